@@ -1,0 +1,69 @@
+"""The "Articula" tab in the 3D viewport's sidebar.  One panel per feature; each draws the buttons
+of the operators that feature registered (operators missing from this build are skipped)."""
+import bpy
+
+
+def _button(layout, idname: str, text: str, icon: str = 'NONE'):
+    """Draw an operator button if the operator exists; return its properties (or None)."""
+    cls_name = "ARTICULA_OT_" + idname.split(".", 1)[1]
+    if not hasattr(bpy.types, cls_name):
+        return None
+    return layout.operator(idname, text=text, icon=icon)
+
+
+class _ArticulaPanel:
+    bl_space_type = 'VIEW_3D'
+    bl_region_type = 'UI'
+    bl_category = "Articula"
+
+
+class ARTICULA_PT_main(_ArticulaPanel, bpy.types.Panel):
+    bl_label = "Articula"
+
+    def draw(self, context):
+        ob = context.active_object
+        col = self.layout.column(align=True)
+        if ob is None or ob.articula.kind == 'NONE':
+            col.label(text="Import scans or a depth recording to begin", icon='INFO')
+            return
+        data = ob.articula
+        col.label(text=f"{ob.name}: {data.bl_rna.properties['kind'].enum_items[data.kind].name}")
+        if data.frame_count:
+            col.label(text=f"{data.frame_count} frames from frame {data.frame_start}")
+        if data.kind == 'SCAN_SEQUENCE':
+            col.label(text="Registered" if data.registered else "Unregistered (for tracking)")
+
+
+class ARTICULA_PT_import(_ArticulaPanel, bpy.types.Panel):
+    bl_label = "Import"
+    bl_parent_id = "ARTICULA_PT_main"
+
+    def draw(self, context):
+        col = self.layout.column(align=True)
+        _button(col, "articula.import_scans", "Scans…", 'IMPORT')
+        _button(col, "articula.import_depth", "Depth Recording…", 'OUTLINER_OB_POINTCLOUD')
+
+
+class ARTICULA_PT_rig(_ArticulaPanel, bpy.types.Panel):
+    bl_label = "Rig"
+    bl_parent_id = "ARTICULA_PT_main"
+
+    def draw(self, context):
+        col = self.layout.column(align=True)
+        _button(col, "articula.learn_rig", "Learn Rig from Scans", 'ARMATURE_DATA')
+        _button(col, "articula.build_rig", "Build Rig from Bundle…", 'OUTLINER_OB_ARMATURE')
+        _button(col, "articula.export_bundle", "Save Rig as Bundle…", 'EXPORT')
+        _button(col, "articula.export_lbs", "Convert to Linear-Blend Rig", 'MOD_ARMATURE')
+
+
+class ARTICULA_PT_animate(_ArticulaPanel, bpy.types.Panel):
+    bl_label = "Animate"
+    bl_parent_id = "ARTICULA_PT_main"
+
+    def draw(self, context):
+        col = self.layout.column(align=True)
+        _button(col, "articula.bake_poses", "Bake Poses to Action…", 'ACTION')
+        _button(col, "articula.read_action", "Read Action to Poses…", 'FILE_TICK')
+
+
+classes = (ARTICULA_PT_main, ARTICULA_PT_import, ARTICULA_PT_rig, ARTICULA_PT_animate)

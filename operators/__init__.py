@@ -1,0 +1,11 @@
+"""Operators (``bpy.ops.articula.*``).  Thin: parse input, call ``addon`` and ``solver``, report.
+
+Every feature module here exposes ``classes``; they are collected below in registration order.
+"""
+import importlib
+
+FEATURES = (
+)
+
+classes = tuple(cls for name in FEATURES
+                for cls in importlib.import_module(f".{name}", __package__).classes)
