@@ -26,7 +26,7 @@ def test_roll_frames_match_blender_edit_bones(pkg, rig):
     # Blender stores float32 positions: recompute from what it stored so only the convention is compared
     h32 = np.array([list(arm.bones[n].head_local) for n in spec.names])
     t32 = np.array([list(arm.bones[n].tail_local) for n in spec.names])
-    assert np.abs(blender - mr.roll_frames(h32, t32, spec.rolls)).max() < 1e-5  # float32 arithmetic
+    assert np.abs(blender - mr.roll_frames(h32, t32, spec.rolls)).max() < 5e-5  # float32 arithmetic, tiny face bones
     assert np.abs(blender - frames).max() < 1e-4
     # the comparison can fail: a wrong roll sign is visible
     wrong = mr.roll_frames(heads, tails, -spec.rolls)
