@@ -1,0 +1,241 @@
+"""Skinning: plain linear blend skinning, Blender-style dual-quaternion skinning, and the exact hybrid
+swing/twist skin of ARCHITECTURE.md ("Hybrid skinning"; spec §1.2-1.6).
+
+Shapes: rest vertices ``(V, 3)`` metres; bone maps ``Rm (N, B, 3, 3)``, ``tm (N, B, 3)`` (part b maps
+x -> Rm x + tm, e.g. from :func:`kinematics.forward_kinematics`); posed vertices ``(N, V, 3)``.
+
+Hybrid skin of rest vertex v with anchor a and blend set C(a) = children of a, for one frame:
+1. twist: DLB of "rotate by the world twist of c about heads[c]" (c ∈ C(a), weights twist_weights[v, c])
+   with the identity taking the remainder;  2. swing: linear blend of "rotate by the world swing of c
+   about heads[c]" with the identity taking the remainder;  3. the anchor chain M_a.
+Implementation: every vertex touches only the ≤ K children of its anchor, so vertices are grouped by
+anchor; per (frame, bone) we precompute the world twist dual quaternion and the composite affine map
+``M_parent(c) ∘ Swing_c``; per group two small matrix products blend them (weights compact ``(V_a, K_a)``).
+Twist quaternions have w >= 0 after canonicalisation, so all lie in the identity's hemisphere and DLB
+needs no flipping (this equals aligning to the neutral pivot).
+"""
+import numpy as np
+
+from .dualquat import IDENTITY as DQ_IDENTITY
+from .dualquat import dq_apply, dq_from_rigid, align_hemisphere
+from .kinematics import chain_from_world, to_world
+from .rotations import quat_canonical, quat_normalize, quat_to_matrix, swing_twist_y
+
+FRAME_CHUNK = 32
+
+
+# ----------------------------------------------------------------------------- plain LBS and DQS
+
+def _flat_maps(Rm, tm):
+    """(N, B, 3, 3), (N, B, 3) -> (N, B, 12) rows [R00 R01 R02 t0 R10 ... t2]."""
+    return np.concatenate([Rm, tm[..., None]], axis=-1).reshape(Rm.shape[:2] + (12,))
+
+
+def _weights_times(weights, T):
+    """weights (V, B) dense or scipy sparse, T (B, C) -> (V, C) dense."""
+    out = weights @ T
+    return np.asarray(out)
+
+
+def lbs(vertices, weights, Rm, tm):
+    """Linear blend skinning with a neutral remainder: ``Σ_b w_b (Rm_b v + tm_b) + (1 − Σ_b w_b) v``.
+
+    vertices (V, 3); weights (V, B) dense array or scipy.sparse matrix (rows summing to 1 give
+    classical LBS); Rm (N, B, 3, 3), tm (N, B, 3).  Returns (N, V, 3)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    if not hasattr(weights, "tocsr"):
+        weights = np.asarray(weights, dtype=np.float64)
+    N, B = Rm.shape[:2]
+    ident = np.concatenate([np.eye(3), np.zeros((3, 1))], axis=1).reshape(12)
+    D = _flat_maps(Rm, tm) - ident                      # (N, B, 12), neutral subtracted
+    out = np.empty((N, len(v), 3))
+    for n0 in range(0, N, FRAME_CHUNK):
+        Dc = D[n0:n0 + FRAME_CHUNK]
+        n = len(Dc)
+        blend = _weights_times(weights, Dc.transpose(1, 0, 2).reshape(B, n * 12))   # (V, n*12)
+        blend = blend.reshape(len(v), n, 3, 4).transpose(1, 0, 2, 3)                # (n, V, 3, 4)
+        out[n0:n0 + n] = v + np.einsum("nvij,vj->nvi", blend[..., :3], v) + blend[..., 3]
+    return out
+
+
+def _compact(weights):
+    """Dense/sparse (V, B) weights -> indices (V, K) and weights (V, K) of the non-zeros (padded with
+    index 0 and weight 0)."""
+    if hasattr(weights, "tocsr"):
+        w = weights.tocsr()
+        w.eliminate_zeros()
+        counts = np.diff(w.indptr)
+        K = max(int(counts.max()) if len(counts) else 0, 1)
+        V = w.shape[0]
+        idx = np.zeros((V, K), dtype=np.int64)
+        val = np.zeros((V, K))
+        rows = np.repeat(np.arange(V), counts)
+        slot = np.arange(len(w.indices)) - np.repeat(w.indptr[:-1], counts)
+        idx[rows, slot] = w.indices
+        val[rows, slot] = w.data
+        return idx, val
+    w = np.asarray(weights, dtype=np.float64)
+    K = max(int((w != 0).sum(axis=1).max()) if len(w) else 0, 1)
+    idx = np.argsort(w == 0, axis=1, kind="stable")[:, :K]
+    return idx, np.take_along_axis(w, idx, axis=1)
+
+
+def dqs(vertices, weights, Rm, tm):
+    """Dual-quaternion skinning as Blender's Armature modifier with "Preserve Volume" does it.
+
+    Rows of weights (dense (V, B) or scipy.sparse) are normalised by their sum (rows summing to 0 stay
+    at rest); each bone map x -> Rm x + tm must be a rotation times a uniform scale s_b: the scale is
+    blended linearly and applied first, the rigid parts are blended as dual quaternions aligned to the
+    hemisphere of the vertex's largest-weight bone, normalised and applied.  Returns (N, V, 3)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    idx, w = _compact(weights)
+    total = w.sum(axis=1)
+    moving = total > 0
+    w = np.where(moving[:, None], w / np.where(moving, total, 1.0)[:, None], 0.0)
+    s = np.cbrt(np.linalg.det(Rm))                                   # (N, B)
+    DQ = dq_from_rigid(Rm / s[..., None, None], tm)                  # (N, B, 8)
+    dq = DQ[:, idx]                                                   # (N, V, K, 8)
+    pivot = quat_canonical(np.take_along_axis(dq[..., :4], np.argmax(w, axis=1)[None, :, None, None],
+                                              axis=2)[:, :, 0])
+    dq = align_hemisphere(dq, pivot)
+    blended = np.einsum("vk,nvki->nvi", w, dq)
+    blended = np.where(moving[None, :, None], blended, DQ_IDENTITY)
+    scale = np.where(moving, np.einsum("vk,nvk->nv", w, s[:, idx]), 1.0)
+    posed = dq_apply(blended, scale[..., None] * v)
+    return np.where(moving[None, :, None], posed, v)
+
+
+# ----------------------------------------------------------------------------- hybrid skin
+
+def _bone_terms(skeleton, poses):
+    """Per (frame, bone) quantities of the hybrid skin.
+
+    Returns dict with ``twist_dq (N, B, 8)`` world twist about the head as a dual quaternion,
+    ``swing_chain (N, B, 12)`` the affine map ``M_parent(c) ∘ Swing_c`` (row-major 3x4; row 0 is unused),
+    ``chain (N, B, 12)`` the part maps ``M_b``, and ``Rm, tm`` (the chain as matrices)."""
+    F, h = skeleton.frames, skeleton.heads
+    q = quat_canonical(quat_normalize(poses.rotations))
+    q_sw, q_tw = swing_twist_y(q)
+    y_axis = F[:, :, 1]                                                 # (B, 3) world twist axes
+    u = q_tw[..., 2:3] * y_axis                                        # (N, B, 3) world twist vector part
+    twist_dq = np.concatenate([q_tw[..., :1], u, np.zeros(u.shape[:-1] + (1,)), np.cross(h, u)], axis=-1)
+    R_sw = to_world(F, quat_to_matrix(q_sw))                           # (N, B, 3, 3)
+    R = to_world(F, quat_to_matrix(q))
+    Rm, tm = chain_from_world(skeleton, R, poses.translations, poses.scales)
+    par = np.maximum(skeleton.parents, 0)
+    Rp, tp = Rm[:, par], tm[:, par]
+    sw_lin = Rp @ R_sw
+    sw_t = np.einsum("nbij,nbj->nbi", Rp, h - np.einsum("nbij,bj->nbi", R_sw, h)) + tp
+    return dict(twist_dq=twist_dq, swing_chain=_flat_maps(sw_lin, sw_t), chain=_flat_maps(Rm, tm), Rm=Rm, tm=tm)
+
+
+class _Groups:
+    """Vertices grouped by anchor, with compact blend-set weights.
+
+    ``order`` (V,) sorts vertices by anchor; for each anchor part with vertices, ``groups`` holds
+    ``(a, children (K,), start, stop, twist (V_a, K), swing (V_a, K))`` (slices of the sorted order)."""
+
+    def __init__(self, model):
+        anchor = model.anchor
+        self.order = np.argsort(anchor, kind="stable")
+        sorted_anchor = anchor[self.order]
+        bounds = np.searchsorted(sorted_anchor, np.arange(model.skeleton.num_bones + 1))
+        self.groups = []
+        for a in range(model.skeleton.num_bones):
+            start, stop = int(bounds[a]), int(bounds[a + 1])
+            if stop == start:
+                continue
+            rows = self.order[start:stop]
+            kids = np.asarray(model.skeleton.children(a), dtype=np.int64)
+            wt = model.twist_weights[rows][:, kids].astype(np.float64)
+            ws = model.swing_weights[rows][:, kids].astype(np.float64)
+            self.groups.append((a, kids, start, stop, wt, ws))
+
+
+def _blend_group(terms, n0, n1, a, kids, wt, ws):
+    """Blended twist dual quaternions ``(8, n, V_a)`` and swing∘chain affine maps ``(12, n, V_a)`` of
+    one anchor group over frames n0:n1 (component-major so each component is a contiguous (n, V_a))."""
+    chain_a = terms["chain"][n0:n1, a].T[:, :, None]                   # (12, n, 1)
+    n, Va = n1 - n0, len(wt)
+    if len(kids) == 0:
+        tw = np.broadcast_to(DQ_IDENTITY[:, None, None], (8, n, Va))
+        return tw, np.broadcast_to(chain_a, (12, n, Va))
+    dt = (terms["twist_dq"][n0:n1][:, kids] - DQ_IDENTITY).transpose(2, 0, 1)       # (8, n, K)
+    tw = (dt.reshape(8 * n, -1) @ wt.T).reshape(8, n, Va) + DQ_IDENTITY[:, None, None]
+    ds = terms["swing_chain"][n0:n1][:, kids] - terms["chain"][n0:n1, a][:, None]   # (n, K, 12)
+    sw = (ds.transpose(2, 0, 1).reshape(12 * n, -1) @ ws.T).reshape(12, n, Va) + chain_a
+    return tw, sw
+
+
+def _apply_dq_components(tw, x):
+    """Apply blended dual quaternions given as components ``(8, n, V)`` to points ``x`` (3, V) with the
+    normalising formula of dualquat.dq_apply.  Returns (3, n, V)."""
+    aw, ax, ay, az, dw, dx, dy, dz = tw
+    inv = 2.0 / (aw * aw + ax * ax + ay * ay + az * az)
+    px, py, pz = x[0], x[1], x[2]
+    # c = a × x + a_w x
+    cx = ay * pz - az * py + aw * px
+    cy = az * px - ax * pz + aw * py
+    cz = ax * py - ay * px + aw * pz
+    # e = a × c + a_w d − d_w a + a × d  =  a × (c + d) + a_w d − d_w a
+    sx, sy, sz = cx + dx, cy + dy, cz + dz
+    ex = ay * sz - az * sy + aw * dx - dw * ax
+    ey = az * sx - ax * sz + aw * dy - dw * ay
+    ez = ax * sy - ay * sx + aw * dz - dw * az
+    return np.stack([px + inv * ex, py + inv * ey, pz + inv * ez])
+
+
+def _apply_affine_components(sw, x):
+    """Apply affine maps given as components (12, n, V) (row-major 3x4) to points (3, n, V)."""
+    return np.stack([sw[4 * i] * x[0] + sw[4 * i + 1] * x[1] + sw[4 * i + 2] * x[2] + sw[4 * i + 3]
+                     for i in range(3)])
+
+
+def hybrid_skin(model, poses):
+    """Posed vertices ``(N, V, 3)`` of the hybrid swing/twist skin (ARCHITECTURE.md steps 1-4)."""
+    terms = _bone_terms(model.skeleton, poses)
+    groups = _Groups(model)
+    rest_sorted = model.rest_vertices[groups.order].T                 # (3, V)
+    N, V = len(poses), model.num_vertices
+    out = np.empty((N, V, 3))
+    for n0 in range(0, N, FRAME_CHUNK):
+        n1 = min(N, n0 + FRAME_CHUNK)
+        chunk = np.empty((3, n1 - n0, V))
+        for a, kids, start, stop, wt, ws in groups.groups:
+            tw, sw = _blend_group(terms, n0, n1, a, kids, wt, ws)
+            x = rest_sorted[:, start:stop]
+            vt = _apply_dq_components(tw, x) if len(kids) else np.broadcast_to(x[:, None], (3, n1 - n0, stop - start))
+            chunk[:, :, start:stop] = _apply_affine_components(sw, vt)
+        out[n0:n1][:, groups.order] = chunk.transpose(1, 2, 0)
+    return out
+
+
+def _dq_components_to_rigid(tw):
+    """Rotation (3, 3, n, V) and translation (3, n, V) of blended dual quaternions (8, n, V)."""
+    q = np.moveaxis(tw[:4], 0, -1)
+    n2 = np.sum(q * q, axis=-1)
+    R = np.moveaxis(quat_to_matrix(q), (-2, -1), (0, 1))
+    aw, ax, ay, az, dw, dx, dy, dz = tw
+    t = 2.0 / n2 * np.stack([aw * dx - dw * ax + ay * dz - az * dy,
+                             aw * dy - dw * ay + az * dx - ax * dz,
+                             aw * dz - dw * az + ax * dy - ay * dx])
+    return R, t
+
+
+def affine_form(model, poses):
+    """Per-vertex affine form of the hybrid skin (spec §1.6): ``A (N, V, 3, 3)``, ``b (N, V, 3)`` with
+    posed vertex = A @ rest vertex + b.  A = M_a,lin · M_S · R_D (not orthogonal with fractional swing
+    weights), b = M_S-chain applied to the DLB translation."""
+    terms = _bone_terms(model.skeleton, poses)
+    groups = _Groups(model)
+    N, V = len(poses), model.num_vertices
+    A = np.empty((N, V, 3, 3))
+    b = np.empty((N, V, 3))
+    for a, kids, start, stop, wt, ws in groups.groups:
+        rows = groups.order[start:stop]
+        tw, sw = _blend_group(terms, 0, N, a, kids, wt, ws)
+        R_D, t_D = _dq_components_to_rigid(tw)
+        L = sw.reshape(3, 4, N, -1)                                     # (3, 4, n, V_a)
+        A[:, rows] = np.einsum("iknv,kjnv->nvij", L[:, :3], R_D)
+        b[:, rows] = (np.einsum("iknv,knv->nvi", L[:, :3], t_D) + np.moveaxis(L[:, 3], 0, -1))
+    return A, b
