@@ -1,0 +1,229 @@
+"""Initial skeleton from a segmentation (spec §3.2 steps 3-5).
+
+* Part adjacency: the number of mesh edges between two parts.
+* Tree: the maximum spanning tree of that graph (a long shared boundary = a real joint; a hand resting on
+  a hip shares only a few edges), rooted at the most central part (least summed hop distance to all
+  other parts, ties to the larger part).  Bones are numbered breadth-first so ``parents[b] < b``.
+* Joint centres: the centroid of the boundary ring between parent and child, refined as the least-squares
+  rotation centre: the point h that both parts' per-scan rigid transforms move alike,
+  ``min_h Σ_m ‖(R_p,m − R_c,m) h − (t_c,m − t_p,m)‖² + μ² ‖h − h_ring‖²`` (μ keeps a hinge's axis
+  direction, which the motion cannot fix, at the ring).
+* Frames: Y from the joint towards the main child's joint (the child continuing the incoming direction;
+  for the root the largest unpaired child), or for end parts towards the part's mean vertex, with the
+  tail at the part's far extent along it; X/Z completed by :func:`solver.model.frames_from_bones`.
+* Mirror pairs: the mesh's symmetry plane (best of principal/world axes, refined by iterated
+  reflect-and-match; among several the one pairing most parts), parts matched by reflection; pairs are
+  named ``part_NN.L`` / ``part_NN.R``, .L on the side the plane normal points to, the normal's largest
+  component made positive (+X for a character facing −Y: Blender's left).
+Units: metres.
+"""
+from collections import deque
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import minimum_spanning_tree, shortest_path
+from scipy.spatial import cKDTree
+
+from .errors import ArticulaInputError
+from .laplacian import edges_of
+from .model import Skeleton, frames_from_bones
+
+
+def part_adjacency(labels, faces, k):
+    """Symmetric ``(k,k)`` count of mesh edges joining two different parts."""
+    e = edges_of(faces)
+    a, b = labels[e[:, 0]], labels[e[:, 1]]
+    cross = a != b
+    C = np.zeros((k, k))
+    np.add.at(C, (a[cross], b[cross]), 1.0)
+    return C + C.T
+
+
+def part_tree(adj, sizes):
+    """Maximum spanning tree of the part adjacency ``adj (k,k)`` rooted at the most central part.
+    Returns ``(order (k,) parts in breadth-first order, parent_part (k,) with -1 at the root)``.
+    Raises when the parts are not all connected."""
+    k = len(adj)
+    if k == 1:
+        return np.array([0]), np.array([-1])
+    W = np.where(adj > 0, adj.max() + 1.0 - adj, 0.0)          # max spanning tree = min of (max+1-w)
+    T = minimum_spanning_tree(sp.csr_matrix(W)).toarray()
+    T = (T + T.T) > 0
+    hops = shortest_path(sp.csr_matrix(T.astype(float)), unweighted=True, directed=False)
+    if not np.isfinite(hops).all():
+        raise ArticulaInputError("mesh: the parts are not connected to each other (disconnected mesh?)")
+    score = hops.sum(axis=1) - 1e-9 * np.asarray(sizes, dtype=float) / max(1, np.max(sizes))
+    root = int(np.argmin(score))
+    parent = np.full(k, -1)
+    order, queue, seen = [], deque([root]), {root}
+    while queue:
+        p = queue.popleft()
+        order.append(p)
+        for c in np.flatnonzero(T[p]):
+            if int(c) not in seen:
+                seen.add(int(c))
+                parent[c] = p
+                queue.append(int(c))
+    return np.array(order), parent
+
+
+def boundary_centroid(rest, labels, faces, p, c):
+    """Centroid of the vertices on edges between parts p and c ``(3,)``."""
+    e = edges_of(faces)
+    la, lb = labels[e[:, 0]], labels[e[:, 1]]
+    sel = ((la == p) & (lb == c)) | ((la == c) & (lb == p))
+    return rest[np.unique(e[sel])].mean(axis=0)
+
+
+def rotation_centre(Rp, tp, Rc, tc, h0, mu=0.02):
+    """Least-squares common rotation centre of two parts (see module doc).
+
+    Rp, Rc ``(M,3,3)``, tp, tc ``(M,3)`` per-scan rigid maps of parent and child; h0 ``(3,)`` prior
+    (boundary centroid).  ``mu²·M`` weighs the prior (dimensionless, relative to rotation angles² in
+    radians²)."""
+    D = Rp - Rc
+    r = tc - tp
+    H = np.einsum("mji,mjk->ik", D, D) + mu ** 2 * len(D) * np.eye(3)
+    g = np.einsum("mji,mj->i", D, r) + mu ** 2 * len(D) * h0
+    return np.linalg.solve(H, g)
+
+
+def symmetry_planes(points, iterations=8, tol=0.02):
+    """Candidate mirror planes of a point set, best first: ``[(normal (3,), offset, score), ...]`` with
+    the plane ``x·n = offset`` and score = median distance of reflected points to their nearest point,
+    relative to the size.  Candidates start at the principal and world axes through the centroid and
+    are refined by reflect-and-match; only those with score < tol are returned (distinct normals)."""
+    pts = np.asarray(points, dtype=np.float64)
+    size = np.linalg.norm(np.ptp(pts, axis=0))
+    c = pts.mean(axis=0)
+    _, vecs = np.linalg.eigh(np.cov((pts - c).T))
+    tree = cKDTree(pts)
+
+    def score(n, d):
+        refl = pts - 2.0 * ((pts @ n) - d)[:, None] * n
+        dist, idx = tree.query(refl)
+        return np.median(dist) / size, idx
+
+    found = []
+    for n in [vecs[:, i] for i in range(3)] + list(np.eye(3)):
+        d = c @ n
+        for _ in range(iterations):
+            _, idx = score(n, d)
+            diff = pts - pts[idx]
+            diff *= np.sign(diff @ n)[:, None]
+            keep = np.linalg.norm(diff, axis=1) > 1e-9 * size
+            if keep.sum() < 3:
+                break
+            n_new = diff[keep].sum(axis=0)
+            n_new /= np.linalg.norm(n_new)
+            n, d = n_new, float(np.median((0.5 * (pts + pts[idx]))[keep] @ n_new))
+        s, _ = score(n, d)
+        axis = int(np.argmax(np.abs(n)))
+        if n[axis] < 0:
+            n, d = -n, -d
+        if s < tol and all(abs(n @ m) < 0.99 for m, _, _ in found):
+            found.append((n, float(d), float(s)))
+    return sorted(found, key=lambda f: f[2])
+
+
+def mirror_pairs(rest, labels, k, plane, min_match=0.6):
+    """Pairs of parts that are mirror images ``[(left, right), ...]`` (part indices; left on the
+    positive side of the plane).  A part pairs with the part where most of its reflected vertices land,
+    when that relation is mutual and the two are different parts."""
+    n, d, _ = plane
+    tree = cKDTree(rest)
+    refl = rest - 2.0 * ((rest @ n) - d)[:, None] * n
+    target = labels[tree.query(refl)[1]]
+    match = np.full(k, -1)
+    for p in range(k):
+        t = target[labels == p]
+        if len(t):
+            best = np.bincount(t, minlength=k).argmax()
+            if np.mean(t == best) >= min_match:
+                match[p] = best
+    pairs = []
+    for p in range(k):
+        q = match[p]
+        if q > p and match[q] == p:
+            side = (rest[labels == p] @ n).mean() - d
+            pairs.append((p, q) if side > 0 else (q, p))
+    return pairs
+
+
+def _main_child(b, kids, heads, parents, paired, subtree_size):
+    """The child of bone b that continues the chain (see module doc)."""
+    if parents[b] >= 0:
+        incoming = heads[b] - heads[parents[b]]
+        n = np.linalg.norm(incoming)
+        if n > 1e-12:
+            dirs = heads[kids] - heads[b]
+            cos = dirs @ incoming / (np.linalg.norm(dirs, axis=1) * n + 1e-300)
+            return kids[int(np.argmax(cos))]
+    unpaired = [c for c in kids if c not in paired]
+    cands = unpaired or kids
+    return max(cands, key=lambda c: subtree_size[c])
+
+
+def build_skeleton(rest, labels, faces, k, part_R=None, part_t=None, symmetry=True):
+    """Skeleton from a segmentation.
+
+    rest (V,3), labels (V,) parts in [0,k), faces (F,3); part_R (M,k,3,3), part_t (M,k,3) the per-scan
+    rigid maps of the parts (for the rotation-centre refinement; None keeps the boundary centroids).
+    Returns ``(skeleton, part_of_bone (B,), bone_of_part (k,), bone_pairs [(l, r)])``."""
+    rest = np.asarray(rest, dtype=np.float64)
+    sizes = np.bincount(labels, minlength=k)
+    order, parent_part = part_tree(part_adjacency(labels, faces, k), sizes)
+    bone_of_part = np.empty(k, dtype=np.int64)
+    bone_of_part[order] = np.arange(k)
+    parents = np.array([-1 if parent_part[p] < 0 else bone_of_part[parent_part[p]] for p in order], dtype=np.int32)
+    heads = np.empty((k, 3))
+    heads[0] = rest[labels == order[0]].mean(axis=0)
+    for b in range(1, k):
+        p, c = parent_part[order[b]], order[b]
+        h = boundary_centroid(rest, labels, faces, p, c)
+        if part_R is not None:
+            h = rotation_centre(part_R[:, p], part_t[:, p], part_R[:, c], part_t[:, c], h)
+        heads[b] = h
+    pairs = []
+    if symmetry and k > 1:
+        # the plane that pairs the most parts (a tube body is also front/back symmetric)
+        for plane in symmetry_planes(rest):
+            found = mirror_pairs(rest, labels, k, plane)
+            if len(found) > len(pairs):
+                pairs = found
+        pairs = [(int(bone_of_part[a]), int(bone_of_part[b])) for a, b in pairs]
+    tails = _tails(rest, labels, order, parents, heads, {x for pr in pairs for x in pr})
+    names = _names(k, pairs)
+    frames = frames_from_bones(heads, tails)
+    return Skeleton(names, parents, heads, tails, frames), order, bone_of_part, pairs
+
+
+def _tails(rest, labels, order, parents, heads, paired):
+    """Bone tails: the main child's joint, or the far end of an end part along its mean direction."""
+    k = len(order)
+    subtree = np.bincount(labels, minlength=k)[order].astype(float)
+    for b in range(k - 1, 0, -1):
+        subtree[parents[b]] += subtree[b]
+    tails = np.empty((k, 3))
+    for b in range(k):
+        kids = [int(c) for c in np.flatnonzero(parents == b)]
+        if kids:
+            tails[b] = heads[_main_child(b, kids, heads, parents, paired, subtree)]
+            if np.linalg.norm(tails[b] - heads[b]) > 1e-9:
+                continue
+        pts = rest[labels == order[b]]
+        d = pts.mean(axis=0) - heads[b]
+        if np.linalg.norm(d) < 1e-9:
+            d = pts[np.argmax(np.linalg.norm(pts - heads[b], axis=1))] - heads[b]
+        d /= np.linalg.norm(d)
+        tails[b] = heads[b] + d * max(((pts - heads[b]) @ d).max(), 1e-6)
+    return tails
+
+
+def _names(k, pairs):
+    """``root``, ``part_NN`` and mirror pairs ``part_NN.L`` / ``part_NN.R`` (NN = the smaller bone index)."""
+    names = ["root"] + [f"part_{b:02d}" for b in range(1, k)]
+    for l, r in pairs:
+        base = f"part_{min(l, r):02d}"
+        names[l], names[r] = base + ".L", base + ".R"
+    return names
