@@ -5,7 +5,8 @@ Threads: BLAS/OpenMP pools are read when numpy loads, so unless OPENBLAS_NUM_THR
 this benchmark re-runs itself in a child Python with OMP_NUM_THREADS = OPENBLAS_NUM_THREADS =
 MKL_NUM_THREADS = 1 (threadpoolctl is not installed).
 
-Usage: ./run bench skin [--vertices 13380] [--frames 100] [--repeats 5]
+Usage: ./run bench skin   (defaults), or with options:
+       ~/.cache/articula/venv-bpy52/bin/python bench/bench_skin.py [--vertices 13380] [--frames 100] [--repeats 5]
 """
 import argparse
 import os
