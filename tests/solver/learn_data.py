@@ -120,3 +120,47 @@ def rigid_scans(M=10, seed=0, max_angle=0.7):
     Rm, tm = part_transforms(R, t)
     scans = np.einsum("mvij,vj->mvi", Rm[:, labels], rest) + tm[:, labels]
     return scans, faces, labels, rest, Rm, tm
+
+
+def truth_skeleton():
+    """The body's skeleton as a solver :class:`Skeleton` (PARTS order already has parents[b] < b)."""
+    from articula.solver.model import Skeleton, frames_from_bones
+    return Skeleton(PARTS, PARENTS, JOINTS, TAILS, frames_from_bones(JOINTS, TAILS))
+
+
+def smooth_skin(rest, labels, width=0.1):
+    """Anchors and smooth swing/twist weights: vertices within ``width`` of the elbow, neck and hip
+    joints (measured along the child bone's axis) are anchored at the parent part and ramp their
+    weights on the child joint (twist 0→1, swing faster).  Returns ``(anchor, twist (V,8), swing (V,8))``."""
+    V = len(rest)
+    anchor = labels.astype(np.int32).copy()
+    twist = np.zeros((V, 8), np.float32)
+    swing = np.zeros((V, 8), np.float32)
+    for c in (1, 3, 5, 6, 7):                              # head, forearms, thighs
+        p = PARENTS[c]
+        axis = (TAILS[c] - JOINTS[c]) / np.linalg.norm(TAILS[c] - JOINTS[c])
+        s = (rest - JOINTS[c]) @ axis
+        near = np.isin(labels, [p, c]) & (np.abs(s) < width) & (np.linalg.norm(rest - JOINTS[c], axis=1) < 2 * width)
+        anchor[near] = p
+        twist[near, c] = np.clip(0.5 + s[near] / (2 * width), 0, 1)
+        swing[near, c] = np.clip(0.5 + s[near] / (1.2 * width), 0, 1)
+    return anchor, twist, swing
+
+
+def hybrid_truth(M=8, seed=0, max_angle=0.6):
+    """Ground-truth hybrid model + poses and the scans it generates (solver's hybrid_skin).
+    Returns ``(model, poses, scans)``; scan 0 is the rest pose."""
+    from articula.solver.model import Model, Poses
+    from articula.solver.rotations import rotvec_to_quat
+    from articula.solver.skinning import hybrid_skin
+    rest, faces, labels = body()
+    anchor, twist, swing = smooth_skin(rest, labels)
+    model = Model(rest, faces, truth_skeleton(), anchor, twist, swing)
+    rng = np.random.default_rng(seed)
+    r = rng.normal(size=(M, 8, 3))
+    r *= max_angle * rng.uniform(0.3, 1.0, (M, 8, 1)) / np.linalg.norm(r, axis=2, keepdims=True)
+    r[0] = 0.0
+    t = rng.uniform(-0.3, 0.3, (M, 3))
+    t[0] = 0.0
+    poses = Poses(rotvec_to_quat(r), t, np.ones(M))
+    return model, poses, hybrid_skin(model, poses)
