@@ -225,7 +225,9 @@ def manifest_with(text: str, platforms: list[str], wheels: list[str]) -> str:
         pattern = re.compile(rf"^\s*{key}\s*=")
         idx = [i for i in range(first_table) if pattern.match(lines[i])]
         if idx:
-            if key not in tomllib.loads(lines[idx[0]]):  # a multi-line value: refuse rather than guess
+            try:
+                tomllib.loads(lines[idx[0]])
+            except tomllib.TOMLDecodeError:  # a multi-line value: refuse rather than guess
                 raise PackageError(f"{MANIFEST}: write '{key} = [...]' on one line so it can be filled in")
             lines[idx[0]] = new
         else:
