@@ -5,6 +5,9 @@ Every feature module here exposes ``classes``; they are collected below in regis
 import importlib
 
 FEATURES = (
+    "build_rig",
+    "bake_poses",
+    "export_bundle",
 )
 
 classes = tuple(cls for name in FEATURES

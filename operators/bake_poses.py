@@ -1,0 +1,40 @@
+"""``articula.bake_poses``: bake the poses of a bundle onto an existing rig as a new action."""
+import bpy
+
+from ..addon import rig_io
+from ..addon.jobs import JobOperator
+
+
+class ARTICULA_OT_bake_poses(JobOperator, bpy.types.Operator):
+    """Bake the poses of a bundle (.npz) as a new action on an Articula rig"""
+    bl_idname = "articula.bake_poses"
+    bl_label = "Bake Poses to Action"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    filepath: bpy.props.StringProperty(name="Bundle", subtype='FILE_PATH')
+    filter_glob: bpy.props.StringProperty(default="*.npz", options={'HIDDEN'})
+    armature: bpy.props.StringProperty(name="Armature", description="Rig armature (default: the active rig)")
+    nla: bpy.props.BoolProperty(name="Push to NLA", default=False,
+                                description="Put the action on a new NLA track instead of making it active")
+    frame_start: bpy.props.IntProperty(name="First Frame", default=1)
+    action_name: bpy.props.StringProperty(name="Action Name", description="Default: '<bundle> poses'")
+
+    job_label = "Bake poses"
+
+    def invoke(self, context, event):
+        if not self.filepath:
+            context.window_manager.fileselect_add(self)
+            return {'RUNNING_MODAL'}
+        return self.execute(context)
+
+    def prepare(self, context):
+        path = bpy.path.abspath(self.filepath)
+        return lambda progress: path
+
+    def finish(self, context, path):
+        action = rig_io.bake_bundle(context, path, self.armature, self.nla, self.frame_start, self.action_name)
+        where = "an NLA track" if self.nla else "the active action"
+        self.report({'INFO'}, f"Baked {action.name!r} as {where}")
+
+
+classes = (ARTICULA_OT_bake_poses,)
