@@ -1,0 +1,244 @@
+"""Analytic Jacobians of hybrid-skinned vertices, for Gauss–Newton / Levenberg–Marquardt solvers.
+
+Pose parameters of one frame, in this order (``P = 4 + 3 B``; see :func:`pose_layout`):
+* ``t`` (3): root translation, world metres, additive (t ← t + dt);
+* ``s`` (1): uniform subject scale, additive (s ← s + ds);
+* ``δ_b`` (3 per bone, b = 0 … B−1): rotation increment as a rotation vector (angle = norm, radians)
+  in the bone's *local* axes, applied on the right: ``q_b ← q_b · exp(δ_b)`` (bone 0 = root rotation).
+:func:`apply_pose_increment` applies exactly this update, so a solver can iterate
+``J Δ = −r; poses = apply_pose_increment(poses, Δ)``.
+
+Joint-centre parameters: the rest heads ``(B, 3)`` (world metres), moved additively with rest frames,
+tails and rest vertices held fixed (Chapter 4 adapts only joint locations; spec §2).
+
+Shapes: Jacobians are dense per-vertex blocks ``(N, V, 3, P)`` (resp. ``(N, V, 3, 3B)``); memory is
+N·V·3·P·8 bytes (13,380 vertices × 19 bones ≈ 20 MB per frame).  Each vertex has non-zero columns only
+for t, s, its anchor's chain and its anchor's children; :func:`to_sparse` turns one frame into a
+``scipy.sparse.csr_matrix`` of shape (3V, P) (rows x0, y0, z0, x1, …).
+
+Derivation (world axes; Rm_b = s·Rot_b is the chain of part b, p_b its posed joint):
+* chain bone b of the anchor: ∂x'/∂δ_b = −[x' − p_b]× Rot_b F_b;  ∂x'/∂h_b = Rm_parent(b) − Rm_b
+  (I − Rm_0 for the root);
+* child c of the anchor: through the twist (DLB: chain rule through the normalising dual-quaternion map
+  and the swing/twist split) and the swing (LBS: ∂R_sw = R_sw [ω]×);  see the helper docstrings.
+"""
+import numpy as np
+
+from .dualquat import dq_apply
+from .model import Poses
+from .rotations import (quat_canonical, quat_conj, quat_mul, quat_normalize, quat_to_matrix, rotvec_to_quat,
+                        swing_twist_y)
+from .skinning import _bone_terms, _blend_group, _Groups
+
+_TWIST_EPS = 1e-12
+
+
+def pose_layout(num_bones: int) -> dict:
+    """Column slices of the pose parameters: ``translation``, ``scale``, and ``rotation(b)``."""
+    return {"translation": slice(0, 3), "scale": slice(3, 4),
+            "rotation": lambda b: slice(4 + 3 * b, 7 + 3 * b), "size": 4 + 3 * num_bones}
+
+
+def apply_pose_increment(poses: Poses, delta) -> Poses:
+    """New poses after the increment ``delta`` (N, P) in the layout of :func:`pose_layout`."""
+    delta = np.asarray(delta, dtype=np.float64)
+    N, B = poses.rotations.shape[:2]
+    d_rot = delta[:, 4:].reshape(N, B, 3)
+    rotations = quat_normalize(quat_mul(poses.rotations, rotvec_to_quat(d_rot)))
+    return Poses(rotations, poses.translations + delta[:, :3], poses.scales + delta[:, 3])
+
+
+def _skew(v):
+    """Cross-product matrices ``(..., 3, 3)`` of vectors ``(..., 3)``: skew(a) @ b = a × b."""
+    z = np.zeros(v.shape[:-1])
+    x, y, w = v[..., 0], v[..., 1], v[..., 2]
+    return np.stack([z, -w, y, w, z, -x, -y, x, z], axis=-1).reshape(v.shape + (3,))
+
+
+def _left(q):
+    """(…, 4, 4) matrix of p ↦ q·p."""
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    return np.stack([w, -x, -y, -z, x, w, -z, y, y, z, w, -x, z, -y, x, w], -1).reshape(q.shape + (4,))
+
+
+def _right(q):
+    """(…, 4, 4) matrix of p ↦ p·q."""
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    return np.stack([w, -x, -y, -z, x, w, z, -y, y, -z, w, x, z, y, -x, w], -1).reshape(q.shape + (4,))
+
+
+def _split_derivatives(q):
+    """Derivatives of the swing/twist split w.r.t. q (canonical, (N, B, 4)).
+
+    Returns ``d_twist (N, B, 2, 4)`` of the twist components (w_t, y_t) = (w, y)/√(w²+y²) and
+    ``d_swing (N, B, 4, 4)`` of q_swing = q · q_twist*.  Where the twist is undefined (w²+y² ≈ 0) the
+    twist is held at identity and its derivative is 0."""
+    w, y = q[..., 0], q[..., 2]
+    n2 = w * w + y * y
+    ok = n2 > _TWIST_EPS
+    inv3 = np.where(ok, 1.0 / np.where(ok, n2, 1.0) ** 1.5, 0.0)
+    z = np.zeros_like(w)
+    d_twist = np.stack([y * y, z, -w * y, z, -w * y, z, w * w, z], axis=-1).reshape(q.shape[:-1] + (2, 4))
+    d_twist = d_twist * inv3[..., None, None]
+    _, q_tw = swing_twist_y(q)
+    d_tw4 = np.zeros(q.shape[:-1] + (4, 4))
+    d_tw4[..., 0, :], d_tw4[..., 2, :] = d_twist[..., 0, :], d_twist[..., 1, :]
+    conj = np.diag([1.0, -1.0, -1.0, -1.0])
+    d_swing = _right(quat_conj(q_tw)) + _left(q) @ conj @ d_tw4
+    return d_twist, d_swing
+
+
+def _pose_bone_terms(skeleton, poses):
+    """Per (frame, bone) Jacobian pieces on top of :func:`skinning._bone_terms`:
+    ``T (N, B, 8, 3)`` = ∂(world twist dual quaternion)/∂δ, ``G (N, B, 3, 3)`` = world swing angular
+    velocity per δ (∂R_sw = R_sw [G δ]×), ``K (N, B, 3, 3)`` = Rot_b F_b (chain), ``p (N, B, 3)`` the
+    posed joints, ``R_sw (N, B, 3, 3)`` world swing rotations."""
+    terms = _bone_terms(skeleton, poses)
+    F, h = skeleton.frames, skeleton.heads
+    q = quat_canonical(quat_normalize(poses.rotations))
+    E = 0.5 * _left(q)[..., 1:]                                      # ∂q/∂δ for q·exp(δ), (N, B, 4, 3)
+    d_twist, d_swing = _split_derivatives(q)
+    Y = F[:, :, 1]
+    dQ = np.zeros((len(F), 8, 2))                                    # ∂Q/∂(w_t, y_t), (B, 8, 2)
+    dQ[:, 0, 0] = 1.0
+    dQ[:, 1:4, 1] = Y
+    dQ[:, 5:8, 1] = np.cross(h, Y)
+    T = dQ @ d_twist @ E
+    q_sw, _ = swing_twist_y(q)
+    omega = 2.0 * _left(quat_conj(q_sw))[..., 1:, :] @ d_swing @ E   # body angular velocity of the swing
+    G = F @ omega
+    s = poses.scales[:, None, None, None]
+    Rm, tm = terms["Rm"], terms["tm"]
+    K = (Rm / s) @ F
+    p = np.einsum("nbij,bj->nbi", Rm, h) + tm
+    R_sw = F @ quat_to_matrix(q_sw) @ np.swapaxes(F, -1, -2)
+    return dict(terms, T=T, G=G, K=K, p=p, R_sw=R_sw)
+
+
+def _dq_apply_jacobian(b, x):
+    """∂/∂b of the normalising dual-quaternion map f(b, x) (dualquat.dq_apply).
+
+    b (…, 8) un-normalised, x (…, 3) broadcastable.  Returns (…, 3, 8).  With (a_w, a) = b0, (d_w, d) = bε,
+    n2 = |b0|², g = a × (a × x + a_w x) + a_w d − d_w a + a × d and f = x + 2 g / n2."""
+    aw, a, dw, d = b[..., 0], b[..., 1:4], b[..., 4], b[..., 5:8]
+    x = np.broadcast_to(x, a.shape)
+    n2 = np.sum(b[..., :4] ** 2, axis=-1)
+    g = np.cross(a, np.cross(a, x) + aw[..., None] * x) + aw[..., None] * d - dw[..., None] * a + np.cross(a, d)
+    eye = np.eye(3)
+    dg = np.empty(a.shape[:-1] + (3, 8))
+    dg[..., 0] = np.cross(a, x) + d
+    dg[..., 1:4] = (a[..., :, None] * x[..., None, :] + np.sum(a * x, -1)[..., None, None] * eye
+                    - 2.0 * x[..., :, None] * a[..., None, :] - aw[..., None, None] * _skew(x)
+                    - dw[..., None, None] * eye - _skew(d))
+    dg[..., 4] = -a
+    dg[..., 5:8] = aw[..., None, None] * eye + _skew(a)
+    J = (2.0 / n2)[..., None, None] * dg
+    J[..., :4] -= (4.0 / n2 ** 2)[..., None, None] * g[..., :, None] * b[..., None, :4]
+    return J
+
+
+def _chain_of(skeleton, a):
+    """Bones of the chain of part a: a, parent(a), …, 0."""
+    out = [a]
+    while skeleton.parents[out[-1]] >= 0:
+        out.append(int(skeleton.parents[out[-1]]))
+    return out
+
+
+def _group_state(terms, group):
+    """Blended twist dual quaternions ``bq (N, V_a, 8)`` and swing∘chain maps ``L (N, V_a, 3, 4)`` of
+    one anchor group for all frames."""
+    a, kids, start, stop, wt, ws = group
+    N = terms["Rm"].shape[0]
+    tw, sw = _blend_group(terms, 0, N, a, kids, wt, ws)
+    bq = np.moveaxis(np.asarray(tw), 0, -1)                           # (N, V_a, 8)
+    L = np.moveaxis(np.asarray(sw), 0, -1).reshape(N, stop - start, 3, 4)
+    return bq, L
+
+
+def pose_jacobian(model, poses):
+    """Posed vertices ``(N, V, 3)`` and their Jacobian ``(N, V, 3, P)`` w.r.t. the pose parameters
+    (module docstring for the layout and conventions)."""
+    sk = model.skeleton
+    B = sk.num_bones
+    bt = _pose_bone_terms(sk, poses)
+    groups = _Groups(model)
+    order = groups.order
+    N, V = len(poses), model.num_vertices
+    P = 4 + 3 * B
+    posed = np.empty((N, V, 3))
+    J = np.zeros((N, V, 3, P))
+    for group in groups.groups:
+        a, kids, start, stop, wt, ws = group
+        rows = order[start:stop]
+        x = model.rest_vertices[rows]
+        bq, L = _group_state(bt, group)
+        vt = dq_apply(bq, x)
+        L3 = L[..., :3]
+        xp = np.einsum("nvij,nvj->nvi", L3, vt) + L[..., 3]
+        posed[:, rows] = xp
+        Jg = np.zeros((N, len(rows), 3, P))
+        Jg[..., 0, 0] = Jg[..., 1, 1] = Jg[..., 2, 2] = 1.0
+        Jg[..., 3] = (xp - sk.heads[0] - poses.translations[:, None]) / poses.scales[:, None, None]
+        for b in _chain_of(sk, a):
+            rel = xp - bt["p"][:, b, None]
+            Jg[..., 4 + 3 * b:7 + 3 * b] = -_skew(rel) @ bt["K"][:, b, None]
+        if len(kids):
+            Jdq = _dq_apply_jacobian(bq, x)                              # (N, V_a, 3, 8)
+            L3Jdq = L3 @ Jdq
+            Rm_a = bt["Rm"][:, a]
+            for k, c in enumerate(kids):
+                twist = wt[None, :, k, None, None] * (L3Jdq @ bt["T"][:, c, None])
+                lever = _skew(vt - sk.heads[c])                          # [v_t − h_c]×
+                RR = (Rm_a @ bt["R_sw"][:, c])[:, None]                  # (N, 1, 3, 3)
+                swing = -ws[None, :, k, None, None] * (RR @ lever @ bt["G"][:, c, None])
+                Jg[..., 4 + 3 * c:7 + 3 * c] = twist + swing
+        J[:, rows] = Jg
+    return posed, J
+
+
+def joint_jacobian(model, poses):
+    """Posed vertices ``(N, V, 3)`` and their Jacobian ``(N, V, 3, 3B)`` w.r.t. the rest joint centres
+    ``heads`` (columns 3b … 3b+2 = x, y, z of heads[b]; frames, tails, rest vertices fixed)."""
+    sk = model.skeleton
+    B = sk.num_bones
+    bt = _pose_bone_terms(sk, poses)
+    groups = _Groups(model)
+    order = groups.order
+    N, V = len(poses), model.num_vertices
+    Rm = bt["Rm"]
+    eye = np.eye(3)
+    chain_block = np.empty_like(Rm)                                  # ∂x'/∂h_b through the chain
+    chain_block[:, 0] = eye - Rm[:, 0]
+    chain_block[:, 1:] = Rm[:, np.maximum(sk.parents[1:], 0)] - Rm[:, 1:]
+    twist_u = bt["twist_dq"][..., 1:4]                               # (N, B, 3) world twist vector part
+    posed = np.empty((N, V, 3))
+    J = np.zeros((N, V, 3, 3 * B))
+    for group in groups.groups:
+        a, kids, start, stop, wt, ws = group
+        rows = order[start:stop]
+        x = model.rest_vertices[rows]
+        bq, L = _group_state(bt, group)
+        vt = dq_apply(bq, x)
+        L3 = L[..., :3]
+        posed[:, rows] = np.einsum("nvij,nvj->nvi", L3, vt) + L[..., 3]
+        Jg = np.zeros((N, len(rows), 3, 3 * B))
+        for b in _chain_of(sk, a):
+            Jg[..., 3 * b:3 * b + 3] = chain_block[:, b, None]
+        if len(kids):
+            Jdq = _dq_apply_jacobian(bq, x)
+            L3Jd = L3 @ Jdq[..., 5:8]                                   # through the dual vector part
+            Rm_a = Rm[:, a]
+            for k, c in enumerate(kids):
+                twist = wt[None, :, k, None, None] * (L3Jd @ -_skew(twist_u[:, c])[:, None])
+                swing = ws[None, :, k, None, None] * (Rm_a @ (eye - bt["R_sw"][:, c]))[:, None]
+                Jg[..., 3 * c:3 * c + 3] = twist + swing
+        J[:, rows] = Jg
+    return posed, J
+
+
+def to_sparse(J_frame):
+    """One frame's dense Jacobian ``(V, 3, P)`` as a ``scipy.sparse.csr_matrix`` of shape (3V, P)."""
+    import scipy.sparse as sp
+    V, _, P = J_frame.shape
+    return sp.csr_matrix(J_frame.reshape(3 * V, P))
