@@ -16,6 +16,7 @@ _PKG = __package__.rpartition(".")[0]
 # Relative to the extension package.
 COMMAND_MODULES = (
     ".addon.bench_cli",
+    ".sample_scenes.cli",
     ".addon.rig_cli",
 )
 
