@@ -12,8 +12,9 @@ Steps:
 3. Build with Blender's own builder (``bl_pkg/cli/blender_ext.py`` shipped in the bpy wheel, run as a plain
    script, with Blender's list of valid tags), ``--split-platforms`` -> ``articula-<version>-<platform>.zip``.
 4. Check every zip (only the extension's own files plus its platform's wheels; the generated manifest block
-   lists exactly those wheels) and validate it with the ``validate`` command of every Blender found, which must
-   include the oldest supported one (``blender_version_min``), so a manifest key 4.2 does not know fails here.
+   lists exactly those wheels), validate it with the ``validate`` command of every Blender found and compile its
+   Python files with each one's Python.  The Blenders found must include the oldest supported one
+   (``blender_version_min``), so a manifest key or a syntax 4.2 / Python 3.11 does not know fails here.
 
 Wheel choices (scipy 1.17.1, checked on PyPI): linux-x64 ``manylinux_2_27_x86_64.manylinux_2_28_x86_64``
 (scipy 1.17 has no manylinux2014 wheel; Blender itself needs glibc 2.28), windows-x64 ``win_amd64``,
@@ -163,6 +164,8 @@ def fetch_wheel(req: Requirement, python: str, platform: str, cache: Path) -> Pa
     cached = sorted(folder.glob("*.whl"))
     if len(cached) == 1:
         return cached[0]
+    if len(cached) > 1:
+        raise PackageError(f"the wheel cache folder {folder} holds {len(cached)} wheels instead of one; delete it")
 
     cache.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".download-", dir=cache))
@@ -187,9 +190,9 @@ def fetch_wheel(req: Requirement, python: str, platform: str, cache: Path) -> Pa
         folder.parent.mkdir(parents=True, exist_ok=True)
         try:
             os.rename(tmp, folder)
-        except OSError:  # a concurrent run filled the cache first: use theirs
+        except OSError as exc:  # a concurrent run filled the cache first: use theirs
             if len(sorted(folder.glob("*.whl"))) != 1:
-                raise
+                raise PackageError(f"could not store {got[0].name} in the wheel cache {folder}: {exc}")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return sorted(folder.glob("*.whl"))[0]
@@ -309,6 +312,29 @@ def check_zip(path: Path, platform: str, wheels: list[Path]) -> list[str]:
     return [Path(n).name for n in in_zip]
 
 
+_COMPILE_ALL = """
+import sys, zipfile
+bad = []
+with zipfile.ZipFile(sys.argv[1]) as zf:
+    for name in zf.namelist():
+        if name.endswith(".py"):
+            try:
+                compile(zf.read(name), name, "exec", dont_inherit=True)
+            except SyntaxError as exc:
+                bad.append(f"{name}:{exc.lineno}: {exc.msg}")
+print("\\n".join(bad))
+sys.exit(1 if bad else 0)
+"""
+
+
+def check_compiles(path: Path, tools: BlenderTools) -> None:
+    """Raise unless every Python file in the zip compiles with the Python of ``tools``' Blender."""
+    proc = subprocess.run([str(tools.python), "-I", "-c", _COMPILE_ALL, str(path)], capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise PackageError(f"{path.name}: Python files that {tools.label}'s Python ({tools.python}) cannot "
+                           f"compile:\n{(proc.stdout + proc.stderr).strip()}")
+
+
 def zip_name(manifest: dict, platform: str) -> str:
     """The builder's name for a split-platform zip."""
     return f"{manifest['id']}-{manifest['version']}-{platform.replace('-', '_')}.zip"
@@ -354,10 +380,11 @@ def build(platforms: list[str], out: Path, cache: Path, source: Path = ROOT, log
         names = check_zip(path, platform, wheels[platform])
         for tools in blenders:
             run_builder(tools, "validate", str(path))
+            check_compiles(path, tools)
         log(f"{path}  {path.stat().st_size / 1e6:.1f} MB  wheels: {', '.join(names)}")
         zips.append(path)
     t3 = time.perf_counter()
-    log(f"checked and validated with {', '.join(b.label for b in blenders)} in {t3 - t2:.1f} s; "
+    log(f"checked, validated and compiled with {', '.join(b.label for b in blenders)} in {t3 - t2:.1f} s; "
         f"total {t3 - t0:.1f} s")
     return zips
 

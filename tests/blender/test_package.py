@@ -115,7 +115,7 @@ def test_validators_of_blender_42_and_this_blender_accept_the_zip(built):
     for version in sorted({(4, 2), this}):
         out = tool.run_builder(blenders[version], "validate", str(built["zip"]))
         assert "Success" in out, out
-    assert "validated with" in built["stdout"] and "Blender 4.2" in built["stdout"]
+    assert "validated and compiled with" in built["stdout"] and "Blender 4.2" in built["stdout"]
 
 
 def test_install_enables_the_installed_copy(installed):
