@@ -1,0 +1,208 @@
+"""Joints and per-scan poses by Levenberg–Marquardt with a Schur complement (spec §3.4 (C)).
+
+Parameters (all increments, applied by :func:`apply_increment`):
+
+* shared block, per non-root bone b: the joint centre ``δh_b`` (3, metres) and the twist-axis direction
+  ``δo_b`` (2, radians: a rotation of the frame about its local X and Z axes; the roll about Y is a
+  gauge freedom of the swing/twist split and is not a parameter).  Changing the frame keeps every scan's
+  *world* joint rotation (the local quaternion is re-expressed), so δo only moves the swing/twist split;
+* per-scan block, scan m: bone-local rotation increments ``q_b ← q_b · exp(δr_b)`` for every bone (3 each,
+  full-angle rotation vectors, bone 0 = global rotation) and the root translation ``δt`` (3, metres).
+  The root head and frame are gauge (they only re-parameterise the global motion) and stay fixed.
+
+Residuals: data ``p − s`` and ``√α (L p − L s)`` of every scan, and the left/right bone-length symmetry
+residuals ``√λ (‖h_suc(l) − h_l‖ − ‖h_suc(r) − h_r‖)`` (spec Eq. 3.23 with the recommended
+length-difference form).  The Jacobian has the arrow-head structure ``[S_m | O_m]`` per scan; the normal
+equations are reduced to the shared block by the Schur complement
+``(H_ss − Σ_m H_so,m H_oo,m⁻¹ H_os,m) δs = −g_s + Σ_m H_so,m H_oo,m⁻¹ g_o,m`` and back-substituted.
+Damping: Levenberg–Marquardt ``μ (diag H_data + ε)`` (the diagonal of the data part: the symmetry
+weight λ ≈ 1e10 would otherwise freeze the joints it couples); a step is accepted only if the objective
+decreases.
+
+Jacobian of the posed vertices: central finite differences through :func:`apply_increment` and
+``hybrid_skin`` (step 1e-6).  A per-scan column of all scans is obtained from one skinning call (the
+increment of bone b in scan m affects only scan m), so the cost is 2·(5(B−1) + 3B + 3) skinning calls of
+all scans per iteration.  (To be replaced by the analytic ``solver.jacobians`` when it is available.)
+"""
+import copy
+
+import numpy as np
+
+from .errors import Cancelled  # noqa: F401  (raised by progress callbacks)
+from .model import Poses, Skeleton
+from .rotations import matrix_to_quat, quat_conj, quat_mul, quat_normalize, rotvec_to_matrix, rotvec_to_quat
+from .skinning import hybrid_skin
+
+FD_STEP = 1e-6
+
+
+def sizes(num_bones):
+    """``(n_shared, n_own)`` parameter counts."""
+    return 5 * (num_bones - 1), 3 * num_bones + 3
+
+
+def apply_increment(skeleton, poses, d_shared, d_own):
+    """New ``(skeleton, poses)`` after the increments ``d_shared (5(B−1),)`` and ``d_own (M, 3B+3)``."""
+    B, M = skeleton.num_bones, len(poses)
+    ds = np.asarray(d_shared, dtype=np.float64).reshape(B - 1, 5)
+    do = np.asarray(d_own, dtype=np.float64).reshape(M, 3 * B + 3)
+    q = quat_mul(poses.rotations, rotvec_to_quat(do[:, :3 * B].reshape(M, B, 3)))
+    F = skeleton.frames.copy()
+    heads = skeleton.heads.copy()
+    heads[1:] += ds[:, :3]
+    omega = ds[:, 3:4] * F[1:, :, 0] + ds[:, 4:5] * F[1:, :, 2]          # world axis-angle (B-1, 3)
+    F_new = F.copy()
+    F_new[1:] = rotvec_to_matrix(omega) @ F[1:]
+    g = matrix_to_quat(np.swapaxes(F_new, -1, -2) @ F)                   # local re-expression F'ᵀF
+    q = quat_normalize(quat_mul(quat_mul(g[None], q), quat_conj(g)[None]))
+    length = np.linalg.norm(skeleton.tails - skeleton.heads, axis=1)
+    sk = Skeleton(list(skeleton.names), skeleton.parents.copy(), heads,
+                  heads + length[:, None] * F_new[:, :, 1], F_new)
+    return sk, Poses(q, poses.translations + do[:, 3 * B:], poses.scales.copy())
+
+
+def _with(model, skeleton):
+    m = copy.copy(model)
+    m.skeleton = skeleton
+    return m
+
+
+def posed_jacobians(model, poses, step=FD_STEP):
+    """Jacobians of the posed vertices: ``(J_shared (M,3V,n_s), J_own (M,3V,n_o))`` by central
+    differences (see module doc)."""
+    sk, M, V = model.skeleton, len(poses), model.num_vertices
+    n_s, n_o = sizes(sk.num_bones)
+    Js = np.empty((M, 3 * V, n_s))
+    Jo = np.empty((M, 3 * V, n_o))
+    zs, zo = np.zeros(n_s), np.zeros((M, n_o))
+    for j in range(n_s):
+        e = zs.copy()
+        e[j] = step
+        sp_, pp = apply_increment(sk, poses, e, zo)
+        sm_, pm = apply_increment(sk, poses, -e, zo)
+        diff = hybrid_skin(_with(model, sp_), pp) - hybrid_skin(_with(model, sm_), pm)
+        Js[:, :, j] = diff.reshape(M, -1) / (2 * step)
+    for j in range(n_o):
+        e = zo.copy()
+        e[:, j] = step
+        _, pp = apply_increment(sk, poses, zs, e)
+        _, pm = apply_increment(sk, poses, zs, -e)
+        Jo[:, :, j] = (hybrid_skin(model, pp) - hybrid_skin(model, pm)).reshape(M, -1) / (2 * step)
+    return Js, Jo
+
+
+def symmetry_residuals(skeleton, sym_pairs):
+    """Bone-length differences ``(P,)`` (metres) and their Jacobian ``(P, n_s)`` w.r.t. the shared block.
+    sym_pairs: ``[(l, suc_l, r, suc_r), ...]`` bone indices (the bone of l runs from head l to head suc_l)."""
+    h = skeleton.heads
+    n_s, _ = sizes(skeleton.num_bones)
+    r = np.zeros(len(sym_pairs))
+    J = np.zeros((len(sym_pairs), n_s))
+    for i, (l, sl, rr, sr) in enumerate(sym_pairs):
+        bl, br = h[sl] - h[l], h[sr] - h[rr]
+        nl, nr = np.linalg.norm(bl), np.linalg.norm(br)
+        r[i] = nl - nr
+        for bone, sign, u in ((sl, 1, bl / nl), (l, -1, bl / nl), (sr, -1, br / nr), (rr, 1, br / nr)):
+            if bone > 0:
+                J[i, 5 * (bone - 1):5 * (bone - 1) + 3] += sign * u
+    return r, J
+
+
+def normal_blocks(Js, Jo, rd, rl, L, alpha):
+    """Gauss–Newton blocks from posed-vertex Jacobians and residuals.
+
+    Js (M,3V,n_s), Jo (M,3V,n_o); rd, rl (M,V,3) data and Laplacian residuals; L (V,V).
+    Returns ``H_ss (n_s,n_s), H_so (M,n_s,n_o), H_oo (M,n_o,n_o), g_s (n_s,), g_o (M,n_o)``."""
+    M, R3, n_s = Js.shape
+    V = R3 // 3
+    n_o = Jo.shape[2]
+
+    def lap(J):
+        n = J.shape[2]
+        return (L @ J.reshape(M, V, 3 * n).transpose(1, 0, 2).reshape(V, -1)).reshape(V, M, 3, n) \
+            .transpose(1, 0, 2, 3).reshape(M, R3, n)
+
+    LJs, LJo = lap(Js), lap(Jo)
+    rd, rl = rd.reshape(M, -1), rl.reshape(M, -1)
+    H_ss = np.einsum("mri,mrj->ij", Js, Js) + alpha * np.einsum("mri,mrj->ij", LJs, LJs)
+    H_so = np.einsum("mri,mrj->mij", Js, Jo) + alpha * np.einsum("mri,mrj->mij", LJs, LJo)
+    H_oo = np.einsum("mri,mrj->mij", Jo, Jo) + alpha * np.einsum("mri,mrj->mij", LJo, LJo)
+    g_s = np.einsum("mri,mr->i", Js, rd) + alpha * np.einsum("mri,mr->i", LJs, rl)
+    g_o = np.einsum("mri,mr->mi", Jo, rd) + alpha * np.einsum("mri,mr->mi", LJo, rl)
+    return H_ss, H_so, H_oo, g_s, g_o
+
+
+def schur_solve(H_ss, H_so, H_oo, g_s, g_o):
+    """Solve the arrow-head system ``[[H_ss, H_so_1.., ], [H_so_mᵀ, H_oo_m]] [x_s; x_m] = [g_s; g_o_m]``
+    by eliminating the per-scan blocks.  Returns ``(x_s (n_s,), x_o (M,n_o))``."""
+    Y = np.linalg.solve(H_oo, np.concatenate([np.swapaxes(H_so, 1, 2), g_o[:, :, None]], axis=2))
+    HinvHos, Hinv_go = Y[:, :, :-1], Y[:, :, -1]
+    S = H_ss - np.einsum("mij,mjk->ik", H_so, HinvHos)
+    rhs = g_s - np.einsum("mij,mj->i", H_so, Hinv_go)
+    x_s = np.linalg.solve(S, rhs)
+    x_o = Hinv_go - np.einsum("mij,j->mi", HinvHos, x_s)
+    return x_s, x_o
+
+
+class JointPoseProblem:
+    """Objective ``Q + λ Q_sym`` as a function of (skeleton, poses) for a fixed model skin and rest mesh."""
+
+    def __init__(self, objective, sym_pairs=(), lam=1e10):
+        self.objective = objective
+        self.sym_pairs = list(sym_pairs)
+        self.lam = float(lam)
+
+    def value(self, model, poses):
+        q = self.objective.value(hybrid_skin(model, poses))
+        if self.sym_pairs and self.lam > 0:
+            r, _ = symmetry_residuals(model.skeleton, self.sym_pairs)
+            q += self.lam * float(r @ r)
+        return q
+
+
+def optimise_joints_and_poses(model, poses, problem, iterations=10, mu=1e-3, step_tol=1e-9, progress=None):
+    """Levenberg–Marquardt on joints (centres + twist axes) and all per-scan poses.
+
+    model: current :class:`Model` (its skin and rest mesh are held fixed); poses: current poses;
+    problem: :class:`JointPoseProblem`.  Returns ``(model, poses, log)`` with log the objective after every
+    accepted step (never increasing).  ``progress(fraction, stage, objective)`` after each iteration."""
+    obj = problem.objective
+    E = problem.value(model, poses)
+    log = []
+    for it in range(iterations):
+        posed = hybrid_skin(model, poses)
+        rd, rl = obj.residuals(posed)
+        Js, Jo = posed_jacobians(model, poses)
+        H_ss, H_so, H_oo, g_s, g_o = normal_blocks(Js, Jo, rd, rl, obj.L, obj.alpha)
+        # damping from the data part only: the huge symmetry weight must not freeze the joints it couples
+        diag_s = np.diag(H_ss).copy()
+        if problem.sym_pairs and problem.lam > 0:
+            r, J = symmetry_residuals(model.skeleton, problem.sym_pairs)
+            H_ss = H_ss + problem.lam * J.T @ J
+            g_s = g_s + problem.lam * J.T @ r
+        scale_s = diag_s.mean() if diag_s.size else 1.0
+        scale_o = np.diagonal(H_oo, axis1=1, axis2=2).mean()
+        accepted = False
+        for _ in range(12):
+            Ds = mu * (diag_s + 1e-6 * scale_s)
+            Do = mu * (np.diagonal(H_oo, axis1=1, axis2=2) + 1e-6 * scale_o)
+            x_s, x_o = schur_solve(H_ss + np.diag(Ds), H_so, H_oo + Do[:, :, None] * np.eye(H_oo.shape[1]),
+                                   -g_s, -g_o)
+            sk_new, poses_new = apply_increment(model.skeleton, poses, x_s, x_o)
+            model_new = _with(model, sk_new)
+            E_new = problem.value(model_new, poses_new)
+            if E_new < E:
+                accepted = True
+                step = np.sqrt(x_s @ x_s + np.sum(x_o * x_o))
+                model, poses, E = model_new, poses_new, E_new
+                mu = max(mu / 3.0, 1e-9)
+                break
+            mu *= 4.0
+        if progress is not None:
+            progress((it + 1) / iterations, "joints and poses (Gauss-Newton)", E)
+        if not accepted:
+            break
+        log.append(E)
+        if step < step_tol:
+            break
+    return model, poses, log

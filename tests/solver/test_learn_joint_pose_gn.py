@@ -1,0 +1,157 @@
+"""G9 (joints + poses by Gauss-Newton/LM), G10 (symmetry), G11 (Schur complement = dense solve)."""
+import copy
+
+import numpy as np
+
+from articula.solver.joint_pose_gn import (JointPoseProblem, apply_increment, normal_blocks,
+                                           optimise_joints_and_poses, posed_jacobians, schur_solve, sizes,
+                                           symmetry_residuals)
+from articula.solver.laplacian import uniform_laplacian
+from articula.solver.rig_objective import RigObjective
+from articula.solver.skinning import hybrid_skin
+
+from .learn_data import hybrid_truth
+
+WEIGHTED = [1, 3, 5, 6, 7]          # bones with fractional weights: their twist axis is identifiable
+
+
+def _perturbed(model, poses, seed=0, dh=0.02, deg=10.0, dpose=0.05):
+    rng = np.random.default_rng(seed)
+    B, M = model.skeleton.num_bones, len(poses)
+    n_s, n_o = sizes(B)
+    ds = np.zeros((B - 1, 5))
+    ds[:, :3] = rng.uniform(-dh, dh, (B - 1, 3))
+    ds[:, 3:] = rng.uniform(-1, 1, (B - 1, 2)) * np.radians(deg) / np.sqrt(2)
+    sk, p = apply_increment(model.skeleton, poses, ds.ravel(), dpose * rng.normal(size=(M, n_o)))
+    m = copy.copy(model)
+    m.skeleton = sk
+    return m, p
+
+
+def _angles(a, b):
+    return np.degrees(np.arccos(np.clip(np.sum(a.frames[:, :, 1] * b.frames[:, :, 1], axis=1), -1, 1)))
+
+
+def test_apply_increment_keeps_world_rotations_when_only_the_axis_changes():
+    model, poses, _ = hybrid_truth(3)
+    n_s, n_o = sizes(8)
+    ds = np.zeros((7, 5))
+    ds[:, 3:] = 0.2
+    sk, p = apply_increment(model.skeleton, poses, ds.ravel(), np.zeros((3, n_o)))
+    from articula.solver.kinematics import forward_kinematics
+    R0, t0 = forward_kinematics(model.skeleton, poses)
+    R1, t1 = forward_kinematics(sk, p)
+    assert np.abs(R0 - R1).max() < 1e-12 and np.abs(t0 - t1).max() < 1e-12
+    sk.validate()
+    assert _angles(sk, model.skeleton)[1:].min() > 10
+
+
+def test_posed_jacobian_against_closed_forms():
+    model, poses, _ = hybrid_truth(3)
+    Js, Jo = posed_jacobians(model, poses)
+    V, B = model.num_vertices, 8
+    # translation columns: identity for every vertex of every scan
+    Jt = Jo[:, :, 3 * B:].reshape(3, V, 3, 3)
+    assert np.abs(Jt - np.eye(3)).max() < 1e-8
+    # rest scan (identity pose), rigid vertex of bone b, local rotation axis i: (F_b e_i) x (x - chain centre)
+    sk, x = model.skeleton, model.rest_vertices
+    rigid = (model.twist_weights.sum(1) == 0) & (model.swing_weights.sum(1) == 0)
+    for b in (0, 3, 6):
+        rows = np.flatnonzero(rigid & (model.anchor == b))
+        chain = [b]
+        while sk.parents[chain[-1]] >= 0:
+            chain.append(int(sk.parents[chain[-1]]))
+        for c in chain:
+            for i in range(3):
+                want = np.cross(sk.frames[c][:, i], x[rows] - sk.heads[c])
+                got = Jo[0].reshape(V, 3, -1)[rows, :, 3 * c + i]
+                assert np.abs(got - want).max() < 1e-8
+    # a head moves nothing in the rest pose (rotation about it is identity)
+    assert np.abs(Js[0]).max() < 1e-8
+    # shared columns in a posed scan: compare with a larger-step difference quotient (consistency)
+    Js2, _ = posed_jacobians(model, poses, step=1e-4)
+    assert np.abs(Js2 - Js).max() < 1e-6 * max(1.0, np.abs(Js).max())
+
+
+def test_schur_complement_equals_dense_solve():
+    rng = np.random.default_rng(3)
+    M, n_s, n_o = 4, 6, 5
+    J = rng.normal(size=(M * 9 + 7, n_s + M * n_o))
+    mask = np.zeros_like(J, dtype=bool)                       # arrow-head pattern
+    mask[:, :n_s] = True
+    for m in range(M):
+        mask[m * 9:(m + 1) * 9, n_s + m * n_o:n_s + (m + 1) * n_o] = True
+    J = np.where(mask, J, 0.0)
+    H = J.T @ J + 0.1 * np.eye(J.shape[1])
+    g = rng.normal(size=J.shape[1])
+    H_ss = H[:n_s, :n_s]
+    H_so = np.stack([H[:n_s, n_s + m * n_o:n_s + (m + 1) * n_o] for m in range(M)])
+    H_oo = np.stack([H[n_s + m * n_o:n_s + (m + 1) * n_o, n_s + m * n_o:n_s + (m + 1) * n_o] for m in range(M)])
+    x_s, x_o = schur_solve(H_ss, H_so, H_oo, g[:n_s], g[n_s:].reshape(M, n_o))
+    dense = np.linalg.solve(H, g)
+    assert np.abs(np.concatenate([x_s, x_o.ravel()]) - dense).max() < 1e-8
+
+
+def test_normal_blocks_equal_dense_products():
+    model, poses, scans = hybrid_truth(2)
+    L = uniform_laplacian(model.faces, model.num_vertices)
+    Js, Jo = posed_jacobians(model, poses)
+    rng = np.random.default_rng(0)
+    rd, rl = rng.normal(size=(2, 2, model.num_vertices, 3))
+    H_ss, H_so, H_oo, g_s, g_o = normal_blocks(Js, Jo, rd, rl, L, 5.0)
+    Lk = np.kron(L.toarray(), np.eye(3))
+    J1 = np.hstack([Js[1], Jo[1]])
+    H1 = J1.T @ J1 + 5.0 * (Lk @ J1).T @ (Lk @ J1)
+    n_s = Js.shape[2]
+    assert np.allclose(H_so[1], H1[:n_s, n_s:], atol=1e-9) and np.allclose(H_oo[1], H1[n_s:, n_s:], atol=1e-9)
+    assert np.allclose(g_o[1], Jo[1].T @ rd[1].ravel() + 5.0 * (Lk @ Jo[1]).T @ rl[1].ravel(), atol=1e-9)
+
+
+def test_gauss_newton_recovers_perturbed_joints_and_q_is_monotone():
+    model, poses, scans = hybrid_truth(8)
+    obj = RigObjective(scans, uniform_laplacian(model.faces, model.num_vertices), 100.0)
+    start, p0 = _perturbed(model, poses)
+    problem = JointPoseProblem(obj)
+    q0 = problem.value(start, p0)
+    fitted, p1, log = optimise_joints_and_poses(start, p0, problem, iterations=10)
+    assert log and log[0] < q0 and all(b <= a for a, b in zip(log, log[1:]))
+    assert np.linalg.norm(fitted.skeleton.heads - model.skeleton.heads, axis=1).max() < 1e-3
+    assert _angles(fitted.skeleton, model.skeleton)[WEIGHTED].max() < 0.5
+    assert np.abs(hybrid_skin(fitted, p1) - scans).max() < 1e-6
+
+
+def test_symmetry_residual_zero_iff_equal_lengths_for_any_direction():
+    model, _, _ = hybrid_truth(2)
+    sk = copy.deepcopy(model.skeleton)
+    pairs = [(2, 3, 4, 5)]                                     # upper arms: shoulder -> elbow
+    r, J = symmetry_residuals(sk, pairs)
+    assert abs(r[0]) < 1e-15
+    sk.heads[5] = sk.heads[4] + 0.3 * np.array([0.0, 0.6, -0.8])   # same length, another direction
+    assert abs(symmetry_residuals(sk, pairs)[0][0]) < 1e-15
+    sk.heads[5] = sk.heads[4] + 0.31 * np.array([0.0, 0.6, -0.8])
+    assert np.isclose(symmetry_residuals(sk, pairs)[0][0], -0.01)
+    # Jacobian vs central differences
+    r0, J = symmetry_residuals(sk, pairs)
+    n_s, _ = sizes(8)
+    for j in range(n_s):
+        if j % 5 >= 3:
+            continue
+        e = np.zeros((7, 5)).ravel()
+        e[j] = 1e-6
+        b = 1 + j // 5
+        sp_, sm_ = copy.deepcopy(sk), copy.deepcopy(sk)
+        sp_.heads[b] += e.reshape(7, 5)[b - 1, :3]
+        sm_.heads[b] -= e.reshape(7, 5)[b - 1, :3]
+        fd = (symmetry_residuals(sp_, pairs)[0] - symmetry_residuals(sm_, pairs)[0]) / 2e-6
+        assert np.allclose(fd, J[:, j], atol=1e-8)
+
+
+def test_symmetry_term_equalises_bone_lengths():
+    model, poses, scans = hybrid_truth(6)
+    obj = RigObjective(scans, uniform_laplacian(model.faces, model.num_vertices), 100.0)
+    start, p0 = _perturbed(model, poses, seed=2)
+    pairs = [(2, 3, 4, 5)]
+    problem = JointPoseProblem(obj, pairs, lam=1e10)
+    fitted, _, log = optimise_joints_and_poses(start, p0, problem, iterations=8)
+    assert all(b <= a for a, b in zip(log, log[1:]))
+    assert abs(symmetry_residuals(fitted.skeleton, pairs)[0][0]) < 1e-7       # < 1e-4 mm
