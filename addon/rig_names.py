@@ -44,7 +44,7 @@ def problem(name: str):
     if not name:
         return "is empty"
     if name == NEUTRAL or name.startswith((SWING_PREFIX, TWIST_PREFIX)):
-        return f"is reserved for rig helper bones ({NEUTRAL!r}, {SWING_PREFIX!r}*, {TWIST_PREFIX!r}*)"
+        return f"is reserved for rig helper bones ('{NEUTRAL}', '{SWING_PREFIX}*', '{TWIST_PREFIX}*')"
     if len(swing(name).encode("utf-8")) > MAX_NAME_BYTES:
         return f"is too long (Blender allows {MAX_NAME_BYTES - len(SWING_PREFIX)} bytes for a control bone)"
     return None
