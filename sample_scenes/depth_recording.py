@@ -16,10 +16,11 @@ Output folder::
 ``cam_to_world`` (N, 4, 4) camera (OpenCV axes) to world; ``blender_camera_matrix`` (N, 4, 4) the same
 camera as a Blender camera's ``matrix_world`` (looks down -Z, +Y up); ``visible_ids`` (M,) int32 and
 ``visible_offsets`` (N+1,) int64: subject vertices of faces seen in frame k are
-``visible_ids[visible_offsets[k]:visible_offsets[k+1]]``; ``faces`` (F, 3) int32; ``seed``;
+``visible_ids[visible_offsets[k]:visible_offsets[k+1]]``; ``faces`` (F, 3) int32; ``noise_seed``;
 ``noise_params`` (JSON str); optionally ``clean_depth_mm`` (N, H, W) uint16 (noise-free) and
-``vertices`` (N, V, 3) float32; and every array of the caller's ground truth ``gt`` (bone heads,
-poses, ...) under its own key prefixed with ``gt_``.
+``vertices`` (N, V, 3) float32; and every array of the caller's ground truth ``gt`` under its own
+key (e.g. ``posed_heads``, ``pose_rotations`` of ``registered.posed_sequence``; keys listed above
+take precedence).
 """
 from __future__ import annotations
 
@@ -167,7 +168,7 @@ def _ground_truth(frames, faces, gt, intr, c2w, vis, noise, seed, clean_all, sav
         "visible_ids": np.concatenate(vis) if vis else np.zeros(0, np.int32),
         "visible_offsets": np.r_[0, np.cumsum([len(v) for v in vis])].astype(np.int64),
         "faces": faces.astype(np.int32),
-        "seed": np.array(seed),
+        "noise_seed": np.array(seed),
         "noise_params": np.array(json.dumps(dataclasses.asdict(noise))),
     }
     if clean_all:
@@ -176,8 +177,8 @@ def _ground_truth(frames, faces, gt, intr, c2w, vis, noise, seed, clean_all, sav
         out["vertices"] = frames.astype(np.float32)
     for key, value in (gt or {}).items():
         arr = np.asarray(value)
-        if arr.dtype != object:
-            out[f"gt_{key}"] = arr
+        if key not in out and arr.dtype != object:
+            out[key] = arr
     return out
 
 

@@ -9,7 +9,7 @@ import trimesh
 
 from articula.sample_scenes import depth_noise as dn
 from articula.sample_scenes import depth_recording as rec
-from articula.solver import camera, meshfiles, mesh_write, png16
+from articula.solver import camera, png16
 from articula.solver.errors import ArticulaInputError
 
 RADIUS = 0.35
@@ -34,7 +34,7 @@ def test_noiseless_recording_reproduces_the_scene(tmp_path):
     assert (intr.width, intr.height) == (160, 120)
     g = np.load(out / "ground_truth.npz")
     assert str(g["format"]) == rec.GT_FORMAT and json.loads(str(g["noise_params"]))["quantization"] == "none"
-    np.testing.assert_allclose(g["gt_centres"], centres)
+    np.testing.assert_allclose(g["centres"], centres)
     floor_z = frames[:, :, 2].min()
     for k in range(3):
         depth_m = png16.read_png16(out / f"depth_{k:04d}.png") * intr.depth_unit_m
@@ -83,19 +83,3 @@ def test_bad_inputs(tmp_path):
     with pytest.raises(ArticulaInputError, match="unknown camera preset"):
         rec.generate_depth(tmp_path, frames, faces, camera="webcam")
 
-
-def test_mesh_writers_round_trip_through_scan_readers(tmp_path):
-    rng = np.random.default_rng(0)
-    verts = rng.normal(size=(50, 3))
-    faces = rng.integers(0, 50, (80, 3))
-    mesh_write.write_ply(tmp_path / "m.ply", verts, faces, comment="test")
-    mesh_write.write_obj(tmp_path / "m.obj", verts, faces, comment="test")
-    ply = meshfiles.read_ply(str(tmp_path / "m.ply"))
-    obj = meshfiles.read_obj(str(tmp_path / "m.obj"))
-    np.testing.assert_allclose(ply.vertices, verts, atol=1e-6)   # float32
-    np.testing.assert_allclose(obj.vertices, verts, atol=1e-6)   # 6 decimals
-    keep = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
-    np.testing.assert_array_equal(ply.triangles(), faces[keep])  # readers drop degenerate faces
-    np.testing.assert_array_equal(obj.triangles(), faces[keep])
-    with pytest.raises(ArticulaInputError, match="out of range"):
-        mesh_write.write_ply(tmp_path / "bad.ply", verts, faces + 50)
