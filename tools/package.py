@@ -146,7 +146,9 @@ def run_builder(tools: BlenderTools, *args: str) -> str:
 # --------------------------------------------------------------------------------------------------
 # Wheels
 
-_WHEEL_RE = re.compile(r"^(?P<name>[^-]+)-(?P<version>[^-]+)(-\d[^-]*)?-(?P<py>[^-]+)-(?P<abi>[^-]+)-(?P<plat>[^-]+)\.whl$")
+# {name}-{version}(-{build})?-{python tag}-{abi tag}-{platform tag}.whl
+_WHEEL_RE = re.compile(
+    r"^(?P<name>[^-]+)-(?P<version>[^-]+)(-\d[^-]*)?-(?P<py>[^-]+)-(?P<abi>[^-]+)-(?P<plat>[^-]+)\.whl$")
 
 
 def parse_wheel(filename: str) -> dict:
@@ -154,6 +156,10 @@ def parse_wheel(filename: str) -> dict:
     if not m:
         raise PackageError(f"not a wheel file name: {filename}")
     return m.groupdict()
+
+
+def _normal(name: str) -> str:
+    return re.sub(r"[-_.]+", "_", name).lower()
 
 
 def fetch_wheel(req: Requirement, python: str, platform: str, cache: Path) -> Path:
@@ -184,7 +190,7 @@ def fetch_wheel(req: Requirement, python: str, platform: str, cache: Path) -> Pa
                 f"Leave the platform out (--platforms) or change the pin in tools/package.py.")
         tags = parse_wheel(got[0].name)
         ok = (tags["plat"] == "any") if req.pure else (tags["py"] == cp and tags["abi"] == cp)
-        if tags["name"].lower() != req.name or tags["version"] != req.version or not ok:
+        if _normal(tags["name"]) != _normal(req.name) or tags["version"] != req.version or not ok:
             raise PackageError(f"pip returned an unexpected wheel for {req.name}=={req.version}, {cp}, "
                                f"{pip_platform}: {got[0].name}")
         folder.parent.mkdir(parents=True, exist_ok=True)
@@ -247,13 +253,16 @@ def _toml_str(s: str) -> str:
     return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
-def stage(source: Path, dest: Path, wheels: list[Path], platforms: list[str]) -> Path:
-    """Copy ``source`` to ``dest/<id>`` with the wheels in ``wheels/`` and the manifest filled in."""
+def stage(source: Path, dest: Path, wheels: list[Path], platforms: list[str], skip_dirs=()) -> Path:
+    """Copy ``source`` to ``dest/<id>`` with the wheels in ``wheels/`` and the manifest filled in.
+
+    ``skip_dirs``: more folders not to copy (the output folder when it lies inside the source tree)."""
     manifest = tomllib.loads((source / MANIFEST).read_text(encoding="utf-8"))
     pkg = dest / manifest["id"]
+    skip_dirs = {Path(d).resolve() for d in skip_dirs}
 
     def ignore(folder, names):
-        skip = {n for n in names if n == "__pycache__"}
+        skip = {n for n in names if n == "__pycache__" or (Path(folder) / n).resolve() in skip_dirs}
         if Path(folder).resolve() == source.resolve():
             skip |= STAGING_SKIP_TOP & set(names)
         return skip
@@ -367,7 +376,7 @@ def build(platforms: list[str], out: Path, cache: Path, source: Path = ROOT, log
     out.mkdir(parents=True, exist_ok=True)
     all_wheels = list({w.name: w for p in platforms for w in wheels[p]}.values())
     with tempfile.TemporaryDirectory(prefix="articula-stage-") as tmp:
-        pkg = stage(source, Path(tmp), all_wheels, platforms)
+        pkg = stage(source, Path(tmp), all_wheels, platforms, skip_dirs=[out])
         run_builder(builder, "build", "--source-dir", str(pkg), "--output-dir", str(out), "--split-platforms")
     t2 = time.perf_counter()
     log(f"built with {builder.label}'s builder ({builder.builder}) in {t2 - t1:.1f} s")
