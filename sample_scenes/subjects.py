@@ -29,12 +29,13 @@ from .mpfb_rig import load_rig, load_weights, place_joints, roll_frames
 
 SHAPE_PRESETS = {
     "female": {"gender": 0.0}, "male": {"gender": 1.0}, "heavy": {"weight": 0.9}, "thin": {"weight": 0.1},
-    "tall": {"height": 0.9}, "short": {"height": 0.1}, "young": {"age": 0.5}, "old": {"age": 0.875},
+    "tall": {"height": 0.7}, "short": {"height": 0.3}, "young": {"age": 0.5}, "old": {"age": 0.875},
     "muscular": {"muscle": 0.9}, "weak": {"muscle": 0.1}, "average": {},
 }
-#: Ranges of macros drawn at random (adults: age 0.5-0.8 is 25-64 years).
+#: Ranges of macros drawn at random (adults: age 0.5-0.8 is 25-64 years).  MakeHuman's height targets
+#: are large (height 0 / 1 give about 1.3 m / 2.4 m for the default body), hence the narrow range.
 RANDOM_RANGES = {"gender": (0.0, 1.0), "age": (0.5, 0.8), "muscle": (0.3, 0.8), "weight": (0.2, 0.8),
-                 "height": (0.2, 0.8), "proportions": (0.4, 0.8)}
+                 "height": (0.35, 0.65), "proportions": (0.4, 0.8)}
 
 
 @dataclass
