@@ -18,6 +18,7 @@ COMMAND_MODULES = (
     ".addon.bench_cli",
     ".sample_scenes.cli",
     ".addon.rig_cli",
+    ".addon.scan_cli",
 )
 
 

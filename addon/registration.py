@@ -12,6 +12,7 @@ import bpy
 MODULES = (
     ".addon.preferences",
     ".addon.properties",
+    ".addon.scan_sequence",
     ".operators",
     ".addon.panels",
 )

@@ -8,6 +8,7 @@ FEATURES = (
     "build_rig",
     "bake_poses",
     "export_bundle",
+    "import_scans",
 )
 
 classes = tuple(cls for name in FEATURES
