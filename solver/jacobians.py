@@ -28,7 +28,7 @@ from .dualquat import dq_apply
 from .model import Poses
 from .rotations import (quat_canonical, quat_conj, quat_mul, quat_normalize, quat_to_matrix, rotvec_to_quat,
                         swing_twist_y)
-from .skinning import _bone_terms, _blend_group, _Groups
+from .skinning import blend_group, bone_terms, check_pose_shapes, _groups_for
 
 _TWIST_EPS = 1e-12
 
@@ -89,11 +89,11 @@ def _split_derivatives(q):
 
 
 def _pose_bone_terms(skeleton, poses):
-    """Per (frame, bone) Jacobian pieces on top of :func:`skinning._bone_terms`:
+    """Per (frame, bone) Jacobian pieces on top of :func:`skinning.bone_terms`:
     ``T (N, B, 8, 3)`` = ∂(world twist dual quaternion)/∂δ, ``G (N, B, 3, 3)`` = world swing angular
     velocity per δ (∂R_sw = R_sw [G δ]×), ``K (N, B, 3, 3)`` = Rot_b F_b (chain), ``p (N, B, 3)`` the
     posed joints, ``R_sw (N, B, 3, 3)`` world swing rotations."""
-    terms = _bone_terms(skeleton, poses)
+    terms = bone_terms(skeleton, poses)
     F, h = skeleton.frames, skeleton.heads
     q = quat_canonical(quat_normalize(poses.rotations))
     E = 0.5 * _left(q)[..., 1:]                                      # ∂q/∂δ for q·exp(δ), (N, B, 4, 3)
@@ -150,19 +150,20 @@ def _group_state(terms, group):
     one anchor group for all frames."""
     a, kids, start, stop, wt, ws = group
     N = terms["Rm"].shape[0]
-    tw, sw = _blend_group(terms, 0, N, a, kids, wt, ws)
+    tw, sw = blend_group(terms, 0, N, a, kids, wt, ws)
     bq = np.moveaxis(np.asarray(tw), 0, -1)                           # (N, V_a, 8)
     L = np.moveaxis(np.asarray(sw), 0, -1).reshape(N, stop - start, 3, 4)
     return bq, L
 
 
-def pose_jacobian(model, poses):
+def pose_jacobian(model, poses, groups=None):
     """Posed vertices ``(N, V, 3)`` and their Jacobian ``(N, V, 3, P)`` w.r.t. the pose parameters
-    (module docstring for the layout and conventions)."""
+    (module docstring for the layout and conventions).  ``groups``: optional :class:`AnchorGroups`."""
     sk = model.skeleton
     B = sk.num_bones
     bt = _pose_bone_terms(sk, poses)
-    groups = _Groups(model)
+    check_pose_shapes(model, poses)
+    groups = _groups_for(model, groups)
     order = groups.order
     N, V = len(poses), model.num_vertices
     P = 4 + 3 * B
@@ -197,13 +198,15 @@ def pose_jacobian(model, poses):
     return posed, J
 
 
-def joint_jacobian(model, poses):
+def joint_jacobian(model, poses, groups=None):
     """Posed vertices ``(N, V, 3)`` and their Jacobian ``(N, V, 3, 3B)`` w.r.t. the rest joint centres
-    ``heads`` (columns 3b … 3b+2 = x, y, z of heads[b]; frames, tails, rest vertices fixed)."""
+    ``heads`` (columns 3b … 3b+2 = x, y, z of heads[b]; frames, tails, rest vertices fixed).
+    ``groups``: optional :class:`AnchorGroups`."""
     sk = model.skeleton
     B = sk.num_bones
     bt = _pose_bone_terms(sk, poses)
-    groups = _Groups(model)
+    check_pose_shapes(model, poses)
+    groups = _groups_for(model, groups)
     order = groups.order
     N, V = len(poses), model.num_vertices
     Rm = bt["Rm"]

@@ -16,6 +16,7 @@ needs no flipping (this equals aligning to the neutral pivot).
 """
 import numpy as np
 
+from .errors import ArticulaInputError
 from .dualquat import IDENTITY as DQ_IDENTITY
 from .dualquat import dq_apply, dq_from_rigid, align_hemisphere
 from .kinematics import chain_from_world, to_world
@@ -107,17 +108,35 @@ def dqs(vertices, weights, Rm, tm):
 
 # ----------------------------------------------------------------------------- hybrid skin
 
-def _bone_terms(skeleton, poses):
-    """Per (frame, bone) quantities of the hybrid skin.
+def check_pose_shapes(model, poses):
+    """Raise ArticulaInputError unless ``poses`` fits ``model`` (shapes only; values are checked by
+    ``Poses.validate``, the model by ``Model.validate``, once, when loaded or built)."""
+    B = model.skeleton.num_bones
+    r = np.shape(poses.rotations)
+    if len(r) != 3 or r[1:] != (B, 4):
+        raise ArticulaInputError(f"pose_rotations: expected shape (N, {B}, 4) for this model, got {r}")
+    N = r[0]
+    if np.shape(poses.translations) != (N, 3):
+        raise ArticulaInputError(f"pose_translations: expected shape ({N}, 3), got {np.shape(poses.translations)}")
+    if np.shape(poses.scales) != (N,):
+        raise ArticulaInputError(f"pose_scales: expected shape ({N},), got {np.shape(poses.scales)}")
+    V = len(model.rest_vertices)
+    for key in ("anchor", "twist_weights", "swing_weights"):
+        if len(getattr(model, key)) != V:
+            raise ArticulaInputError(f"{key}: {len(getattr(model, key))} rows for {V} rest vertices")
 
-    Returns dict with ``twist_dq (N, B, 8)`` world twist about the head as a dual quaternion,
-    ``swing_chain (N, B, 12)`` the affine map ``M_parent(c) ∘ Swing_c`` (row-major 3x4; row 0 is unused),
-    ``chain (N, B, 12)`` the part maps ``M_b``, and ``Rm, tm`` (the chain as matrices)."""
+
+def bone_terms(skeleton, poses):
+    """Per (frame, bone) quantities of the hybrid skin, computed once and shared by all vertices.
+
+    Returns a dict of arrays: ``twist_dq (N, B, 8)`` world twist of bone b about heads[b] as a dual
+    quaternion (w >= 0); ``swing_chain (N, B, 12)`` the affine map ``M_parent(b) ∘ Swing_b`` (row-major
+    3x4; unused for the root); ``chain (N, B, 12)`` the part maps ``M_b``; ``Rm (N, B, 3, 3)``,
+    ``tm (N, B, 3)`` the part maps as matrices."""
     F, h = skeleton.frames, skeleton.heads
     q = quat_canonical(quat_normalize(poses.rotations))
     q_sw, q_tw = swing_twist_y(q)
-    y_axis = F[:, :, 1]                                                 # (B, 3) world twist axes
-    u = q_tw[..., 2:3] * y_axis                                        # (N, B, 3) world twist vector part
+    u = q_tw[..., 2:3] * F[:, :, 1]                                    # (N, B, 3) world twist vector part
     twist_dq = np.concatenate([q_tw[..., :1], u, np.zeros(u.shape[:-1] + (1,)), np.cross(h, u)], axis=-1)
     R_sw = to_world(F, quat_to_matrix(q_sw))                           # (N, B, 3, 3)
     R = to_world(F, quat_to_matrix(q))
@@ -129,32 +148,47 @@ def _bone_terms(skeleton, poses):
     return dict(twist_dq=twist_dq, swing_chain=_flat_maps(sw_lin, sw_t), chain=_flat_maps(Rm, tm), Rm=Rm, tm=tm)
 
 
-class _Groups:
-    """Vertices grouped by anchor, with compact blend-set weights.
+class AnchorGroups:
+    """Vertices grouped by anchor part, with compact blend-set weights: a snapshot of the model's
+    anchors and weights (build a new one after changing them).  Pass it to :func:`hybrid_skin`,
+    :func:`affine_form` or the Jacobians to skip the set-up when the skin is fixed (e.g. tracking).
 
-    ``order`` (V,) sorts vertices by anchor; for each anchor part with vertices, ``groups`` holds
-    ``(a, children (K,), start, stop, twist (V_a, K), swing (V_a, K))`` (slices of the sorted order)."""
+    ``order (V,)`` sorts vertices by anchor, ``inverse (V,)`` undoes it; ``rest (3, V)`` rest vertices
+    in sorted order; ``groups`` lists ``(a, children (K,), start, stop, twist (V_a, K), swing (V_a, K))``
+    for every anchor part with vertices (rows start:stop of the sorted order, float64 weights)."""
 
     def __init__(self, model):
         anchor = model.anchor
+        B = model.skeleton.num_bones
+        self.num_vertices = len(anchor)
         self.order = np.argsort(anchor, kind="stable")
-        sorted_anchor = anchor[self.order]
-        bounds = np.searchsorted(sorted_anchor, np.arange(model.skeleton.num_bones + 1))
+        self.inverse = np.empty_like(self.order)
+        self.inverse[self.order] = np.arange(len(anchor))
+        self.rest = np.ascontiguousarray(model.rest_vertices[self.order].T)
+        bounds = np.searchsorted(anchor[self.order], np.arange(B + 1))
+        twist, swing = model.twist_weights[self.order], model.swing_weights[self.order]
         self.groups = []
-        for a in range(model.skeleton.num_bones):
+        for a in range(B):
             start, stop = int(bounds[a]), int(bounds[a + 1])
-            if stop == start:
-                continue
-            rows = self.order[start:stop]
-            kids = np.asarray(model.skeleton.children(a), dtype=np.int64)
-            wt = model.twist_weights[rows][:, kids].astype(np.float64)
-            ws = model.swing_weights[rows][:, kids].astype(np.float64)
-            self.groups.append((a, kids, start, stop, wt, ws))
+            if stop > start:
+                kids = np.asarray(model.skeleton.children(a), dtype=np.int64)
+                self.groups.append((a, kids, start, stop, twist[start:stop, kids].astype(np.float64),
+                                    swing[start:stop, kids].astype(np.float64)))
 
 
-def _blend_group(terms, n0, n1, a, kids, wt, ws):
-    """Blended twist dual quaternions ``(8, n, V_a)`` and swing∘chain affine maps ``(12, n, V_a)`` of
-    one anchor group over frames n0:n1 (component-major so each component is a contiguous (n, V_a))."""
+def _groups_for(model, groups):
+    if groups is None:
+        return AnchorGroups(model)
+    if groups.num_vertices != model.num_vertices:
+        raise ArticulaInputError(f"groups: built for {groups.num_vertices} vertices, model has {model.num_vertices}")
+    return groups
+
+
+def blend_group(terms, n0, n1, a, kids, wt, ws):
+    """Blended twist dual quaternions ``(8, n, V_a)`` (un-normalised) and swing∘chain affine maps
+    ``(12, n, V_a)`` (row-major 3x4) of one anchor group over frames n0:n1, component-major so each
+    component is a contiguous (n, V_a) array.  Twist: ``e + Σ_c w_t,c (Q_c − e)`` (e = identity);
+    swing: ``M_a + Σ_c w_s,c (M_a ∘ Swing_c − M_a)``."""
     chain_a = terms["chain"][n0:n1, a].T[:, :, None]                   # (12, n, 1)
     n, Va = n1 - n0, len(wt)
     if len(kids) == 0:
@@ -191,51 +225,58 @@ def _apply_affine_components(sw, x):
                      for i in range(3)])
 
 
-def hybrid_skin(model, poses):
-    """Posed vertices ``(N, V, 3)`` of the hybrid swing/twist skin (ARCHITECTURE.md steps 1-4)."""
-    terms = _bone_terms(model.skeleton, poses)
-    groups = _Groups(model)
-    rest_sorted = model.rest_vertices[groups.order].T                 # (3, V)
+def hybrid_skin(model, poses, groups=None):
+    """Posed vertices ``(N, V, 3)`` of the hybrid swing/twist skin (ARCHITECTURE.md steps 1-4).
+    ``groups``: an optional :class:`AnchorGroups` of this model (built here when omitted)."""
+    check_pose_shapes(model, poses)
+    groups = _groups_for(model, groups)
+    terms = bone_terms(model.skeleton, poses)
     N, V = len(poses), model.num_vertices
     out = np.empty((N, V, 3))
     for n0 in range(0, N, FRAME_CHUNK):
         n1 = min(N, n0 + FRAME_CHUNK)
         chunk = np.empty((3, n1 - n0, V))
         for a, kids, start, stop, wt, ws in groups.groups:
-            tw, sw = _blend_group(terms, n0, n1, a, kids, wt, ws)
-            x = rest_sorted[:, start:stop]
-            vt = _apply_dq_components(tw, x) if len(kids) else np.broadcast_to(x[:, None], (3, n1 - n0, stop - start))
+            tw, sw = blend_group(terms, n0, n1, a, kids, wt, ws)
+            x = groups.rest[:, start:stop]
+            vt = _apply_dq_components(tw, x) if len(kids) else x[:, None]
             chunk[:, :, start:stop] = _apply_affine_components(sw, vt)
-        out[n0:n1][:, groups.order] = chunk.transpose(1, 2, 0)
+        out[n0:n1] = chunk[:, :, groups.inverse].transpose(1, 2, 0)
     return out
 
 
 def _dq_components_to_rigid(tw):
-    """Rotation (3, 3, n, V) and translation (3, n, V) of blended dual quaternions (8, n, V)."""
-    q = np.moveaxis(tw[:4], 0, -1)
-    n2 = np.sum(q * q, axis=-1)
-    R = np.moveaxis(quat_to_matrix(q), (-2, -1), (0, 1))
+    """Rotation components ``R[i][j]`` (each (n, V)) and translation (3, n, V) of blended dual
+    quaternions (8, n, V), normalised as in dualquat.dq_apply."""
     aw, ax, ay, az, dw, dx, dy, dz = tw
-    t = 2.0 / n2 * np.stack([aw * dx - dw * ax + ay * dz - az * dy,
-                             aw * dy - dw * ay + az * dx - ax * dz,
-                             aw * dz - dw * az + ax * dy - ay * dx])
+    s = 2.0 / (aw * aw + ax * ax + ay * ay + az * az)
+    R = [[1 - s * (ay * ay + az * az), s * (ax * ay - aw * az), s * (ax * az + aw * ay)],
+         [s * (ax * ay + aw * az), 1 - s * (ax * ax + az * az), s * (ay * az - aw * ax)],
+         [s * (ax * az - aw * ay), s * (ay * az + aw * ax), 1 - s * (ax * ax + ay * ay)]]
+    t = [s * (aw * dx - dw * ax + ay * dz - az * dy),
+         s * (aw * dy - dw * ay + az * dx - ax * dz),
+         s * (aw * dz - dw * az + ax * dy - ay * dx)]
     return R, t
 
 
-def affine_form(model, poses):
+def affine_form(model, poses, groups=None):
     """Per-vertex affine form of the hybrid skin (spec §1.6): ``A (N, V, 3, 3)``, ``b (N, V, 3)`` with
-    posed vertex = A @ rest vertex + b.  A = M_a,lin · M_S · R_D (not orthogonal with fractional swing
-    weights), b = M_S-chain applied to the DLB translation."""
-    terms = _bone_terms(model.skeleton, poses)
-    groups = _Groups(model)
+    posed vertex = A @ rest vertex + b.  A = L · R_D and b = L t_D + l, where (R_D, t_D) is the vertex's
+    normalised DLB twist and (L, l) its blended swing∘chain map; A is not orthogonal when swing
+    weights are fractional."""
+    check_pose_shapes(model, poses)
+    groups = _groups_for(model, groups)
+    terms = bone_terms(model.skeleton, poses)
     N, V = len(poses), model.num_vertices
-    A = np.empty((N, V, 3, 3))
-    b = np.empty((N, V, 3))
+    A = np.empty((3, 3, N, V))
+    b = np.empty((3, N, V))
     for a, kids, start, stop, wt, ws in groups.groups:
-        rows = groups.order[start:stop]
-        tw, sw = _blend_group(terms, 0, N, a, kids, wt, ws)
-        R_D, t_D = _dq_components_to_rigid(tw)
-        L = sw.reshape(3, 4, N, -1)                                     # (3, 4, n, V_a)
-        A[:, rows] = np.einsum("iknv,kjnv->nvij", L[:, :3], R_D)
-        b[:, rows] = (np.einsum("iknv,knv->nvi", L[:, :3], t_D) + np.moveaxis(L[:, 3], 0, -1))
-    return A, b
+        tw, sw = blend_group(terms, 0, N, a, kids, wt, ws)
+        R, t = _dq_components_to_rigid(tw)
+        for i in range(3):
+            Li = sw[4 * i:4 * i + 4]
+            for j in range(3):
+                A[i, j, :, start:stop] = Li[0] * R[0][j] + Li[1] * R[1][j] + Li[2] * R[2][j]
+            b[i, :, start:stop] = Li[0] * t[0] + Li[1] * t[1] + Li[2] * t[2] + Li[3]
+    inv = groups.inverse
+    return A[..., inv].transpose(2, 3, 0, 1), b[..., inv].transpose(1, 2, 0)
