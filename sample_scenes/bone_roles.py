@@ -9,9 +9,11 @@ breasts: kept at rest).
 
 Limits per role (:data:`LIMITS`, degrees): ``cone`` = largest swing angle (rotation of the bone's Y axis,
 about an axis in the local XZ plane), ``twist`` = largest |rotation about local Y|, and for hinges
-``hinge`` = (min, max) flexion about the hinge axis (the swing is then only about that axis).  Hinge
-axes are defined anatomically, not by the rig's roll: the distal bone flexes towards :data:`FLEX_DIRECTION`
-(world, Z up, character facing -Y): the forearm forward (-Y), the lower leg backward (+Y).
+``hinge`` = (min, max) *anatomical* flexion (angle between the two segments, 0 = straight) about the
+hinge axis; the swing is then only about that axis.  Hinge axes are defined anatomically, not by the
+rig's roll (:func:`hinge_geometry`): in the plane of the two bones when the rest pose is bent (the
+elbows of MakeHuman's A-pose), otherwise towards :data:`FLEX_DIRECTION` (world, Z up, character facing
+-Y: the lower leg bends backward, +Y).
 """
 from __future__ import annotations
 
@@ -50,13 +52,15 @@ class Limit:
 LIMITS = {
     "root": Limit(0, 0), "other": Limit(0, 0),
     "spine": Limit(15, 10), "neck": Limit(20, 25), "head": Limit(20, 30), "clavicle": Limit(10, 5),
-    "upper_arm": Limit(75, 40), "forearm": Limit(0, 40, (0, 130)), "wrist": Limit(45, 10),
+    "upper_arm": Limit(75, 40), "forearm": Limit(0, 40, (0, 145)), "wrist": Limit(45, 10),
     "finger": Limit(20, 5), "twist_arm": Limit(0, 30),
-    "hip_girdle": Limit(5, 3), "hip": Limit(55, 30), "knee": Limit(0, 5, (0, 120)),
+    "hip_girdle": Limit(5, 3), "hip": Limit(55, 30), "knee": Limit(0, 5, (0, 135)),
     "ankle": Limit(30, 10), "toe": Limit(20, 0), "twist_leg": Limit(0, 15),
 }
 
-#: World direction the distal segment moves to when a hinge flexes.
+#: Bend angle (degrees) above which a hinge's flexion plane is taken from its two bones.
+BENT_DEG = 15.0
+#: World direction the distal segment moves to when a straight hinge flexes.
 FLEX_DIRECTION = {"forearm": np.array([0.0, -1.0, 0.0]), "knee": np.array([0.0, 1.0, 0.0])}
 
 
@@ -76,18 +80,43 @@ def skeleton_roles(names) -> list:
     return [bone_role(n, i) for i, n in enumerate(names)]
 
 
-def hinge_axes_local(frames: np.ndarray, roles) -> np.ndarray:
-    """(B, 3) unit hinge axes in bone-local coordinates (zero rows for non-hinge bones).
+def hinge_geometry(skeleton, roles) -> tuple[np.ndarray, np.ndarray]:
+    """Hinge axes (B, 3) in bone-local coordinates and rest flexion angles (B,) radians.
 
-    The axis k = Y x d (d = :data:`FLEX_DIRECTION` of the role, made orthogonal to Y), so a positive
-    rotation about k moves the bone's tail towards d.  frames (B, 3, 3) columns = local axes in world.
+    Rows of non-hinge bones are zero.  For a hinge bone with direction y and parent direction p:
+    if the rest bend angle(p, y) exceeds :data:`BENT_DEG` the flexion plane is the plane of the two
+    bones and k = p x y / |.| (the rest flexion is that angle); otherwise (a straight joint, e.g. the
+    knee) k = y x d / |.| with d = :data:`FLEX_DIRECTION` made orthogonal to y, and the rest flexion is
+    the angle from p to y about k.  A positive rotation about k bends the joint further.
     """
-    axes = np.zeros((len(roles), 3))
+    B = skeleton.num_bones
+    axes, rest = np.zeros((B, 3)), np.zeros(B)
+    direction = skeleton.tails - skeleton.heads
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
     for b, role in enumerate(roles):
         if LIMITS[role].hinge is None:
             continue
-        y = frames[b][:, 1]
-        d = FLEX_DIRECTION[role] - np.dot(FLEX_DIRECTION[role], y) * y
-        k = np.cross(y, d / np.linalg.norm(d))
-        axes[b] = frames[b].T @ (k / np.linalg.norm(k))
-    return axes
+        y, p = direction[b], direction[skeleton.parents[b]]
+        bend = np.arccos(np.clip(p @ y, -1, 1))
+        if bend > np.radians(BENT_DEG):
+            k = np.cross(p, y)
+        else:
+            d = FLEX_DIRECTION[role] - np.dot(FLEX_DIRECTION[role], y) * y
+            k = np.cross(y, d)
+            bend = np.arctan2(np.cross(p, y) @ (k / np.linalg.norm(k)), p @ y)
+        axes[b] = skeleton.frames[b].T @ (k / np.linalg.norm(k))
+        rest[b] = bend
+    return axes, rest
+
+
+def hinge_ranges(skeleton, roles) -> np.ndarray:
+    """(B, 2) rest-relative flexion ranges in radians: the anatomical ``hinge`` range of the role minus
+    the rest flexion (MakeHuman's A-pose already bends the elbows by about 35 degrees); NaN rows for
+    non-hinge bones."""
+    _, rest = hinge_geometry(skeleton, roles)
+    out = np.full((len(roles), 2), np.nan)
+    for b, role in enumerate(roles):
+        if LIMITS[role].hinge is not None:
+            lo, hi = np.radians(LIMITS[role].hinge) - rest[b]
+            out[b] = min(lo, 0.0), max(hi, 0.0)          # the rest pose is always allowed
+    return out

@@ -4,9 +4,10 @@ Per bone the pose is parameterised by a swing rotation vector ``s`` in the bone'
 twist angle ``t`` about local Y; the rotation relative to rest is ``q = q(s) * q_twist(t)`` (w, x, y, z),
 in bone-local axes as Blender's pose-bone quaternion (``solver.model.Poses``).  Limits come from
 :mod:`.bone_roles`: ball joints draw ``s`` uniformly from the disk ``|s| <= cone`` and ``t`` uniformly
-from ``[-twist, twist]``; hinges (elbow, knee) draw the flexion angle uniformly from ``hinge`` and
-rotate about the anatomical hinge axis (:func:`.bone_roles.hinge_axes_local`).  ``amplitude`` in
-(0, 1] scales every limit.
+from ``[-twist, twist]``; hinges (elbow, knee) draw the flexion angle uniformly from the rest-relative range
+(:func:`.bone_roles.hinge_ranges`) and rotate about the anatomical hinge axis
+(:func:`.bone_roles.hinge_geometry`).  ``amplitude`` in (0, 1] scales every limit (hinge ranges are
+scaled about the rest pose, so they always contain it).
 
 ``key_every = k > 1`` draws key poses every k frames and interpolates the parameters linearly in
 between, which gives a smooth motion that stays within the limits (the disk and the intervals are
@@ -21,7 +22,7 @@ import numpy as np
 from ..solver.errors import ArticulaInputError
 from ..solver.model import Poses
 from ..solver.rotations import matrix_to_quat, quat_mul, rotvec_to_quat
-from .bone_roles import LIMITS, hinge_axes_local, skeleton_roles
+from .bone_roles import LIMITS, hinge_geometry, hinge_ranges, skeleton_roles
 
 
 def _check(n, amplitude, key_every, root_yaw, root_shift):
@@ -37,25 +38,25 @@ def _check(n, amplitude, key_every, root_yaw, root_shift):
         raise ArticulaInputError(f"root_shift: must be >= 0 metres, got {root_shift}")
 
 
-def _limit_arrays(roles, amplitude):
-    """cone, twist (B,) radians; hinge (B, 2) radians (NaN for ball joints)."""
+def limit_arrays(skeleton, roles, amplitude=1.0):
+    """cone, twist (B,) radians; rest-relative hinge ranges (B, 2) radians (NaN for ball joints),
+    all scaled by ``amplitude`` about the rest pose."""
     lim = [LIMITS[r] for r in roles]
     cone = np.radians([l.cone for l in lim]) * amplitude
     twist = np.radians([l.twist for l in lim]) * amplitude
-    hinge = np.array([l.hinge if l.hinge else (np.nan, np.nan) for l in lim], dtype=float)
-    return cone, twist, np.radians(hinge) * amplitude
+    return cone, twist, hinge_ranges(skeleton, roles) * amplitude
 
 
-def _draw_keys(rng, K, frames, roles, amplitude):
+def _draw_keys(rng, K, skeleton, roles, amplitude):
     """Key parameters: swing rotation vectors (K, B, 3) local, twist angles (K, B)."""
     B = len(roles)
-    cone, twist, hinge = _limit_arrays(roles, amplitude)
+    cone, twist, hinge = limit_arrays(skeleton, roles, amplitude)
     alpha = rng.uniform(0, 2 * np.pi, (K, B))
     radius = cone * np.sqrt(rng.uniform(0, 1, (K, B)))
     swing = np.stack([radius * np.cos(alpha), np.zeros((K, B)), radius * np.sin(alpha)], axis=-1)
     is_hinge = ~np.isnan(hinge[:, 0])
     flex = rng.uniform(np.nan_to_num(hinge[:, 0]), np.nan_to_num(hinge[:, 1]), (K, B))
-    axes = hinge_axes_local(frames, roles)
+    axes, _ = hinge_geometry(skeleton, roles)
     swing[:, is_hinge] = flex[:, is_hinge, None] * axes[is_hinge]
     tw = rng.uniform(-1, 1, (K, B)) * twist
     return swing, tw
@@ -92,7 +93,7 @@ def rom_poses(skeleton, n: int, seed: int = 0, amplitude: float = 1.0, key_every
     rng = np.random.default_rng(seed)
     roles = skeleton_roles(skeleton.names)
     K = (n - 1) // key_every + 2
-    swing, twist = _draw_keys(rng, K, skeleton.frames, roles, amplitude)
+    swing, twist = _draw_keys(rng, K, skeleton, roles, amplitude)
     yaw, shift = _root_motion(rng, K, root_yaw, root_shift)
     rot = compose_swing_twist(_interpolate(swing, n, key_every), _interpolate(twist, n, key_every))
     rot[:, 0] = quat_mul(yaw_quaternions(skeleton.frames[0], _interpolate(yaw, n, key_every)), rot[:, 0])
