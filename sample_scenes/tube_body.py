@@ -124,3 +124,32 @@ def random_poses(num_bones: int, n: int, seed: int = 1, max_twist_deg: float = 1
     root = rng.normal(size=(n, 4))
     q[:, 0] = root / np.linalg.norm(root, axis=1, keepdims=True)
     return q, rng.uniform(-0.5, 0.5, (n, 3)), rng.uniform(0.7, 1.4, n)
+
+
+def cylinder(rings: int = 41, segments: int = 24, radius: float = 0.3) -> Model:
+    """The candy-wrapper subject: two bones along Z (0..1 and 1..2, X axes = world X) and an open tube of
+    ``rings`` rings of ``segments`` vertices, all anchored on the lower bone, with the twist weight of
+    the upper bone ramping over z in [0.5, 1.5] and its swing weight over [0.8, 1.2]."""
+    z = np.linspace(0.0, 2.0, rings)
+    t = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    verts = np.stack([np.tile(radius * np.cos(t), rings), np.tile(radius * np.sin(t), rings),
+                      np.repeat(z, segments)], axis=1)
+    r, s = np.meshgrid(np.arange(rings - 1), np.arange(segments), indexing="ij")
+    a, b = r * segments + s, r * segments + (s + 1) % segments
+    faces = np.concatenate([np.stack([a, b, b + segments], -1).reshape(-1, 3),
+                            np.stack([a, b + segments, a + segments], -1).reshape(-1, 3)])
+    frames = np.stack([np.column_stack([(1, 0, 0), (0, 0, 1), (0, -1, 0)])] * 2)   # columns X, Y (up), Z
+    sk = Skeleton(["lower", "upper"], [-1, 0], [(0, 0, 0), (0, 0, 1)], [(0, 0, 1), (0, 0, 2)], frames)
+    tw = np.zeros((len(verts), 2), np.float32)
+    sw = np.zeros((len(verts), 2), np.float32)
+    tw[:, 1] = np.clip(verts[:, 2] - 0.5, 0, 1)
+    sw[:, 1] = np.clip((verts[:, 2] - 0.8) / 0.4, 0, 1)
+    return Model(verts, faces, sk, np.zeros(len(verts), np.int32), tw, sw)
+
+
+def min_ring_radius_ratio(positions, rings: int, segments: int, radius: float) -> float:
+    """Smallest mean ring radius / rest radius of a deformed :func:`cylinder` (positions (V, 3));
+    1 = no candy-wrapper collapse."""
+    ring = np.asarray(positions).reshape(rings, segments, 3)
+    centre = ring.mean(axis=1, keepdims=True)
+    return float(np.linalg.norm(ring - centre, axis=2).mean(axis=1).min() / radius)
