@@ -13,6 +13,7 @@ MODULES = (
     ".addon.preferences",
     ".addon.properties",
     ".addon.scan_sequence",
+    ".addon.point_cloud_sequence",
     ".operators",
     ".addon.panels",
 )

@@ -9,6 +9,7 @@ FEATURES = (
     "bake_poses",
     "export_bundle",
     "import_scans",
+    "import_depth",
 )
 
 classes = tuple(cls for name in FEATURES

@@ -331,7 +331,7 @@ def process_depth(depth_m: np.ndarray, rays, opts: DepthOptions, background=None
                   color=None) -> FramePoints:
     """One depth frame (metres, NaN invalid) -> the points that survive the filters.
 
-    ``color``: optional (Hc, Wc, 3) float32 image registered to the depth image (the colour of depth
+    ``color``: optional (Hc, Wc, 3) image (float 0..1 or uint8) registered to the depth image (the colour of depth
     pixel (u, v) is the nearest colour pixel at ``(u * Wc / W, v * Hc / H)``).
     """
     grid = backproject_grid(depth_m, rays)
@@ -346,7 +346,8 @@ def process_depth(depth_m: np.ndarray, rays, opts: DepthOptions, background=None
         h, w = depth_m.shape
         ci = np.minimum(((rows + 0.5) * hc / h).astype(np.intp), hc - 1)
         cj = np.minimum(((cols + 0.5) * wc / w).astype(np.intp), wc - 1)
-        attrs["colors"] = color[ci, cj, :3].astype(np.float32)
+        c = color[ci, cj, :3]
+        attrs["colors"] = c.astype(np.float32) / 255 if c.dtype == np.uint8 else c.astype(np.float32)
     if opts.voxel_size > 0:
         names = list(attrs)
         pts, *vals = voxel_downsample(pts, opts.voxel_size, *(attrs[n] for n in names))
