@@ -14,8 +14,9 @@ angle θ between surface normal and viewing ray (``depth_render.incidence_cosine
    f = 580 px, so the depth step is z²/(8·b·f) ≈ 2.9 mm at 1 m and 2.6 cm at 3 m.  ``"mm"`` rounds to
    millimetres only (ToF cameras); the PNG writer always rounds to millimetres anyway.
 4. **Missing pixels**: outside the working range (``min_depth``..``max_depth``), at grazing angles
-   (θ > ``grazing_deg``), at depth discontinuities (pixels with a 4-neighbour more than
-   ``edge_jump_m`` away are dropped with probability ``edge_dropout``), plus uniform random dropout.
+   (θ > ``grazing_deg``), at depth discontinuities of the clean image (pixels with a 4-neighbour
+   further away than a continuous surface at the grazing limit could be, ``edge_jump_m +
+   z·tan(grazing)/f``, are dropped with probability ``edge_dropout``), plus uniform random dropout.
 
 All randomness comes from the ``numpy.random.Generator`` passed in (deterministic from a seed).
 """
@@ -45,7 +46,7 @@ class NoiseParams:
     min_depth: float = 0.4
     max_depth: float = 4.5
     grazing_deg: float = 78.0
-    edge_jump_m: float = 0.05
+    edge_jump_m: float = 0.03
     edge_dropout: float = 0.5
     dropout: float = 0.002
 
@@ -104,22 +105,29 @@ def quantize(z, params: NoiseParams = NoiseParams()):
         return np.where((z > 0) & (disparity > 0), bf / np.where(disparity > 0, disparity, 1.0), 0.0)
 
 
-def depth_edges(depth, jump_m):
-    """(H, W) bool: valid pixels with a 4-neighbour whose depth differs by more than ``jump_m``
-    (a missing neighbour counts as a jump)."""
+def depth_edges(depth, jump_m, slope_per_m=0.0):
+    """(H, W) bool: valid pixels with a 4-neighbour whose depth differs by more than
+    ``jump_m + slope_per_m * z`` (a missing neighbour counts as a jump).
+
+    ``slope_per_m = tan(θ_max) / f`` lets continuous surfaces up to incidence θ_max through (their
+    neighbouring pixels differ by about z·tanθ/f)."""
     d = np.pad(depth, 1, constant_values=0.0)
     centre = d[1:-1, 1:-1]
+    limit = jump_m + slope_per_m * centre
     edge = np.zeros(depth.shape, bool)
     for nb in (d[:-2, 1:-1], d[2:, 1:-1], d[1:-1, :-2], d[1:-1, 2:]):
-        edge |= np.abs(nb - centre) > jump_m
+        edge |= np.abs(nb - centre) > limit
     return edge & (centre > 0)
 
 
-def apply_noise(depth, cos_incidence, rng: np.random.Generator, params: NoiseParams = NoiseParams()):
+def apply_noise(depth, cos_incidence, rng: np.random.Generator, params: NoiseParams = NoiseParams(),
+                focal_px: float | None = None):
     """Noisy copy of a clean depth image.
 
     ``depth``: (H, W) metres, 0 = nothing; ``cos_incidence``: (H, W) |cos θ| (see module docstring);
-    ``rng``: the only source of randomness.  Returns (H, W) float64 metres, 0 = missing.
+    ``rng``: the only source of randomness; ``focal_px``: the image's focal length in pixels, which
+    makes the edge test slope-aware (None: plain ``edge_jump_m`` threshold).
+    Returns (H, W) float64 metres, 0 = missing.
     """
     params.validate()
     depth = np.asarray(depth, dtype=float)
@@ -127,13 +135,15 @@ def apply_noise(depth, cos_incidence, rng: np.random.Generator, params: NoisePar
         raise ArticulaInputError(f"apply_noise: incidence image {np.shape(cos_incidence)} does not match "
                                  f"depth {depth.shape}")
     theta = np.arccos(np.clip(cos_incidence, 0.0, 1.0))
+    slope = np.tan(np.radians(min(params.grazing_deg, 89.0))) / focal_px if focal_px else 0.0
+    edges = depth_edges(depth, params.edge_jump_m, slope)
     z, theta = _lateral_jitter(depth, theta, rng, params)
     valid = z > 0
     noisy = z + rng.standard_normal(z.shape) * axial_sigma(z, theta, params)
     noisy = np.where(valid & (noisy > 0), quantize(noisy, params), 0.0)
     drop = ~valid | (noisy < params.min_depth) | (noisy > params.max_depth)
     drop |= theta > np.radians(params.grazing_deg)
-    drop |= depth_edges(z, params.edge_jump_m) & (rng.random(z.shape) < params.edge_dropout)
+    drop |= edges & (rng.random(z.shape) < params.edge_dropout)
     drop |= rng.random(z.shape) < params.dropout
     return np.where(drop, 0.0, noisy)
 

@@ -97,7 +97,7 @@ def render_frame(vertices, faces, scene_v, scene_f, cam_to_world, intr, noise: N
     all_v = cam.world_to_camera(np.concatenate([vertices, scene_v]), cam_to_world)
     all_f = np.concatenate([faces, scene_f + len(vertices)])
     clean, tri = render_depth(all_v, all_f, intr)
-    noisy = apply_noise(clean, incidence_cosine(all_v, all_f, tri, intr), rng, noise)
+    noisy = apply_noise(clean, incidence_cosine(all_v, all_f, tri, intr), rng, noise, intr.fx)
     return noisy, clean, visible_vertices(tri, all_f, n_faces=len(faces))
 
 

@@ -130,7 +130,7 @@ def scan_frame(vertices, faces, rng, rig: ScanRig = ScanRig(), noise: NoiseParam
     for c2w, intr in cameras:
         vc = cam.world_to_camera(vertices, c2w)
         clean, tri = render_depth(vc, faces, intr)
-        noisy = apply_noise(clean, incidence_cosine(vc, faces, tri, intr), rng, noise)
+        noisy = apply_noise(clean, incidence_cosine(vc, faces, tri, intr), rng, noise, intr.fx)
         v, f, pix = depth_mesh(noisy, intr, c2w, rig.max_jump_m, rig.max_jump_rel)
         parts_v.append(v)
         parts_f.append(f + offset)

@@ -92,3 +92,21 @@ def test_deterministic_from_seed_and_validation():
         dn.NoiseParams(quantization="disparity").validate()
     with pytest.raises(ArticulaInputError, match="does not match"):
         dn.apply_noise(depth, cos[:, 1:], np.random.default_rng(0))
+
+
+def test_slope_aware_edges_keep_tilted_surfaces():
+    """A plane at 70 deg incidence has large depth steps between pixels but no discontinuity."""
+    f, z0 = 290.0, 2.5
+    u = np.arange(200) - 99.5
+    # plane tilted about the image's vertical axis: z = z0 / (1 - tan(70deg) * u / f)
+    z = z0 / (1 - np.tan(np.radians(70.0)) * u / f * 0.5)
+    depth = np.tile(z, (20, 1))
+    depth = depth[:, (depth[0] > 0) & (depth[0] < 6)]
+    steps = np.abs(np.diff(depth[0]))
+    assert steps.max() > 0.03                                 # plain threshold would call these edges
+    assert dn.depth_edges(depth, 0.03)[5:15, 5:-5].any()
+    slope = np.tan(np.radians(78.0)) / f
+    assert not dn.depth_edges(depth, 0.03, slope)[1:-1, 1:-1].any()
+    step = depth.copy()
+    step[:, 50:] += 0.4                                       # a real discontinuity is still found
+    assert dn.depth_edges(step, 0.03, slope)[5, 49] and dn.depth_edges(step, 0.03, slope)[5, 50]
