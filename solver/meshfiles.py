@@ -144,6 +144,17 @@ def _drop_degenerate(sizes: np.ndarray, corners: np.ndarray):
 
 # -- OBJ ------------------------------------------------------------------------------------------
 _SLASH_PART = re.compile(rb"/\S*")
+_V_ROWS = re.compile(rb"^[ \t]*v[ \t]+([^\n]*)", re.M)
+_F_ROWS = re.compile(rb"^[ \t]*f[ \t]+([^\n]*)", re.M)
+
+
+def _parse_numbers(text: bytes, dtype, expected: int):
+    """Whitespace-separated numbers, or None unless exactly ``expected`` of them parse (C speed)."""
+    try:
+        out = np.fromstring(text, dtype=dtype, sep=" ")
+    except ValueError:
+        return None
+    return out if out.size == expected else None
 
 
 def read_obj(path: str) -> PolyMesh:
@@ -153,45 +164,51 @@ def read_obj(path: str) -> PolyMesh:
     data = read_bytes(path)
     if b"\0" in data[:4096]:
         raise ArticulaInputError(f"{path}: not an OBJ text file (binary data)")
-    data = data.replace(b"\t", b" ").replace(b"\\\r\n", b" ").replace(b"\\\n", b" ")
-    v_rows, f_rows, f_base = [], [], []
-    for line in data.splitlines():
-        if line[:1] == b" ":
-            line = line.lstrip()
-        head = line[:2]
-        if head == b"v ":
-            v_rows.append(line)
-        elif head == b"f ":
-            f_rows.append(line)
-            f_base.append(len(v_rows))
+    data = data.replace(b"\\\r\n", b" ").replace(b"\\\n", b" ")
+    v_rows = _V_ROWS.findall(data)
     if not v_rows:
         raise ArticulaInputError(f"{path}: no vertices ('v' lines) in this OBJ file")
-    # vertices: usually exactly "v x y z"; otherwise (w, colours) take the first three numbers per row
-    tokens = b" ".join(v_rows).split()
-    if len(tokens) == 4 * len(v_rows) and tokens[::4].count(b"v") == len(v_rows):
-        vertices = _numbers(np.array(tokens).reshape(-1, 4)[:, 1:], np.float64, path, "vertex coordinate")
-    else:
-        rows = [r.split()[1:4] for r in v_rows]
+    vertices = _parse_numbers(b" ".join(v_rows), np.float64, 3 * len(v_rows))
+    if vertices is None:   # w or colours after x y z, or bad numbers: row by row
+        rows = [r.split()[:3] for r in v_rows]
         short = [i for i, r in enumerate(rows) if len(r) < 3]
         if short:
             raise ArticulaInputError(f"{path}: vertex {short[0]} has fewer than 3 coordinates")
         vertices = _numbers(rows, np.float64, path, "vertex coordinate")
     vertices = vertices.reshape(-1, 3)
+    f_rows = _F_ROWS.findall(data)
     if not f_rows:
         return _finish(path, vertices, np.zeros(0, np.int64), np.zeros(0, np.int64))
-    ftok = np.array(_SLASH_PART.sub(b"", b" ".join(f_rows)).split())
-    marks = np.flatnonzero(ftok == b"f")
-    sizes = np.diff(np.append(marks, len(ftok))) - 1
-    keep = np.ones(len(ftok), bool)
-    keep[marks] = False
-    idx = _numbers(ftok[keep], np.int64, path, "face index")
-    if (idx == 0).any():
-        c = int(np.flatnonzero(idx == 0)[0])
-        k = int(np.searchsorted(np.cumsum(sizes), c, side="right"))
+    # Faces joined with " 0 " (0 is never a valid OBJ index) so row ends survive number parsing.
+    text = _SLASH_PART.sub(b"", b" 0 ".join(f_rows)) + b" 0"
+    idx = _parse_numbers(text, np.int64, len(text.split()))
+    if idx is None:
+        bad = next(t for t in text.split() if not t.lstrip(b"-").isdigit())
+        raise ArticulaInputError(f"{path}: bad face index {bad.decode(errors='replace')!r}")
+    ends = np.flatnonzero(idx == 0)
+    if len(ends) != len(f_rows):
+        k = next(k for k, r in enumerate(f_rows) if b"0" in _SLASH_PART.sub(b"", r).split())
         raise ArticulaInputError(f"{path}: face {k} uses vertex index 0 (OBJ indices start at 1)")
-    base = np.repeat(np.asarray(f_base, np.int64), sizes)
-    idx = np.where(idx < 0, base + idx, idx - 1)
+    sizes = np.diff(np.append(-1, ends)) - 1
+    idx = idx[idx != 0]
+    if (idx < 0).any():
+        base = np.repeat(_vertices_before_faces(data), sizes)
+        idx = np.where(idx < 0, base + idx, idx - 1)
+    else:
+        idx -= 1
     return _finish(path, vertices, sizes, idx)
+
+
+def _vertices_before_faces(data: bytes) -> np.ndarray:
+    """(F,) number of ``v`` lines before each ``f`` line (for negative indices)."""
+    out, nv = [], 0
+    for line in data.splitlines():
+        head = line.lstrip()[:2]
+        if head in (b"v ", b"v\t"):
+            nv += 1
+        elif head in (b"f ", b"f\t"):
+            out.append(nv)
+    return np.array(out, np.int64)
 
 
 # -- PLY ------------------------------------------------------------------------------------------

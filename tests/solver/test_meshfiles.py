@@ -115,7 +115,8 @@ def test_inf_in_binary_ply(tmp_path):
 @pytest.mark.parametrize("name, content, message", [
     ("g.obj", b"v 0 0 0\nv 1 0 0\nv zero 1 0\nf 1 2 3\n", "bad vertex coordinate"),
     ("r.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "face 0 uses vertex 3, but there are only 3"),
-    ("z.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "index 0"),
+    ("z.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1/1 0/1 2/1\n", "face 1 uses vertex index 0"),
+    ("b.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n", "bad face index 'x'"),
     ("e.obj", b"# nothing\n", "no vertices"),
     ("bin.obj", b"\0\1\2garbage", "not an OBJ"),
     ("g.ply", b"garbage", "not a PLY"),

@@ -114,3 +114,18 @@ def test_point_cache_nan_names_frame_and_vertex(tmp_path):
     write_pc2(path, frames)
     with pytest.raises(ArticulaInputError, match="n.pc2: frame 2 vertex 6 has a non-finite"):
         read_point_cache(path)
+
+
+@pytest.mark.parametrize("fmt", ["obj", "ply"])
+def test_reads_the_sample_scenes_writer(tmp_path, fmt):
+    """Cross-check with the project's own sequence writer (written independently of these readers)."""
+    from articula.sample_scenes.mesh_files import SequenceWriter
+    quads = np.array([f for f in CUBE_FACES if len(f) == 4])
+    frames = make_frames(3, seed=7)
+    writer = SequenceWriter(quads, fmt)
+    for k, f in enumerate(frames):
+        writer.write(str(tmp_path / f"q{k + 1}.{fmt}"), f)
+    seq = read_scan_files(list_scan_files(str(tmp_path)))
+    assert seq.registered and np.allclose(seq.frames, frames, atol=6e-7)   # OBJ: 6 decimals
+    assert seq.topology.face_sizes.tolist() == [4] * len(quads)
+    assert seq.topology.corner_verts.tolist() == quads.ravel().tolist()
