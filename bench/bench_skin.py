@@ -41,7 +41,7 @@ def _best_time(fn, repeats):
 def _speed(args):
     import numpy as np
     import scipy.sparse as sp
-    from articula.solver import kinematics, skinning, synthetic
+    from articula.solver import jacobians, kinematics, skinning, synthetic
 
     model = synthetic.random_model(args.vertices, seed=0)
     model.validate()
@@ -70,6 +70,13 @@ def _speed(args):
     _common.report("affine_form", n / t_aff, "frames/s", "A (N,V,3,3), b (N,V,3)")
     best_lbs = min(t_dense, t_sparse)
     _common.report("speed ratio hybrid / best lbs", best_lbs / t_hyb, "", "target >= 0.333")
+    one = synthetic.random_poses(1, B, seed=2)
+    groups = skinning.AnchorGroups(model)
+    t_one = _best_time(lambda: skinning.hybrid_skin(model, one, groups), args.repeats)
+    t_jac = _best_time(lambda: jacobians.pose_jacobian(model, one, groups), args.repeats)
+    _common.report("hybrid_skin one frame (AnchorGroups reused)", 1e3 * t_one, "ms")
+    _common.report("pose_jacobian one frame", 1e3 * t_jac, "ms",
+                   f"{t_jac / t_one:.3g} x one hybrid_skin frame; P = {4 + 3 * B} columns")
 
 
 def _tube_volume(posed, tube, rings, sectors):
@@ -86,6 +93,13 @@ def _tube_volume(posed, tube, rings, sectors):
         tris.append(cap)
     t = np.concatenate(tris)
     return abs(np.einsum("ti,ti->t", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0)
+
+
+def _ring_area(ring):
+    """Vector area |½ Σ p_i × p_(i+1)| of a closed polygon (R, 3)."""
+    import numpy as np
+    c = ring - ring.mean(axis=0)
+    return 0.5 * float(np.linalg.norm(np.cross(c, np.roll(c, -1, axis=0)).sum(axis=0)))
 
 
 def _candy_wrapper():
@@ -117,8 +131,12 @@ def _candy_wrapper():
     swung = deform(pose([np.pi / 2, 0, 0]))
     _common.report("90 deg swing max |hybrid - lbs|", float(np.abs(swung["hybrid"] - swung["lbs"]).max()), "m",
                    "hybrid equals LBS: no bulge added")
+    joint_ring = (rings // 2) * sectors + np.arange(sectors)            # the ring at x = 0 (the joint)
+    rest_area = _ring_area(tube.rest_vertices[joint_ring])
     for name, pts in swung.items():
         _common.report(f"90 deg swing volume ratio {name}", f"{_tube_volume(pts, tube, rings, sectors) / rest_vol:.6f}")
+        _common.report(f"90 deg swing joint cross-section area ratio {name}",
+                       f"{_ring_area(pts[joint_ring]) / rest_area:.6f}")
 
 
 def main(argv) -> int:

@@ -156,88 +156,98 @@ def _group_state(terms, group):
     return bq, L
 
 
+def _skew_times(w, H):
+    """``[w]× H`` for vectors w ``(..., 3)`` and matrices H ``(..., 3, 3)`` (broadcasting), without
+    forming the cross-product matrix."""
+    w0, w1, w2 = w[..., 0, None], w[..., 1, None], w[..., 2, None]
+    H0, H1, H2 = H[..., 0, :], H[..., 1, :], H[..., 2, :]
+    return np.stack([w1 * H2 - w2 * H1, w2 * H0 - w0 * H2, w0 * H1 - w1 * H0], axis=-2)
+
+
+def _per_frame_matmul(X, Y):
+    """``X (N, V, 3, k) @ Y (N, k, m)`` for every vertex, as one BLAS product per frame."""
+    N, V, r, k = X.shape
+    return (X.reshape(N, V * r, k) @ Y).reshape(N, V, r, Y.shape[-1])
+
+
+def _group_posed(bt, groups, group):
+    """Twisted points v_t, the blended twist bq, the linear part L3 of the swing∘chain map and the
+    posed points of one anchor group: shapes (N, V_a, 3), (N, V_a, 8), (N, V_a, 3, 3), (N, V_a, 3)."""
+    _, _, start, stop, _, _ = group
+    x = groups.rest[:, start:stop].T
+    bq, L = _group_state(bt, group)
+    vt = dq_apply(bq, x)
+    L3 = L[..., :3]
+    return x, bq, vt, L3, np.einsum("nvij,nvj->nvi", L3, vt) + L[..., 3]
+
+
 def pose_jacobian(model, poses, groups=None):
     """Posed vertices ``(N, V, 3)`` and their Jacobian ``(N, V, 3, P)`` w.r.t. the pose parameters
     (module docstring for the layout and conventions).  ``groups``: optional :class:`AnchorGroups`."""
-    sk = model.skeleton
-    B = sk.num_bones
-    bt = _pose_bone_terms(sk, poses)
     check_pose_shapes(model, poses)
     groups = _groups_for(model, groups)
-    order = groups.order
-    N, V = len(poses), model.num_vertices
-    P = 4 + 3 * B
+    sk = model.skeleton
+    bt = _pose_bone_terms(sk, poses)
+    N, V, P = len(poses), model.num_vertices, 4 + 3 * sk.num_bones
     posed = np.empty((N, V, 3))
-    J = np.zeros((N, V, 3, P))
+    J = np.zeros((N, V, 3, P))                                       # in AnchorGroups order until the end
+    s = poses.scales[:, None, None]
     for group in groups.groups:
         a, kids, start, stop, wt, ws = group
-        rows = order[start:stop]
-        x = model.rest_vertices[rows]
-        bq, L = _group_state(bt, group)
-        vt = dq_apply(bq, x)
-        L3 = L[..., :3]
-        xp = np.einsum("nvij,nvj->nvi", L3, vt) + L[..., 3]
-        posed[:, rows] = xp
-        Jg = np.zeros((N, len(rows), 3, P))
+        x, bq, vt, L3, xp = _group_posed(bt, groups, group)
+        posed[:, start:stop] = xp
+        Jg = J[:, start:stop]
         Jg[..., 0, 0] = Jg[..., 1, 1] = Jg[..., 2, 2] = 1.0
-        Jg[..., 3] = (xp - sk.heads[0] - poses.translations[:, None]) / poses.scales[:, None, None]
-        for b in _chain_of(sk, a):
-            rel = xp - bt["p"][:, b, None]
-            Jg[..., 4 + 3 * b:7 + 3 * b] = -_skew(rel) @ bt["K"][:, b, None]
-        if len(kids):
-            Jdq = _dq_apply_jacobian(bq, x)                              # (N, V_a, 3, 8)
-            L3Jdq = L3 @ Jdq
-            Rm_a = bt["Rm"][:, a]
-            for k, c in enumerate(kids):
-                twist = wt[None, :, k, None, None] * (L3Jdq @ bt["T"][:, c, None])
-                lever = _skew(vt - sk.heads[c])                          # [v_t − h_c]×
-                RR = (Rm_a @ bt["R_sw"][:, c])[:, None]                  # (N, 1, 3, 3)
-                swing = -ws[None, :, k, None, None] * (RR @ lever @ bt["G"][:, c, None])
-                Jg[..., 4 + 3 * c:7 + 3 * c] = twist + swing
-        J[:, rows] = Jg
-    return posed, J
+        Jg[..., 3] = (xp - sk.heads[0] - poses.translations[:, None]) / s
+        for b in _chain_of(sk, a):                                   # −[x' − p_b]× Rot_b F_b
+            Jg[..., 4 + 3 * b:7 + 3 * b] = -_skew_times(xp - bt["p"][:, b, None], bt["K"][:, b, None])
+        if not len(kids):
+            continue
+        L3Jdq = L3 @ _dq_apply_jacobian(bq, x)                       # (N, V_a, 3, 8)
+        for k, c in enumerate(kids):
+            twist = wt[None, :, k, None, None] * _per_frame_matmul(L3Jdq, bt["T"][:, c])
+            # swing: −w RR [v_t − h_c]× G = −w [RR (v_t − h_c)]× (RR G / s), RR = Rm_a R_sw,c = s·rotation
+            RR = bt["Rm"][:, a] @ bt["R_sw"][:, c]
+            lever = np.einsum("nij,nvj->nvi", RR, vt - sk.heads[c])
+            swing = -ws[None, :, k, None, None] * _skew_times(lever, ((RR @ bt["G"][:, c]) / s)[:, None])
+            Jg[..., 4 + 3 * c:7 + 3 * c] = twist + swing
+    inv = groups.inverse
+    return posed[:, inv], J[:, inv]
 
 
 def joint_jacobian(model, poses, groups=None):
     """Posed vertices ``(N, V, 3)`` and their Jacobian ``(N, V, 3, 3B)`` w.r.t. the rest joint centres
     ``heads`` (columns 3b … 3b+2 = x, y, z of heads[b]; frames, tails, rest vertices fixed).
     ``groups``: optional :class:`AnchorGroups`."""
-    sk = model.skeleton
-    B = sk.num_bones
-    bt = _pose_bone_terms(sk, poses)
     check_pose_shapes(model, poses)
     groups = _groups_for(model, groups)
-    order = groups.order
-    N, V = len(poses), model.num_vertices
+    sk = model.skeleton
+    bt = _pose_bone_terms(sk, poses)
+    N, V, B = len(poses), model.num_vertices, sk.num_bones
     Rm = bt["Rm"]
     eye = np.eye(3)
     chain_block = np.empty_like(Rm)                                  # ∂x'/∂h_b through the chain
     chain_block[:, 0] = eye - Rm[:, 0]
     chain_block[:, 1:] = Rm[:, np.maximum(sk.parents[1:], 0)] - Rm[:, 1:]
-    twist_u = bt["twist_dq"][..., 1:4]                               # (N, B, 3) world twist vector part
+    minus_skew_u = -_skew(bt["twist_dq"][..., 1:4])                  # ∂(dual vector h × u)/∂h, (N, B, 3, 3)
     posed = np.empty((N, V, 3))
     J = np.zeros((N, V, 3, 3 * B))
     for group in groups.groups:
         a, kids, start, stop, wt, ws = group
-        rows = order[start:stop]
-        x = model.rest_vertices[rows]
-        bq, L = _group_state(bt, group)
-        vt = dq_apply(bq, x)
-        L3 = L[..., :3]
-        posed[:, rows] = np.einsum("nvij,nvj->nvi", L3, vt) + L[..., 3]
-        Jg = np.zeros((N, len(rows), 3, 3 * B))
+        x, bq, vt, L3, xp = _group_posed(bt, groups, group)
+        posed[:, start:stop] = xp
+        Jg = J[:, start:stop]
         for b in _chain_of(sk, a):
             Jg[..., 3 * b:3 * b + 3] = chain_block[:, b, None]
-        if len(kids):
-            Jdq = _dq_apply_jacobian(bq, x)
-            L3Jd = L3 @ Jdq[..., 5:8]                                   # through the dual vector part
-            Rm_a = Rm[:, a]
-            for k, c in enumerate(kids):
-                twist = wt[None, :, k, None, None] * (L3Jd @ -_skew(twist_u[:, c])[:, None])
-                swing = ws[None, :, k, None, None] * (Rm_a @ (eye - bt["R_sw"][:, c]))[:, None]
-                Jg[..., 3 * c:3 * c + 3] = twist + swing
-        J[:, rows] = Jg
-    return posed, J
+        if not len(kids):
+            continue
+        L3Jd = L3 @ _dq_apply_jacobian(bq, x)[..., 5:8]              # through the dual vector part
+        for k, c in enumerate(kids):
+            twist = wt[None, :, k, None, None] * _per_frame_matmul(L3Jd, minus_skew_u[:, c])
+            swing = ws[None, :, k, None, None] * (Rm[:, a] @ (eye - bt["R_sw"][:, c]))[:, None]
+            Jg[..., 3 * c:3 * c + 3] = twist + swing
+    inv = groups.inverse
+    return posed[:, inv], J[:, inv]
 
 
 def to_sparse(J_frame):

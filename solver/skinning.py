@@ -38,14 +38,29 @@ def _weights_times(weights, T):
     return np.asarray(out)
 
 
+def _check_maps(vertices, weights, Rm, tm):
+    """Shape checks shared by :func:`lbs` and :func:`dqs` (ArticulaInputError naming the argument)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ArticulaInputError(f"vertices: expected shape (V, 3), got {v.shape}")
+    if np.ndim(Rm) != 4 or np.shape(Rm)[2:] != (3, 3):
+        raise ArticulaInputError(f"Rm: expected shape (N, B, 3, 3), got {np.shape(Rm)}")
+    N, B = np.shape(Rm)[:2]
+    if np.shape(tm) != (N, B, 3):
+        raise ArticulaInputError(f"tm: expected shape ({N}, {B}, 3), got {np.shape(tm)}")
+    if tuple(weights.shape) != (len(v), B):
+        raise ArticulaInputError(f"weights: expected shape ({len(v)}, {B}), got {tuple(weights.shape)}")
+    return v
+
+
 def lbs(vertices, weights, Rm, tm):
     """Linear blend skinning with a neutral remainder: ``Σ_b w_b (Rm_b v + tm_b) + (1 − Σ_b w_b) v``.
 
     vertices (V, 3); weights (V, B) dense array or scipy.sparse matrix (rows summing to 1 give
     classical LBS); Rm (N, B, 3, 3), tm (N, B, 3).  Returns (N, V, 3)."""
-    v = np.asarray(vertices, dtype=np.float64)
     if not hasattr(weights, "tocsr"):
         weights = np.asarray(weights, dtype=np.float64)
+    v = _check_maps(vertices, weights, Rm, tm)
     N, B = Rm.shape[:2]
     ident = np.concatenate([np.eye(3), np.zeros((3, 1))], axis=1).reshape(12)
     D = _flat_maps(Rm, tm) - ident                      # (N, B, 12), neutral subtracted
@@ -88,7 +103,9 @@ def dqs(vertices, weights, Rm, tm):
     at rest); each bone map x -> Rm x + tm must be a rotation times a uniform scale s_b: the scale is
     blended linearly and applied first, the rigid parts are blended as dual quaternions aligned to the
     hemisphere of the vertex's largest-weight bone, normalised and applied.  Returns (N, V, 3)."""
-    v = np.asarray(vertices, dtype=np.float64)
+    if not hasattr(weights, "tocsr"):
+        weights = np.asarray(weights, dtype=np.float64)
+    v = _check_maps(vertices, weights, Rm, tm)
     idx, w = _compact(weights)
     total = w.sum(axis=1)
     moving = total > 0

@@ -277,3 +277,36 @@ def test_dqs_is_rigid_for_one_bone_and_keeps_tube_radius():
     w = np.stack([1 - tube.twist_weights[:, 1], tube.twist_weights[:, 1]], 1).astype(float)
     r = np.linalg.norm(skinning.dqs(tube.rest_vertices, w, Rm, tm)[0][:, 1:], axis=1)
     np.testing.assert_allclose(r, 1, rtol=1e-12)
+
+
+# ---------------------------------------------------------------- groups reuse and bad input
+
+def test_reused_groups_give_identical_results(human):
+    model, poses = human
+    g = skinning.AnchorGroups(model)
+    np.testing.assert_array_equal(skinning.hybrid_skin(model, poses, g), skinning.hybrid_skin(model, poses))
+    A1, b1 = skinning.affine_form(model, poses, g)
+    A2, b2 = skinning.affine_form(model, poses)
+    np.testing.assert_array_equal(A1, A2)
+    np.testing.assert_array_equal(b1, b2)
+    other = synthetic.random_model(50, seed=3)
+    from articula.solver.errors import ArticulaInputError
+    with pytest.raises(ArticulaInputError, match="groups: built for 120 vertices"):
+        skinning.hybrid_skin(other, poses, g)
+
+
+def test_bad_shapes_raise_input_errors(human):
+    from articula.solver.errors import ArticulaInputError
+    model, poses = human
+    with pytest.raises(ArticulaInputError, match=r"pose_rotations: expected shape \(N, 19, 4\)"):
+        skinning.hybrid_skin(model, Poses.identity(2, 5))
+    bad = Poses(poses.rotations, poses.translations[:1], poses.scales)
+    with pytest.raises(ArticulaInputError, match="pose_translations"):
+        skinning.affine_form(model, bad)
+    Rm, tm = kinematics.forward_kinematics(model.skeleton, poses)
+    with pytest.raises(ArticulaInputError, match=r"weights: expected shape \(120, 19\)"):
+        skinning.lbs(model.rest_vertices, model.swing_weights[:, :4], Rm, tm)
+    with pytest.raises(ArticulaInputError, match="tm: expected"):
+        skinning.dqs(model.rest_vertices, model.swing_weights, Rm, tm[:, :3])
+    with pytest.raises(ArticulaInputError, match="vertices: expected"):
+        skinning.lbs(model.rest_vertices[:, :2], model.swing_weights, Rm, tm)
