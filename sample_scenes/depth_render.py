@@ -120,14 +120,13 @@ def face_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 def incidence_cosine(vertices_cam, faces, tri_id, intr: Intrinsics) -> np.ndarray:
     """(H, W) |cos| of the angle between the seen face's normal and the pixel's viewing ray
     (1 = facing the camera, 0 = grazing or no surface)."""
-    u, v = np.meshgrid(np.arange(intr.width, dtype=float), np.arange(intr.height, dtype=float))
-    rays = np.stack([(u - intr.cx) / intr.fx, (v - intr.cy) / intr.fy, np.ones_like(u)], axis=-1)
-    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
-    normals = face_normals(vertices_cam, np.asarray(faces))
-    seen = tri_id >= 0
-    cos = np.zeros(tri_id.shape)
-    cos[seen] = np.abs(np.einsum("ij,ij->i", normals[tri_id[seen]], rays[seen]))
-    return cos
+    seen = np.flatnonzero(tri_id.ravel() >= 0)
+    rows, cols = np.divmod(seen, intr.width)
+    rays = np.stack([(cols - intr.cx) / intr.fx, (rows - intr.cy) / intr.fy, np.ones(len(seen))], axis=1)
+    normals = face_normals(vertices_cam, np.asarray(faces))[tri_id.ravel()[seen]]
+    cos = np.zeros(tri_id.size)
+    cos[seen] = np.abs(np.einsum("ij,ij->i", normals, rays)) / np.linalg.norm(rays, axis=1)
+    return cos.reshape(tri_id.shape)
 
 
 def visible_vertices(tri_id: np.ndarray, faces: np.ndarray, n_faces: int | None = None) -> np.ndarray:
