@@ -78,8 +78,9 @@ def _compact(weights):
     """Dense/sparse (V, B) weights -> indices (V, K) and weights (V, K) of the non-zeros (padded with
     index 0 and weight 0)."""
     if hasattr(weights, "tocsr"):
-        w = weights.tocsr()
+        w = weights.tocsr(copy=True)
         w.eliminate_zeros()
+        w.sort_indices()
         counts = np.diff(w.indptr)
         K = max(int(counts.max()) if len(counts) else 0, 1)
         V = w.shape[0]
@@ -96,13 +97,28 @@ def _compact(weights):
     return idx, np.take_along_axis(w, idx, axis=1)
 
 
-def dqs(vertices, weights, Rm, tm):
+def _align_running(dq, w):
+    """Blender's hemisphere rule: walk a vertex's bones in order (K axis) and flip each dual quaternion
+    whose real part has a negative dot product with the weighted sum so far.  dq (N, V, K, 8),
+    w (V, K).  Returns the aligned copy."""
+    out = dq.copy()
+    total = np.zeros(dq.shape[:2] + (4,))
+    for k in range(dq.shape[2]):
+        flip = np.einsum("nvi,nvi->nv", out[:, :, k, :4], total) < 0
+        out[:, :, k] = np.where(flip[..., None], -out[:, :, k], out[:, :, k])
+        total += w[None, :, k, None] * out[:, :, k, :4]
+    return out
+
+
+def dqs(vertices, weights, Rm, tm, align="running"):
     """Dual-quaternion skinning as Blender's Armature modifier with "Preserve Volume" does it.
 
     Rows of weights (dense (V, B) or scipy.sparse) are normalised by their sum (rows summing to 0 stay
     at rest); each bone map x -> Rm x + tm must be a rotation times a uniform scale s_b: the scale is
-    blended linearly and applied first, the rigid parts are blended as dual quaternions aligned to the
-    hemisphere of the vertex's largest-weight bone, normalised and applied.  Returns (N, V, 3)."""
+    blended linearly and applied first, the rigid parts are blended as dual quaternions, normalised and
+    applied.  Hemisphere alignment: ``align="running"`` (Blender's rule: bones in ascending index order,
+    each flipped when it points away from the running weighted sum) or ``"max"`` (every bone aligned to
+    the vertex's largest-weight bone).  Returns (N, V, 3)."""
     if not hasattr(weights, "tocsr"):
         weights = np.asarray(weights, dtype=np.float64)
     v = _check_maps(vertices, weights, Rm, tm)
@@ -113,9 +129,14 @@ def dqs(vertices, weights, Rm, tm):
     s = np.cbrt(np.linalg.det(Rm))                                   # (N, B)
     DQ = dq_from_rigid(Rm / s[..., None, None], tm)                  # (N, B, 8)
     dq = DQ[:, idx]                                                   # (N, V, K, 8)
-    pivot = quat_canonical(np.take_along_axis(dq[..., :4], np.argmax(w, axis=1)[None, :, None, None],
-                                              axis=2)[:, :, 0])
-    dq = align_hemisphere(dq, pivot)
+    if align == "running":
+        dq = _align_running(dq, w)
+    elif align == "max":
+        pivot = quat_canonical(np.take_along_axis(dq[..., :4], np.argmax(w, axis=1)[None, :, None, None],
+                                                  axis=2)[:, :, 0])
+        dq = align_hemisphere(dq, pivot)
+    else:
+        raise ArticulaInputError(f"align: expected 'running' or 'max', got {align!r}")
     blended = np.einsum("vk,nvki->nvi", w, dq)
     blended = np.where(moving[None, :, None], blended, DQ_IDENTITY)
     scale = np.where(moving, np.einsum("vk,nvk->nv", w, s[:, idx]), 1.0)

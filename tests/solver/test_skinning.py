@@ -245,7 +245,8 @@ def test_lbs_matches_loop_dense_and_sparse():
     np.testing.assert_allclose(skinning.lbs(v, sp.csr_matrix(w), Rm, tm), ref, atol=1e-13)
 
 
-def test_dqs_matches_per_vertex_reference():
+@pytest.mark.parametrize("align", ["running", "max"])
+def test_dqs_matches_per_vertex_reference(align):
     import scipy.sparse as sp
     V, B, N = 30, 4, 2
     v = RNG.normal(size=(V, 3))
@@ -254,20 +255,34 @@ def test_dqs_matches_per_vertex_reference():
     R = rot.quat_to_matrix(rot.quat_normalize(RNG.normal(size=(N, B, 4))))
     s = 1.3
     tm = RNG.normal(size=(N, B, 3))
-    out = skinning.dqs(v, w, s * R, tm)
+    out = skinning.dqs(v, w, s * R, tm, align=align)
     ref = np.empty_like(out)
+    flips = 0
     for n in range(N):
+        d = [dq.dq_from_rigid(R[n, b], tm[n, b]) for b in range(B)]
         for i in range(V):
             if w[i].sum() == 0:
                 ref[n, i] = v[i]
                 continue
             wi = w[i] / w[i].sum()
-            d = [dq.dq_from_rigid(R[n, b], tm[n, b]) for b in range(B)]
+            acc = np.zeros(8)
             piv = rot.quat_canonical(d[int(np.argmax(wi))][:4])
-            acc = sum(wi[b] * (d[b] if d[b][:4] @ piv >= 0 else -d[b]) for b in range(B))
+            for b in range(B):                                 # Blender: ascending bone order
+                if wi[b] == 0:
+                    continue
+                pivot = acc[:4] if align == "running" else piv
+                sign = -1.0 if d[b][:4] @ pivot < 0 else 1.0
+                flips += sign < 0
+                acc += wi[b] * sign * d[b]
             ref[n, i] = dq.dq_apply(acc, s * v[i])
+    assert flips > 0                                           # the alignment matters in this data
     np.testing.assert_allclose(out, ref, atol=1e-12)
-    np.testing.assert_allclose(skinning.dqs(v, sp.csr_matrix(w), s * R, tm), ref, atol=1e-12)
+    csr = sp.csr_matrix(w)
+    np.testing.assert_allclose(skinning.dqs(v, csr, s * R, tm, align=align), ref, atol=1e-12)
+    stored_zero = csr.copy()
+    stored_zero.data[0] = 0.0                                  # an explicitly stored zero weight
+    skinning.dqs(v, stored_zero, s * R, tm, align=align)
+    assert stored_zero.nnz == csr.nnz                          # the caller's matrix is not modified
 
 
 def test_dqs_is_rigid_for_one_bone_and_keeps_tube_radius():
