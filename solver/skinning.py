@@ -233,9 +233,9 @@ def blend_group(terms, n0, n1, a, kids, wt, ws):
         tw = np.broadcast_to(DQ_IDENTITY[:, None, None], (8, n, Va))
         return tw, np.broadcast_to(chain_a, (12, n, Va))
     dt = (terms["twist_dq"][n0:n1][:, kids] - DQ_IDENTITY).transpose(2, 0, 1)       # (8, n, K)
-    tw = (dt.reshape(8 * n, -1) @ wt.T).reshape(8, n, Va) + DQ_IDENTITY[:, None, None]
+    tw = (dt.reshape(8 * n, len(kids)) @ wt.T).reshape(8, n, Va) + DQ_IDENTITY[:, None, None]
     ds = terms["swing_chain"][n0:n1][:, kids] - terms["chain"][n0:n1, a][:, None]   # (n, K, 12)
-    sw = (ds.transpose(2, 0, 1).reshape(12 * n, -1) @ ws.T).reshape(12, n, Va) + chain_a
+    sw = (ds.transpose(2, 0, 1).reshape(12 * n, len(kids)) @ ws.T).reshape(12, n, Va) + chain_a
     return tw, sw
 
 

@@ -325,3 +325,11 @@ def test_bad_shapes_raise_input_errors(human):
         skinning.dqs(model.rest_vertices, model.swing_weights, Rm, tm[:, :3])
     with pytest.raises(ArticulaInputError, match="vertices: expected"):
         skinning.lbs(model.rest_vertices[:, :2], model.swing_weights, Rm, tm)
+
+
+def test_zero_frames_give_empty_results(human):
+    model, _ = human
+    none = Poses.identity(0, 19)
+    assert skinning.hybrid_skin(model, none).shape == (0, 120, 3)
+    A, b = skinning.affine_form(model, none)
+    assert A.shape == (0, 120, 3, 3) and b.shape == (0, 120, 3)
