@@ -8,6 +8,7 @@ FEATURES = (
     "build_rig",
     "bake_poses",
     "export_bundle",
+    "export_lbs",
     "import_scans",
     "import_depth",
 )
