@@ -270,6 +270,13 @@ def on_load_post(*_args):
 
 
 @bpy.app.handlers.persistent
+def on_undo_redo(*_args):
+    """Undo restores meshes as they were when the step was pushed; show the current frame again."""
+    if bpy.context.scene:
+        on_frame_change(bpy.context.scene)
+
+
+@bpy.app.handlers.persistent
 def on_save_pre(filepath="", *_args):
     """Keep cache paths valid when the .blend is saved somewhere else: re-derive them relative to
     the new file (or absolute when the cache is outside its folder)."""
@@ -281,7 +288,8 @@ def on_save_pre(filepath="", *_args):
             ob.articula.cache_file = stored_path(bpy.path.abspath(ob.articula.cache_file), filepath)
 
 
-_HANDLERS = (("frame_change_post", on_frame_change), ("load_post", on_load_post), ("save_pre", on_save_pre))
+_HANDLERS = (("frame_change_post", on_frame_change), ("load_post", on_load_post), ("save_pre", on_save_pre),
+             ("undo_post", on_undo_redo), ("redo_post", on_undo_redo))
 
 
 def register_extra():

@@ -306,3 +306,20 @@ def test_batch_command(tmp_path, pkg):
     assert np.array_equal(pkg("addon.scan_sequence").scan_frames(ob)[0], frames)
     os.makedirs(tmp_path / "empty")
     assert cli.main(["import-scans", "--scans", str(tmp_path / "empty")]) == 2
+
+
+def test_undo_and_redo_of_an_import(tmp_path):
+    frames = make_frames(5, seed=8)
+    folder = write_folder(str(tmp_path / "u"), frames)
+    bpy.ops.ed.undo_push(message="before import")
+    before = counts()
+    assert bpy.ops.articula.import_scans(directory=folder) == {'FINISHED'}
+    bpy.ops.ed.undo_push(message="import")   # what the UI does after an UNDO operator (not bpy.ops here)
+    assert "u" in bpy.data.objects
+    bpy.ops.ed.undo()
+    assert "u" not in bpy.data.objects and counts() == before
+    bpy.ops.ed.redo()
+    ob = bpy.data.objects["u"]
+    for k in (3, 1):
+        bpy.context.scene.frame_set(1 + k)
+        assert np.array_equal(evaluated(ob), frames[k])
