@@ -25,6 +25,7 @@ Derivation (world axes; Rm_b = s·Rot_b is the chain of part b, p_b its posed jo
 import numpy as np
 
 from .dualquat import dq_apply
+from .errors import ArticulaInputError
 from .model import Poses
 from .rotations import (quat_canonical, quat_conj, quat_mul, quat_normalize, quat_to_matrix, rotvec_to_quat,
                         swing_twist_y)
@@ -43,6 +44,8 @@ def apply_pose_increment(poses: Poses, delta) -> Poses:
     """New poses after the increment ``delta`` (N, P) in the layout of :func:`pose_layout`."""
     delta = np.asarray(delta, dtype=np.float64)
     N, B = poses.rotations.shape[:2]
+    if delta.shape != (N, 4 + 3 * B):
+        raise ArticulaInputError(f"delta: expected shape ({N}, {4 + 3 * B}), got {delta.shape}")
     d_rot = delta[:, 4:].reshape(N, B, 3)
     rotations = quat_normalize(quat_mul(poses.rotations, rotvec_to_quat(d_rot)))
     return Poses(rotations, poses.translations + delta[:, :3], poses.scales + delta[:, 3])

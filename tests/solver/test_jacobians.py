@@ -135,3 +135,19 @@ def test_gauss_newton_recovers_pose():
         step = np.linalg.lstsq(A, -r, rcond=None)[0]
         poses = jacobians.apply_pose_increment(poses, step[None])
     assert np.abs(skinning.hybrid_skin(model, poses) - goal).max() < 1e-9
+
+
+def test_sign_of_quaternions_does_not_matter(case):
+    model, poses = case
+    flipped = Poses(-poses.rotations, poses.translations, poses.scales)
+    p1, J1 = jacobians.pose_jacobian(model, poses)
+    p2, J2 = jacobians.pose_jacobian(model, flipped)
+    np.testing.assert_allclose(p2, p1, atol=1e-13)
+    np.testing.assert_allclose(J2, J1, atol=1e-12)
+
+
+def test_bad_increment_shape(case):
+    from articula.solver.errors import ArticulaInputError
+    _, poses = case
+    with pytest.raises(ArticulaInputError, match=r"delta: expected shape \(2, 61\)"):
+        jacobians.apply_pose_increment(poses, np.zeros((2, 60)))
