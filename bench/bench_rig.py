@@ -5,7 +5,9 @@ Prints
   translation and scale) relative to the bounding-box diagonal, on the 19-bone tube body;
 * candy-wrapper minimum ring-radius ratio of a two-bone tube at a 180° twist and at a 90° swing for
   Blender LBS (one Armature modifier), Blender "Preserve Volume" and the Articula rig;
-* time to build the rig of a 12,844-vertex 19-bone subject (target < 2 s);
+* time to build the rig of a 12,844-vertex 19-bone subject (target < 2 s), and of the 13,380-vertex
+  31-bone MakeHuman sample subject with its exactness over 100 range-of-motion poses (if its assets
+  are present);
 * time to bake 5,000 frames x 60 bones into a new action (target < 1 s).
 
 Usage: ./run bench rig      or      ~/.cache/articula/venv-bpy42/bin/python bench/bench_rig.py [--repeats 3]
@@ -122,6 +124,39 @@ def build_speed(bpy, pkg, repeats):
     _common.report("build rig (cpu)", cpu, "s")
 
 
+def makehuman(bpy, pkg, repeats, n=100):
+    """The MakeHuman sample subject (cmu_mb rig, hybrid skin of sample_scenes.registered): build time
+    and exactness over ``n`` range-of-motion poses (skipped when the MakeHuman assets are missing)."""
+    try:
+        _, _, gt = _mod(pkg, "sample_scenes.registered").posed_sequence(rig="cmu_mb", n_poses=n, skin="hybrid")
+    except Exception as exc:                                            # assets not fetched
+        _common.report("MakeHuman subject", "skipped", "", f"{type(exc).__name__}: {exc}")
+        return
+    M = _mod(pkg, "solver.model")
+    sk = M.Skeleton(list(gt["bone_names"]), gt["parents"], gt["heads"], gt["tails"], gt["frames"])
+    model = M.Model(gt["rest_vertices"], gt["faces"], sk, gt["anchor"], gt["twist_weights"], gt["swing_weights"])
+    poses = M.Poses(gt["pose_rotations"], gt["pose_translations"], gt["pose_scales"])
+    build = _mod(pkg, "addon.rig_builder").build_rig
+    wall, cpu = _best(lambda: build(bpy.context, model, "MH"), repeats,
+                      lambda: bpy.ops.wm.read_homefile(use_empty=True))
+    note = f"{model.num_vertices} vertices, {sk.num_bones} bones, best of {repeats}; target < 2 s"
+    _common.report("MakeHuman build rig (wall)", wall, "s", note)
+    _common.report("MakeHuman build rig (cpu)", cpu, "s")
+    rig = bpy.data.objects["MH"]
+    _mod(pkg, "addon.actions").write_action(rig, sk.names, poses)
+    mesh = _mod(pkg, "addon.rig_reader").find_mesh(rig)
+    evaluated = _mod(pkg, "addon.mesh_io").evaluated_positions
+    ref = _mod(pkg, "solver.skinning").hybrid_skin(model, poses)
+    worst = 0.0
+    for f in range(n):
+        bpy.context.scene.frame_set(f + 1)
+        worst = max(worst, float(np.linalg.norm(evaluated(mesh) - ref[f], axis=1).max()))
+    diag = float(np.linalg.norm(np.ptp(model.rest_vertices, axis=0)))
+    flips = int(_mod(pkg, "addon.dqs_alignment").blender_twist_flips(model, poses).sum())
+    _common.report("MakeHuman exactness worst error / bbox diagonal", worst / diag, "",
+                   f"{n} range-of-motion poses; worst {1000 * worst:.4f} mm; predicted DQS alignment differences {flips}")
+
+
 def chain_model(pkg, bones=60):
     """A 60-bone chain along Z (one ring of vertices per bone), for the baking benchmark."""
     M = _mod(pkg, "solver.model")
@@ -161,6 +196,7 @@ def main(argv=()) -> int:
         bpy.ops.wm.read_homefile(use_empty=True)
         step(bpy, pkg)
     build_speed(bpy, pkg, args.repeats)
+    makehuman(bpy, pkg, args.repeats)
     bpy.ops.wm.read_homefile(use_empty=True)
     bake_speed(bpy, pkg, args.repeats)
     return 0

@@ -69,3 +69,21 @@ def test_candy_wrapper_does_not_collapse(pkg):
     assert tube.min_ring_radius_ratio(pos, 41, 24, 0.3) >= 0.999
     twisted_top = pos[-24:]
     assert np.allclose(twisted_top[:, :2], -model.rest_vertices[-24:, :2], atol=1e-5)   # really turned 180°
+
+
+def test_makehuman_subject_matches_the_solver(pkg):
+    """The 13,380-vertex MakeHuman sample subject (cmu_mb rig, hybrid skin) over range-of-motion poses."""
+    registered = pkg("sample_scenes.registered")
+    try:
+        _, _, gt = registered.posed_sequence(rig="cmu_mb", n_poses=12, skin="hybrid")
+    except (OSError, pkg("solver.errors").ArticulaInputError) as exc:
+        pytest.skip(f"MakeHuman assets unavailable: {exc}")
+    M = pkg("solver.model")
+    sk = M.Skeleton(list(gt["bone_names"]), gt["parents"], gt["heads"], gt["tails"], gt["frames"])
+    model = M.Model(gt["rest_vertices"], gt["faces"], sk, gt["anchor"], gt["twist_weights"], gt["swing_weights"])
+    p = M.Poses(gt["pose_rotations"], gt["pose_translations"], gt["pose_scales"])
+    rig = _build_and_bake(pkg, model, p)
+    assert rig.frame_error < 1e-5
+    got = evaluate_frames(pkg, rig.mesh, range(1, 13))
+    err = np.linalg.norm(got - gt["posed_vertices"], axis=2).max() / bbox_diagonal(model.rest_vertices)
+    assert err < TOL, f"worst relative error {err:.3g}"
