@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import os
 import uuid
+import warnings
 
 import bpy
 import numpy as np
@@ -103,9 +104,22 @@ def stored_path(abs_path: str, blend_path: str = None) -> str:
 
 
 def write_cache(path: str, seq: ScanSequence) -> None:
-    """Write the sequence's frames (no bpy: callable from a worker thread)."""
-    os.makedirs(os.path.dirname(path), exist_ok=True)
+    """Write the sequence's frames (no bpy: callable from a worker thread); a clear error when the
+    file cannot be written, and never a half-written cache."""
     tmp = path + ".part"
+    try:
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        _write_cache(tmp, seq)
+        os.replace(tmp, path)
+    except OSError as exc:
+        try:
+            os.remove(tmp)
+        except OSError:
+            pass
+        raise ArticulaInputError(f"cannot write the frame cache {path}: {exc.strerror or exc}") from None
+
+
+def _write_cache(tmp: str, seq: ScanSequence) -> None:
     with open(tmp, "wb") as fh:
         if seq.registered:
             np.save(fh, np.ascontiguousarray(seq.frames, np.float32))
@@ -118,7 +132,6 @@ def write_cache(path: str, seq: ScanSequence) -> None:
                      face_offsets=np.cumsum([0] + [len(m.face_sizes) for m in ms]),
                      corner_verts=np.concatenate([m.corner_verts for m in ms]).astype(np.int32),
                      corner_offsets=np.cumsum([0] + [len(m.corner_verts) for m in ms]))
-    os.replace(tmp, path)
 
 
 _loaded = {}   # absolute path -> (mtime, data): np.memmap (.npy) or dict of arrays (.npz)
@@ -180,7 +193,7 @@ def create_object(context, name: str, seq: ScanSequence, cache_path: str, frame_
     data.source = source
     data.frame_start = frame_start
     data.frame_count = len(seq)
-    data.cache_file = stored_path(cache_path)
+    set_cache_path(ob, stored_path(cache_path))
     scene = context.scene
     scene.frame_start = frame_start
     scene.frame_end = frame_start + len(seq) - 1
@@ -190,6 +203,14 @@ def create_object(context, name: str, seq: ScanSequence, cache_path: str, frame_
     ob.select_set(True)
     show_frame(ob, scene.frame_current)
     return ob
+
+
+def set_cache_path(ob, path: str) -> None:
+    # Blender 5.x warns that this FILE_PATH property lacks the PATH_SUPPORTS_BLEND_RELATIVE option
+    # (which 4.2 does not know); the "//" prefix is resolved here with bpy.path.abspath, so it is fine.
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*blend relative", category=RuntimeWarning)
+        ob.articula.cache_file = path
 
 
 def is_scan_sequence(ob) -> bool:
@@ -285,7 +306,7 @@ def on_save_pre(filepath="", *_args):
     for ob in bpy.data.objects:
         if ob.type == 'MESH' and ob.articula.kind == 'SCAN_SEQUENCE' and ob.articula.cache_file \
                 and not ob.library:
-            ob.articula.cache_file = stored_path(bpy.path.abspath(ob.articula.cache_file), filepath)
+            set_cache_path(ob, stored_path(bpy.path.abspath(ob.articula.cache_file), filepath))
 
 
 _HANDLERS = (("frame_change_post", on_frame_change), ("load_post", on_load_post), ("save_pre", on_save_pre),

@@ -19,7 +19,7 @@ import bpy
 import numpy as np
 
 from ..solver.errors import ArticulaInputError
-from ..solver.scan_sequence import ScanSequence, assemble
+from ..solver.scan_sequence import ScanSequence, SequenceAssembler
 from .scan_sequence import read_polymesh
 
 _ID_COLLECTIONS = ("objects", "meshes", "cache_files", "materials", "collections", "curves", "pointclouds",
@@ -95,16 +95,15 @@ def sample_alembic(context, path: str, require_registered: bool = False) -> Scan
         for cf in set(caches):
             cf.override_frame = True
         depsgraph = context.evaluated_depsgraph_get()
-        frames, names = [], []
+        asm = SequenceAssembler(require_registered)
         for f in range(first, last + 1):
             for cf in set(caches):
                 cf.frame = f
             depsgraph.update()
             mesh = _evaluated_polymesh(ob, depsgraph)
             _check_finite(mesh.vertices, f"{name} frame {f}")
-            frames.append(mesh)
-            names.append(f"{name} frame {f}")
-    return assemble(frames, names, require_registered)
+            asm.add(mesh, f"{name} frame {f}")
+    return asm.result()
 
 
 def _check_finite(vertices, where):
@@ -155,14 +154,13 @@ def sample_animation(context, ob, first: int, last: int, require_registered: boo
         raise ArticulaInputError(f"{ob.name}: empty frame range {first}..{last}")
     scene = context.scene
     current = scene.frame_current
-    meshes, names = [], []
+    asm = SequenceAssembler(require_registered)
     try:
         for f in range(first, last + 1):
             scene.frame_set(f)
             mesh = _evaluated_polymesh(ob, context.evaluated_depsgraph_get())
             _check_finite(mesh.vertices, f"{ob.name} frame {f}")
-            meshes.append(mesh)
-            names.append(f"{ob.name} frame {f}")
+            asm.add(mesh, f"{ob.name} frame {f}")
     finally:
         scene.frame_set(current)
-    return assemble(meshes, names, require_registered)
+    return asm.result()

@@ -70,24 +70,49 @@ class ScanSequence:
         return len(self.names)
 
 
+class SequenceAssembler:
+    """Builds a :class:`ScanSequence` frame by frame, keeping little memory: while the frames are
+    registered only their float32 positions are kept (the faces are checked against the first frame,
+    then dropped).  With ``require_registered`` a topology difference is an error naming the first
+    differing frame; otherwise it turns the sequence unregistered (one mesh per frame from then on)."""
+
+    def __init__(self, require_registered: bool = False):
+        self.require_registered = require_registered
+        self.names, self.first = [], None
+        self.positions, self.meshes, self.why = [], None, ""
+
+    def add(self, mesh: PolyMesh, name: str) -> None:
+        if self.first is None:
+            self.first = mesh
+        elif self.meshes is None:
+            how = self.first.topology_difference(mesh)
+            if how:
+                self.why = f"{name} differs from {self.names[0]}: {how}"
+                if self.require_registered:
+                    raise ArticulaInputError(f"not registered: {self.why}")
+                f = self.first
+                self.meshes = [PolyMesh(p.astype(np.float64), f.face_sizes, f.corner_verts) for p in self.positions]
+                self.positions = []
+        self.names.append(name)
+        if self.meshes is None:
+            self.positions.append(np.asarray(mesh.vertices, np.float32))
+        else:
+            self.meshes.append(mesh)
+
+    def result(self) -> ScanSequence:
+        if self.first is None:
+            raise ArticulaInputError("no frames to import")
+        if self.meshes is None:
+            return ScanSequence(list(self.names), self.first, np.stack(self.positions))
+        return ScanSequence(list(self.names), self.first, None, self.meshes, self.why)
+
+
 def assemble(meshes: list, names: list, require_registered: bool = False) -> ScanSequence:
-    """Check the frames' topology against the first one and pack them.  With ``require_registered``
-    a difference is an error naming the first differing frame; otherwise it makes the sequence
-    unregistered."""
-    if not meshes:
-        raise ArticulaInputError("no frames to import")
-    first = meshes[0]
-    for mesh, name in zip(meshes[1:], names[1:]):
-        how = first.topology_difference(mesh)
-        if how:
-            why = f"{name} differs from {names[0]}: {how}"
-            if require_registered:
-                raise ArticulaInputError(f"not registered: {why}")
-            return ScanSequence(list(names), first, None, list(meshes), why)
-    frames = np.empty((len(meshes), len(first.vertices), 3), np.float32)
-    for k, mesh in enumerate(meshes):
-        frames[k] = mesh.vertices
-    return ScanSequence(list(names), first, frames)
+    """:class:`SequenceAssembler` over lists of meshes and names."""
+    asm = SequenceAssembler(require_registered)
+    for mesh, name in zip(meshes, names):
+        asm.add(mesh, name)
+    return asm.result()
 
 
 def read_scan_files(paths, progress=None, require_registered: bool = False) -> ScanSequence:
@@ -96,14 +121,12 @@ def read_scan_files(paths, progress=None, require_registered: bool = False) -> S
     paths = list(paths)
     if not paths:
         raise ArticulaInputError("no scan files given")
-    meshes = []
+    asm = SequenceAssembler(require_registered)
     for k, path in enumerate(paths):
         if progress and k % 8 == 0:
             progress(0.9 * k / len(paths), f"reading {os.path.basename(path)}")
-        meshes.append(read_mesh(path))
-    if progress:
-        progress(0.9, "checking topology")
-    return assemble(meshes, [os.path.basename(p) for p in paths], require_registered)
+        asm.add(read_mesh(path), os.path.basename(path))
+    return asm.result()
 
 
 def sequence_from_cache(frames: np.ndarray, base: PolyMesh, cache_name: str, base_name: str) -> ScanSequence:

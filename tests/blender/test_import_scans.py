@@ -323,3 +323,14 @@ def test_undo_and_redo_of_an_import(tmp_path):
     for k in (3, 1):
         bpy.context.scene.frame_set(1 + k)
         assert np.array_equal(evaluated(ob), frames[k])
+
+
+def test_unwritable_cache_is_reported(tmp_path, monkeypatch):
+    folder = write_folder(str(tmp_path / "w"), make_frames(2))
+    blocker = tmp_path / "not_a_folder"
+    blocker.write_text("x")
+    monkeypatch.setenv("ARTICULA_HOME", str(blocker))   # the cache folder would have to be inside a file
+    before = counts()
+    with pytest.raises(RuntimeError, match="cannot write the frame cache"):
+        bpy.ops.articula.import_scans(directory=folder)
+    assert counts() == before
