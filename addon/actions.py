@@ -63,9 +63,9 @@ def channels(names, poses, root_axes):
 def write_action(arm, names, poses, name: str = "Articula Poses", frame_start: int = 1,
                  nla: bool = False, scene=None):
     """Write ``poses`` (N frames, bones ``names`` in bundle order) to a new action on armature object
-    ``arm`` and make it active (or push it to a new NLA track when ``nla``).  A previously active action
-    without other users gets a fake user so it is not lost.  Sets the scene frame range.  Returns the
-    action."""
+    ``arm`` and make it active (or, when ``nla``, put it on a new NLA track and leave the active action
+    alone).  A replaced active action without other users gets a fake user so it is not lost.  Sets the
+    scene frame range.  Returns the action."""
     poses.validate(len(names))
     missing = [n for n in names if n not in arm.pose.bones]
     if missing:
@@ -83,12 +83,11 @@ def write_action(arm, names, poses, name: str = "Articula Poses", frame_start: i
         fc.keyframe_points.foreach_set("co", co.ravel())
         fc.keyframe_points.foreach_set("interpolation", interp)
         fc.update()
-    if old is not None and old.users == 1 and not old.use_fake_user:
-        old.use_fake_user = True
     if nla:
-        compat.push_to_nla(arm, action, slot, frame_start)
-        arm.animation_data.action = None
+        compat.push_to_nla(arm, action, slot, frame_start)        # the active action stays as it is
     else:
+        if old is not None and old.users == 1 and not old.use_fake_user:
+            old.use_fake_user = True                               # keep the replaced action
         compat.assign_action(arm, action, slot)
     scene = scene or bpy.context.scene
     scene.frame_start, scene.frame_end = frame_start, frame_start + max(N, 1) - 1

@@ -9,7 +9,7 @@ import os
 import bpy
 
 from ..solver.errors import ArticulaInputError
-from . import rig_io
+from . import rig_io, rig_reader
 
 
 def _open(path: str) -> None:
@@ -33,7 +33,7 @@ def build_rig(args) -> int:
         print(f"warning: {text}")
     frames = f", action {action.name!r}" if action is not None else ""
     print(f"built rig {rig.armature.name!r}: {len(rig.mesh.data.vertices)} vertices, "
-          f"{len(rig.armature.data.bones)} bones{frames}")
+          f"{len(rig_reader.control_names(rig.armature))} control bones{frames}")
     if args.blend:
         _save(args.blend)
         print(f"saved {args.blend}")

@@ -2,7 +2,7 @@
 bundle, baking the bundle's poses (if any) as an action on frames 1..N."""
 import bpy
 
-from ..addon import rig_io
+from ..addon import rig_io, rig_reader
 from ..addon.jobs import JobOperator
 
 
@@ -37,11 +37,11 @@ class ARTICULA_OT_build_rig(JobOperator, bpy.types.Operator):
         rig, action = rig_io.build_bundle(context, bundle, self._rig_name, self.bake, self.frame_start)
         for text in rig.warnings:
             self.report({'WARNING'}, text)
-        sk_bones = len(rig.armature.data.bones)
+        sk_bones = len(rig_reader.control_names(rig.armature))
         baked = f", action {action.name!r} ({int(action.frame_range[1] - action.frame_range[0]) + 1} frames)" \
             if action is not None else ""
         self.report({'INFO'}, f"Built rig {rig.armature.name!r}: {len(rig.mesh.data.vertices)} vertices, "
-                              f"{sk_bones} bones{baked}")
+                              f"{sk_bones} control bones{baked}")
 
 
 classes = (ARTICULA_OT_build_rig,)

@@ -95,7 +95,7 @@ def test_bake_onto_existing_rig(pkg, tmp_path):
     arm = bpy.context.view_layer.objects.active
     assert arm.animation_data is None or arm.animation_data.action is None        # no poses, no action
     assert bpy.ops.articula.bake_poses(filepath=pose_path, armature=arm.name, nla=True) == {'FINISHED'}
-    assert arm.animation_data.nla_tracks and arm.animation_data.action is None
+    assert arm.animation_data.nla_tracks and arm.animation_data.action is None   # still no active action
     assert bpy.ops.articula.bake_poses(filepath=pose_path, armature=arm.name) == {'FINISHED'}
     assert arm.animation_data.action.name == "take poses.001"
     before = _counts()

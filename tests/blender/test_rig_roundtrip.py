@@ -1,6 +1,5 @@
 """Round trips: bundle -> rig -> Model, poses -> action -> poses (4.2 legacy and slotted actions), and a
 rig surviving save/reload, renaming and linking into another file."""
-import os
 
 import numpy as np
 import pytest
@@ -68,7 +67,7 @@ def test_action_round_trip(pkg, nla):
     assert (sc.frame_start, sc.frame_end) == (1, 30)
     if nla:
         ad = rig.armature.animation_data
-        assert ad.action is None and ad.nla_tracks[-1].strips[0].action == second
+        assert ad.action == first and ad.nla_tracks[-1].strips[0].action == second
     back = pkg("addon.rig_reader").read_poses(rig.armature, second)
     assert len(back) == 30
     np.testing.assert_allclose(_canonical(back.rotations), _canonical(p.rotations), atol=1e-6)
