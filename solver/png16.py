@@ -133,85 +133,91 @@ def unfilter(filtered: np.ndarray, ftypes: np.ndarray) -> np.ndarray:
 
     ``filtered``: (H, W, bpp) uint8 filtered bytes (without the filter-type byte), bpp = bytes per
     pixel; ``ftypes``: (H,) filter type per row (0..4).  Returns the (H, W, bpp) uint8 raw bytes.
+
+    Order: None and Sub rows do not depend on the row above and are undone first; then every run
+    of dependent rows (Up/Average/Paeth) that holds an Average or Paeth row, all runs together in one
+    wavefront; last the remaining Up rows by a segmented cumulative sum.
     """
-    out = np.empty_like(filtered)
-    prior = np.zeros(filtered.shape[1:], np.uint8)
-    for start, stop, hard in _row_blocks(ftypes, filtered.shape[1]):
-        block, types = filtered[start:stop], ftypes[start:stop]
-        if hard:
-            out[start:stop] = _unfilter_wavefront(block, types, prior)
-        else:
-            out[start:stop] = _unfilter_simple(block, types, prior)
-        prior = out[stop - 1]
+    ftypes = np.asarray(ftypes)
+    out = filtered.copy()
+    sub = ftypes == 1
+    if sub.any():
+        out[sub] = np.cumsum(filtered[sub], axis=1, dtype=np.uint8)
+    known = ftypes <= 1
+    runs = _hard_runs(ftypes)
+    if runs:
+        _unfilter_wavefront(filtered, ftypes, out, runs)
+        for start, stop in runs:
+            known[start:stop] = True
+    if not known.all():
+        out = _unfilter_up(out, known)
     return out
 
 
-def _row_blocks(ftypes, width):
-    """Split rows into (start, stop, hard) blocks.  Hard blocks contain Average/Paeth rows and go
-    through the wavefront, whose cost is about ``width + rows`` steps; hard runs separated by fewer
-    than ``width`` simple rows are therefore merged into one block."""
-    hard_rows = np.flatnonzero((ftypes == 3) | (ftypes == 4))
-    if hard_rows.size == 0:
-        return [(0, len(ftypes), False)]
-    gaps = np.flatnonzero(np.diff(hard_rows) > width)
-    starts = np.r_[hard_rows[0], hard_rows[gaps + 1]]
-    stops = np.r_[hard_rows[gaps], hard_rows[-1]] + 1
-    blocks, pos = [], 0
-    for start, stop in zip(starts.tolist(), stops.tolist()):
-        if start > pos:
-            blocks.append((pos, start, False))
-        blocks.append((start, stop, True))
-        pos = stop
-    if pos < len(ftypes):
-        blocks.append((pos, len(ftypes), False))
-    return blocks
+def _hard_runs(ftypes):
+    """[(start, stop)] maximal runs of dependent rows (type >= 2) containing an Average/Paeth row."""
+    dep = np.r_[False, ftypes >= 2, False].astype(np.int8)
+    edges = np.flatnonzero(np.diff(dep))
+    hard = (ftypes >= 3).astype(np.int64)
+    csum = np.r_[0, np.cumsum(hard)]
+    return [(a, b) for a, b in zip(edges[::2].tolist(), edges[1::2].tolist()) if csum[b] > csum[a]]
 
 
-def _unfilter_simple(block, types, prior):
-    """None/Sub/Up rows: Sub rows by a per-lane cumulative sum, Up runs by a segmented one."""
-    rec = block.copy()
-    sub = types == 1
-    if sub.any():
-        rec[sub] = np.cumsum(block[sub], axis=1, dtype=np.uint8)
-    up = types == 2
-    if up.any():
-        # v[0] is the (known) prior row; each Up row adds to the row above.  Within a run of Up
-        # rows the result is a cumulative sum from the last known (non-Up) row.
-        v = np.concatenate([prior[None], rec])
-        csum = np.cumsum(v, axis=0, dtype=np.uint8)
-        known = np.r_[True, ~up]
-        base = np.maximum.accumulate(np.where(known, np.arange(len(v)), 0))
-        rec = (csum - csum[base] + v[base])[1:]
-    return rec
+def _unfilter_up(rec, known):
+    """Rows not ``known`` are Up rows: each adds the row above; within a run this is a cumulative
+    sum (uint8, wrapping like the filter arithmetic) from the last known row."""
+    v = np.concatenate([np.zeros((1,) + rec.shape[1:], np.uint8), rec])
+    csum = np.cumsum(v, axis=0, dtype=np.uint8)
+    base = np.maximum.accumulate(np.where(np.r_[True, known], np.arange(len(v)), 0))
+    return (csum - csum[base] + v[base])[1:]
 
 
-def _unfilter_wavefront(block, types, prior):
-    """Any mix of filter types, vectorised along anti-diagonals (used for Average/Paeth rows).
+def _unfilter_wavefront(filtered, ftypes, out, runs):
+    """Undo the filters of ``runs`` (their prior rows are already in ``out``), all runs at once.
 
-    Skewed layout ``k[x + i + 2, i + 1] = raw(i, x)`` for block row i, and ``k[x + 1, 0]`` holds the
-    prior row; then left a, up b and up-left c of all pixels on diagonal s = x + i are slices.
+    Columns of the skewed work array: a zero column, then per run its prior row followed by its
+    rows.  Pixel x of the row with in-run index i (prior: -1) sits at ``k[x + i + 2, column]``, so at
+    step s the left (a), up (b) and up-left (c) neighbours of all pixels with x = s - i are plain
+    slices.  Steps: W + longest run.  Prior rows enter as Sub-filtered copies of their known bytes,
+    so every column follows the same recurrence.
     """
-    n, width, bpp = block.shape
-    k = np.zeros((width + n + 1, n + 1, bpp), np.int16)
-    k[1:width + 1, 0] = prior
-    f = np.zeros_like(k)
-    ii, xx = np.meshgrid(np.arange(n), np.arange(width), indexing="ij")
-    f[xx + ii + 2, ii + 1] = block
-    kind = np.broadcast_to(types[:, None], (n, bpp))
-    is_avg, is_up, is_sub, is_none = (kind == 3), (kind == 2), (kind == 1), (kind == 0)
-    any_avg, any_simple = bool(is_avg.any()), bool((kind < 3).any())
-    for s in range(width + n - 1):
-        lo, hi = max(0, s - width + 1), min(n, s + 1)
-        a, b, c = k[s + 1, lo + 1:hi + 1], k[s + 1, lo:hi], k[s, lo:hi]
+    _, width, bpp = filtered.shape
+    rows, local = [-1], [-1]
+    for start, stop in runs:
+        rows += list(range(start - 1, stop))
+        local += list(range(-1, stop - start))
+    rows, local = np.array(rows), np.array(local)
+    prior = local == -1
+    ncol, longest = len(rows), int(local.max()) + 1
+    safe = np.maximum(rows, 0)
+    kind = np.where(prior, 1, ftypes[safe])
+    known = np.where(rows[:, None, None] >= 0, out[safe], 0).astype(np.int16)
+    resub = (known - np.concatenate([np.zeros_like(known[:, :1]), known[:, :-1]], axis=1)) & 255
+    src = np.where(prior[:, None, None], resub, filtered[safe])
+    xx = np.arange(width)
+    f = np.zeros((width + longest + 2, ncol, bpp), np.int16)
+    f[xx[None, :] + local[:, None] + 2, np.arange(ncol)[:, None]] = src
+    k = np.zeros_like(f)
+    k[1, prior] = known[prior, 0]          # x = 0 of prior rows (step -1 is never run)
+    kk = np.broadcast_to(kind[1:, None], (ncol - 1, bpp))
+    is_sub, is_up, is_avg = kk == 1, kk == 2, kk == 3
+    any_up, any_avg = bool(is_up.any()), bool(is_avg.any())
+    # after step s, the x = -1 slot of columns with local == s + 1 must be zero again
+    reset = [np.flatnonzero(local[1:] == s + 1) + 1 for s in range(longest)]
+    for s in range(width + longest):
+        a, b, c = k[s + 1, 1:], k[s + 1, :-1], k[s, :-1]
         pred = _paeth(a, b, c)
         if any_avg:
-            pred = np.where(is_avg[lo:hi], (a + b) >> 1, pred)
-        if any_simple:
-            pred = np.where(is_up[lo:hi], b, np.where(is_sub[lo:hi], a, pred))
-            pred[is_none[lo:hi]] = 0
-        pred += f[s + 2, lo + 1:hi + 1]
-        np.bitwise_and(pred, 255, out=k[s + 2, lo + 1:hi + 1])
-    return k[xx + ii + 2, ii + 1].astype(np.uint8)
+            pred = np.where(is_avg, (a + b) >> 1, pred)
+        if any_up:
+            pred = np.where(is_up, b, pred)
+        pred = np.where(is_sub, a, pred)
+        pred += f[s + 2, 1:]
+        np.bitwise_and(pred, 255, out=k[s + 2, 1:])
+        if s < longest:
+            k[s + 2, reset[s]] = 0
+    cols = np.flatnonzero(~prior)
+    out[rows[cols]] = k[xx[None, :] + local[cols, None] + 2, cols[:, None]].astype(np.uint8)
 
 
 def _paeth(a, b, c):

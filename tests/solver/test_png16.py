@@ -83,13 +83,16 @@ def test_mixed_filters_and_8bit():
 
 
 def test_unfilter_matches_specification_transcription():
-    """The vectorised unfilter equals a literal per-byte transcription of the spec (3-byte pixels)."""
+    """The vectorised unfilter equals a literal per-byte transcription of the spec, for random
+    filter sequences (runs at the top, single rows, 1-pixel-wide images, 1..4 bytes per pixel)."""
     rng = np.random.default_rng(4)
-    filtered = rng.integers(0, 256, (9, 7, 3)).astype(np.uint8)
-    types = np.array([4, 3, 2, 1, 0, 4, 4, 2, 3])
-    rows = [[int(t)] + filtered[i].ravel().tolist() for i, t in enumerate(types)]
-    expected = np.array(_reference_unfilter(rows, 3), np.uint8).reshape(filtered.shape)
-    np.testing.assert_array_equal(png16.unfilter(filtered, types), expected)
+    for trial in range(120):
+        h, w, bpp = int(rng.integers(1, 9)), int(rng.integers(1, 8)), int(rng.integers(1, 5))
+        filtered = rng.integers(0, 256, (h, w, bpp)).astype(np.uint8)
+        types = rng.integers(0, 5, h) if trial % 3 else np.full(h, rng.integers(2, 5))
+        rows = [[int(t)] + filtered[i].ravel().tolist() for i, t in enumerate(types)]
+        expected = np.array(_reference_unfilter(rows, bpp), np.uint8).reshape(filtered.shape)
+        np.testing.assert_array_equal(png16.unfilter(filtered, types), expected, err_msg=str(types))
 
 
 def _png(width, height, depth, ctype, raw_rows, interlace=0):
