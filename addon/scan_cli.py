@@ -43,7 +43,12 @@ def run(args) -> int:
     print(f"{ob.name}: {data.frame_count} frames of {len(ob.data.vertices)} vertices, "
           f"{'registered' if data.registered else 'unregistered'}, cache {data.cache_file}")
     if args.blend:
-        bpy.ops.wm.save_mainfile()
+        paths = bpy.context.preferences.filepaths
+        versions, paths.save_version = paths.save_version, 0   # no .blend1 of the file saved just before
+        try:
+            bpy.ops.wm.save_mainfile()
+        finally:
+            paths.save_version = versions
         print(f"saved {bpy.data.filepath}")
     return 0
 

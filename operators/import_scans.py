@@ -88,6 +88,8 @@ class ARTICULA_OT_import_scans(JobOperator, bpy.types.Operator, ImportHelper):
             paths = [os.path.join(directory, n) for n in natural_sorted(names)]
         elif self.filepath and not os.path.isdir(bpy.path.abspath(self.filepath)):
             paths = [bpy.path.abspath(self.filepath)]
+            if not os.path.exists(paths[0]):
+                raise ArticulaInputError(f"{paths[0]}: file or folder not found")
         elif self.filepath or directory:
             return 'MESHES', list_scan_files(bpy.path.abspath(self.filepath) or directory)
         else:

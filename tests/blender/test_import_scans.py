@@ -131,7 +131,7 @@ def test_unregistered_sequence_rebuilds_topology(tmp_path, pkg):
 
 
 @pytest.mark.parametrize("case, message", [
-    ("missing", "file not found"),
+    ("missing", "gone.obj: file or folder not found"),
     ("empty", "no scan files"),
     ("garbage", "bad.ply: not a PLY file"),
     ("nan", "scan2.obj: vertex 3 has a non-finite"),
@@ -299,7 +299,7 @@ def test_batch_command(tmp_path, pkg):
     cli = pkg("addon.cli")
     out = str(tmp_path / "out" / "walk.blend")
     assert cli.main(["import-scans", "--scans", folder, "--blend", out]) == 0
-    assert os.path.isfile(out)
+    assert os.path.isfile(out) and not os.path.exists(out + "1")
     bpy.ops.wm.open_mainfile(filepath=out)
     ob = bpy.data.objects["walk"]
     assert ob.articula.cache_file.startswith("//walk_articula/")
