@@ -72,8 +72,8 @@ class ARTICULA_OT_import_scans(JobOperator, bpy.types.Operator, ImportHelper):
         if getattr(self, "_browsing", False) and not bpy.app.background:
             # Confirmed in the file browser: run as a modal job (progress + Esc) with the chosen input.
             self._browsing = False
-            props = {p.identifier: getattr(self, p.identifier) for p in self.bl_rna.properties
-                     if p.identifier not in ("rna_type", "files")}
+            props = {p.identifier: getattr(self.properties, p.identifier)
+                     for p in self.properties.bl_rna.properties if p.identifier not in ("rna_type", "files")}
             props["files"] = [{"name": f.name} for f in self.files]
             bpy.ops.articula.import_scans('INVOKE_DEFAULT', **props)
             return {'CANCELLED'}   # the job pushes its own undo step
