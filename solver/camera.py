@@ -4,7 +4,8 @@ Conventions (the same for every depth tool in Articula)
 ------------------------------------------------------
 * **Camera frame** (OpenCV / depth-sensor convention): +X right, +Y down, +Z forward (the viewing
   direction).  A Blender camera looks down its local -Z with +Y up, so
-  ``blender_cam_matrix_world = cam_to_world @ diag(1, -1, -1, 1)`` (see :func:`blender_from_cv`).
+  ``blender_cam_matrix_world = cam_to_world @ diag(1, -1, -1, 1)`` (see :func:`blender_from_cv`);
+  :func:`blender_camera_settings` gives the lens, sensor, shift and resolution of the same camera.
 * **Pixels**: column ``u`` (0..W-1, to the right), row ``v`` (0..H-1, downwards); the centre of pixel
   (u, v) is at image coordinates (u, v).  So the image centre is ((W-1)/2, (H-1)/2).
 * **Depth** is the Z coordinate in the camera frame (distance along the optical axis, *not* along
@@ -259,3 +260,18 @@ def blender_from_cv(cam_to_world: np.ndarray) -> np.ndarray:
     The matrix is its own inverse, so the same call converts back."""
     return np.asarray(cam_to_world, dtype=float) @ _CV_TO_BLENDER
 
+
+
+def blender_camera_settings(intr: Intrinsics, sensor_width_mm: float = 36.0) -> dict:
+    """Blender camera/render settings that reproduce ``intr`` (checked against Blender's own
+    projection in ``tests/blender/test_camera_blender.py``): ``lens`` (mm) with
+    ``sensor_fit = 'HORIZONTAL'`` and ``sensor_width``, ``shift_x``/``shift_y`` (fractions of the
+    image width) for an off-centre principal point, the render resolution, and the pixel aspect for
+    fx != fy.  Use with ``matrix_world = blender_from_cv(cam_to_world)``."""
+    shift_x = ((intr.width - 1) / 2 - intr.cx) / intr.width
+    shift_y = (intr.cy - (intr.height - 1) / 2) / intr.width * intr.fx / intr.fy
+    aspect = intr.fx / intr.fy
+    return {"lens": intr.fx * sensor_width_mm / intr.width, "sensor_width": sensor_width_mm,
+            "sensor_fit": "HORIZONTAL", "shift_x": shift_x, "shift_y": shift_y,
+            "resolution_x": intr.width, "resolution_y": intr.height,
+            "pixel_aspect_x": max(1.0, 1.0 / aspect), "pixel_aspect_y": max(1.0, aspect)}

@@ -8,13 +8,17 @@ Reader (:func:`read_png16`): bit depth 8 or 16, colour types 0 (gray), 2 (RGB), 
 6 (RGBA); colour images yield channel 0.  Non-interlaced only.  All five row filters of the PNG
 specification (§9: None, Sub, Up, Average, Paeth) are undone:
 
-* runs of None/Sub/Up rows are vectorised completely (Sub is a cumulative sum along the row per
-  byte lane, Up a segmented cumulative sum down the columns; sums of uint8 wrap modulo 256, which
-  is the filter arithmetic);
-* runs containing Average/Paeth rows are undone by a *wavefront*: pixel (r, x) depends only on
-  (r, x-1), (r-1, x) and (r-1, x-1), so all pixels with equal r + x are independent.  The block is
-  stored skewed (column s holds the pixels with r + x = s) so every step is a plain slice;
-  W + n - 1 vectorised steps for n rows instead of n·W scalar ones.
+* None and Sub rows do not depend on the row above: Sub is a cumulative sum along the row per byte
+  lane (uint8 sums wrap modulo 256, which is the filter arithmetic);
+* runs of Up/Average/Paeth rows that contain an Average or Paeth row are undone by one
+  *wavefront* over all such runs: pixel (r, x) depends only on (r, x-1), (r-1, x) and (r-1, x-1),
+  so all pixels with equal x + (row index within its run) are independent.  The runs are stored
+  skewed side by side, so every step is a plain slice: W + (longest run) vectorised steps instead
+  of H·W scalar ones;
+* the remaining Up rows are a segmented cumulative sum down the columns.
+
+Measured (``./run bench depth``): ~5 ms per 640x480 frame written by :func:`write_png16` (Up
+filter), ~30 ms for libpng-encoded Kinect frames (mixed Sub/Up/Paeth rows), ~35 ms all-Paeth.
 
 Writer (:func:`write_png16`): uint16 (or uint8) (H, W) arrays as grayscale PNG with a chosen
 filter per row (any of the five, vectorised because forward filtering only reads raw bytes).
