@@ -129,3 +129,16 @@ def test_reads_the_sample_scenes_writer(tmp_path, fmt):
     assert seq.registered and np.allclose(seq.frames, frames, atol=6e-7)   # OBJ: 6 decimals
     assert seq.topology.face_sizes.tolist() == [4] * len(quads)
     assert seq.topology.corner_verts.tolist() == quads.ravel().tolist()
+
+
+def test_stl_sequence_is_registered_when_triangles_keep_their_order(tmp_path):
+    from .mesh_writers import write_stl
+    frames = make_frames(3, seed=9).astype(np.float32)
+    for k, f in enumerate(frames):
+        write_stl(str(tmp_path / f"t{k}.stl"), f, CUBE_FACES, binary=k != 1)   # ascii and binary mixed
+    seq = read_scan_files(list_scan_files(str(tmp_path)))
+    assert seq.registered and seq.frames.shape == (3, 8, 3)
+    # welded numbering = first use by the triangle list; same permutation in every frame
+    order = seq.frames[0][:, None, :] == frames[0][None, :, :]
+    perm = np.flatnonzero(order.all(axis=2)) % 8
+    assert np.allclose(seq.frames, frames[:, perm], atol=1e-6)
