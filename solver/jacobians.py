@@ -10,6 +10,9 @@ Pose parameters of one frame, in this order (``P = 4 + 3 B``; see :func:`pose_la
 
 Joint-centre parameters: the rest heads ``(B, 3)`` (world metres), moved additively with rest frames,
 tails and rest vertices held fixed (Chapter 4 adapts only joint locations; spec §2).
+Frame parameters (:func:`frame_jacobian`): a world axis-angle ω_b per rest frame, ``F_b ← exp(ω_b) F_b``,
+with every bone's world rotation held fixed (:func:`apply_frame_increment`), as Chapter 3 optimises the
+joint orientations.
 
 Shapes: Jacobians are dense per-vertex blocks ``(N, V, 3, P)`` (resp. ``(N, V, 3, 3B)``); memory is
 N·V·3·P·8 bytes (13,380 vertices × 19 bones ≈ 20 MB per frame).  Each vertex has non-zero columns only
@@ -208,14 +211,22 @@ def pose_jacobian(model, poses, groups=None):
             continue
         L3Jdq = L3 @ _dq_apply_jacobian(bq, x)                       # (N, V_a, 3, 8)
         for k, c in enumerate(kids):
-            twist = wt[None, :, k, None, None] * _per_frame_matmul(L3Jdq, bt["T"][:, c])
-            # swing: −w RR [v_t − h_c]× G = −w [RR (v_t − h_c)]× (RR G / s), RR = Rm_a R_sw,c = s·rotation
-            RR = bt["Rm"][:, a] @ bt["R_sw"][:, c]
-            lever = np.einsum("nij,nvj->nvi", RR, vt - sk.heads[c])
-            swing = -ws[None, :, k, None, None] * _skew_times(lever, ((RR @ bt["G"][:, c]) / s)[:, None])
-            Jg[..., 4 + 3 * c:7 + 3 * c] = twist + swing
+            Jg[..., 4 + 3 * c:7 + 3 * c] = _child_block(bt, sk, a, c, wt[:, k], ws[:, k], L3Jdq, vt, s,
+                                                        bt["T"][:, c], bt["G"][:, c])
     inv = groups.inverse
     return posed[:, inv], J[:, inv]
+
+
+def _child_block(bt, sk, a, c, wt_k, ws_k, L3Jdq, vt, s, T, G):
+    """Block ``(N, V_a, 3, m)`` of a blended child c for parameters that move its world twist dual
+    quaternion by ``T (N, 8, m)`` and its world swing by ``∂R_sw = R_sw [G ·]×`` with ``G (N, 3, m)``.
+    Twist: ``w_t L3 (∂f/∂b) T``.  Swing: ``w_s Rm_a R_sw [G·]× (v_t − h_c)`` =
+    ``−w_s [RR (v_t − h_c)]× (RR G / s)`` with RR = Rm_a R_sw = s·rotation."""
+    twist = wt_k[None, :, None, None] * _per_frame_matmul(L3Jdq, T)
+    RR = bt["Rm"][:, a] @ bt["R_sw"][:, c]
+    lever = np.einsum("nij,nvj->nvi", RR, vt - sk.heads[c])
+    swing = -ws_k[None, :, None, None] * _skew_times(lever, ((RR @ G) / s)[:, None])
+    return twist + swing
 
 
 def joint_jacobian(model, poses, groups=None):
@@ -249,6 +260,86 @@ def joint_jacobian(model, poses, groups=None):
             twist = wt[None, :, k, None, None] * _per_frame_matmul(L3Jd, minus_skew_u[:, c])
             swing = ws[None, :, k, None, None] * (Rm[:, a] @ (eye - bt["R_sw"][:, c]))[:, None]
             Jg[..., 3 * c:3 * c + 3] = twist + swing
+    inv = groups.inverse
+    return posed[:, inv], J[:, inv]
+
+
+def apply_frame_increment(skeleton, poses, omega):
+    """Rotate rest frames by world axis-angle vectors ``omega (B, 3)``: ``F_b ← exp(ω_b) F_b`` (tails
+    follow, heads stay), and re-express every local pose quaternion ``q ← g q g*`` with
+    ``g = quat(F'ᵀ F)`` so each bone's *world* rotation is unchanged; only the swing/twist split moves.
+    Returns ``(skeleton, poses)``."""
+    from .model import Skeleton
+    from .rotations import matrix_to_quat, rotvec_to_matrix
+    omega = np.asarray(omega, dtype=np.float64)
+    B = skeleton.num_bones
+    if omega.shape != (B, 3):
+        raise ArticulaInputError(f"omega: expected shape ({B}, 3), got {omega.shape}")
+    F = skeleton.frames
+    F_new = rotvec_to_matrix(omega) @ F
+    g = matrix_to_quat(np.swapaxes(F_new, -1, -2) @ F)
+    q = quat_normalize(quat_mul(quat_mul(g, poses.rotations), quat_conj(g)))
+    length = np.linalg.norm(skeleton.tails - skeleton.heads, axis=1)
+    sk = Skeleton(list(skeleton.names), skeleton.parents.copy(), skeleton.heads.copy(),
+                  skeleton.heads + length[:, None] * F_new[:, :, 1], F_new)
+    return sk, Poses(q, poses.translations.copy(), poses.scales.copy())
+
+
+def _frame_bone_terms(bt, skeleton, poses):
+    """Per (frame, bone) derivatives of the world twist w.r.t. a frame rotation ω (world axis-angle)
+    with the world rotation fixed: ``T (N, B, 8, 3)`` and ``G (N, B, 3, 3)`` (see :func:`_child_block`).
+
+    With world quaternion (w, u) of the bone's rotation and twist axis Y: η = Y·u, n = √(w² + η²),
+    twist (w_t, y_t) = (w, η)/n, world twist dual quaternion ((w_t, y_t Y), (0, y_t h × Y)).
+    ∂η/∂ω = (Y × u)ᵀ, ∂Y/∂ω = −[Y]×; the swing R R_tw⁻¹ changes by −R_sw [Θ·]×, Θ = 2 vec(∂Q_t ⊗ Q_t*)."""
+    F, h = skeleton.frames, skeleton.heads
+    q = quat_canonical(quat_normalize(poses.rotations))
+    w = q[..., 0]
+    u = np.einsum("bij,nbj->nbi", F, q[..., 1:])                     # world vector part
+    Y = np.broadcast_to(F[:, :, 1], u.shape)
+    eta = np.sum(Y * u, axis=-1)
+    n2 = w * w + eta * eta
+    ok = n2 > _TWIST_EPS
+    n3 = np.where(ok, np.where(ok, n2, 1.0) ** 1.5, np.inf)
+    y_t = np.where(ok, eta / np.sqrt(np.where(ok, n2, 1.0)), 0.0)
+    d_eta = np.cross(Y, u)                                           # (N, B, 3)
+    dw_t = (-w * eta / n3)[..., None] * d_eta
+    dvec = Y[..., :, None] * ((w * w / n3)[..., None] * d_eta)[..., None, :] - y_t[..., None, None] * _skew(Y)
+    dQt = np.concatenate([dw_t[..., None, :], dvec], axis=-2)        # (N, B, 4, 3)
+    T = np.zeros(u.shape[:-1] + (8, 3))
+    T[..., :4, :] = dQt
+    T[..., 5:8, :] = _skew(np.broadcast_to(h, u.shape)) @ dvec
+    Qt = np.concatenate([np.where(ok, w / np.sqrt(np.where(ok, n2, 1.0)), 1.0)[..., None],
+                         y_t[..., None] * Y], axis=-1)
+    theta = 2.0 * _right(quat_conj(Qt))[..., 1:, :] @ dQt
+    return T, -theta
+
+
+def frame_jacobian(model, poses, groups=None):
+    """Posed vertices ``(N, V, 3)`` and their Jacobian ``(N, V, 3, 3B)`` w.r.t. world axis-angle
+    rotations ω_b of the rest frames, with the update of :func:`apply_frame_increment` (each bone's world
+    rotation kept, so only the swing/twist split of blended children moves; heads fixed).  Columns
+    3b … 3b+2 = ω_b.  For rotations about the frame's own X and Z axes use ``J_b @ F_b[:, 0]`` and
+    ``J_b @ F_b[:, 2]``.  ``groups``: optional :class:`AnchorGroups`."""
+    check_pose_shapes(model, poses)
+    groups = _groups_for(model, groups)
+    sk = model.skeleton
+    bt = _pose_bone_terms(sk, poses)
+    T, G = _frame_bone_terms(bt, sk, poses)
+    N, V, B = len(poses), model.num_vertices, sk.num_bones
+    posed = np.empty((N, V, 3))
+    J = np.zeros((N, V, 3, 3 * B))
+    s = poses.scales[:, None, None]
+    for group in groups.groups:
+        a, kids, start, stop, wt, ws = group
+        x, bq, vt, L3, xp = _group_posed(bt, groups, group)
+        posed[:, start:stop] = xp
+        if not len(kids):
+            continue
+        L3Jdq = L3 @ _dq_apply_jacobian(bq, x)
+        for k, c in enumerate(kids):
+            J[:, start:stop, :, 3 * c:3 * c + 3] = _child_block(bt, sk, a, c, wt[:, k], ws[:, k], L3Jdq, vt, s,
+                                                                T[:, c], G[:, c])
     inv = groups.inverse
     return posed[:, inv], J[:, inv]
 

@@ -151,3 +151,39 @@ def test_bad_increment_shape(case):
     _, poses = case
     with pytest.raises(ArticulaInputError, match=r"delta: expected shape \(2, 61\)"):
         jacobians.apply_pose_increment(poses, np.zeros((2, 60)))
+
+
+def test_frame_jacobian_matches_central_differences(case):
+    model, poses = case
+    sk = model.skeleton
+    posed, J = jacobians.frame_jacobian(model, poses)
+    np.testing.assert_allclose(posed, skinning.hybrid_skin(model, poses), atol=1e-12)
+    fd = np.zeros_like(J)
+    for j in range(3 * sk.num_bones):
+        out = []
+        for sign in (1, -1):
+            omega = np.zeros((sk.num_bones, 3))
+            omega[j // 3, j % 3] = sign * H
+            moved, p = jacobians.apply_frame_increment(sk, poses, omega)
+            m = Model(model.rest_vertices, model.faces, moved, model.anchor, model.twist_weights,
+                      model.swing_weights)
+            out.append(skinning.hybrid_skin(m, p))
+        fd[..., j] = (out[0] - out[1]) / (2 * H)
+    assert rel_err(J, fd) < 1e-6
+    assert np.abs(J).max() > 1e-2                       # the split really moves blended vertices
+    np.testing.assert_array_equal(J[..., 0:3], 0)       # the root frame is a gauge freedom
+
+
+def test_frame_increment_keeps_world_rotations(case):
+    from articula.solver import kinematics
+    model, poses = case
+    omega = np.random.default_rng(1).normal(size=(19, 3)) * 0.3
+    sk, p = jacobians.apply_frame_increment(model.skeleton, poses, omega)
+    sk.validate()
+    np.testing.assert_allclose(kinematics.world_rotations(sk, p.rotations),
+                               kinematics.world_rotations(model.skeleton, poses.rotations), atol=1e-12)
+    rigid = Model(model.rest_vertices, model.faces, sk, model.anchor, np.zeros_like(model.twist_weights),
+                  np.zeros_like(model.swing_weights))
+    orig = Model(model.rest_vertices, model.faces, model.skeleton, model.anchor, rigid.twist_weights,
+                 rigid.swing_weights)
+    np.testing.assert_allclose(skinning.hybrid_skin(rigid, p), skinning.hybrid_skin(orig, poses), atol=1e-12)
