@@ -48,7 +48,7 @@ def _drive_segments(arm, layout, segments):
             continue
         pb = arm.pose.bones[name]
         pb.rotation_mode = 'XYZ'
-        rig_builder._lock(pb)
+        rig_builder.lock(pb)
         driver = pb.driver_add("rotation_euler", 1).driver
         driver.type = 'SCRIPTED'
         driver.expression = f"twist * {k} / {segments}"
@@ -75,7 +75,7 @@ def build_lbs_rig(context, arm, segments: int = 4) -> LbsRig:
     worst, mean = lbs_export.deviation(model, poses, segments)
     src_mesh = rig_reader.find_mesh(arm)
     sk = model.skeleton
-    with rig_builder._object_mode(context):
+    with rig_builder.object_mode(context):
         lbs_arm = bpy.data.objects.new(f"{arm.name}.lbs", bpy.data.armatures.new(f"{arm.name}.lbs"))
         mesh = bpy.data.objects.new(f"{src_mesh.name}.lbs", src_mesh.data.copy())
         coll = context.collection or context.scene.collection
@@ -84,10 +84,10 @@ def build_lbs_rig(context, arm, segments: int = 4) -> LbsRig:
         for a in list(mesh.data.attributes):
             if a.name == rig_names.ANCHOR_ATTRIBUTE:
                 mesh.data.attributes.remove(a)
-        with rig_builder._edit_mode(context, lbs_arm):
-            rig_builder._edit_main_bones(lbs_arm.data, sk)
+        with rig_builder.edit_mode(context, lbs_arm):
+            rig_builder.edit_main_bones(lbs_arm.data, sk)
             _edit_segments(lbs_arm.data, layout)
-        rig_builder._pose_main(context.scene, lbs_arm, sk)
+        rig_builder.pose_main(context.scene, lbs_arm, sk)
         _drive_segments(lbs_arm, layout, segments)
         mesh.vertex_groups.clear()
         write_vertex_groups(mesh, [name for name, *_ in layout], weights)

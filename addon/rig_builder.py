@@ -67,16 +67,16 @@ def build_rig(context, model, name: str = "Articula") -> Rig:
     armature ends up active and selected, in object mode."""
     check_model(model)
     sk = model.skeleton
-    with _object_mode(context):
-        arm, tw, mesh = _create_objects(context, model, name)
-        with _edit_mode(context, arm):
-            _edit_main_bones(arm.data, sk)
-        with _edit_mode(context, tw):
-            _edit_twist_bones(tw.data, sk)
-        _pose_main(context.scene, arm, sk)
-        _pose_twist(tw, arm, sk)
-        _skin(mesh, model)
-        _finalize(context, arm, tw, mesh)
+    with object_mode(context):
+        arm, tw, mesh = create_objects(context, model, name)
+        with edit_mode(context, arm):
+            edit_main_bones(arm.data, sk)
+        with edit_mode(context, tw):
+            edit_twist_bones(tw.data, sk)
+        pose_main(context.scene, arm, sk)
+        pose_twist(tw, arm, sk)
+        skin(mesh, model)
+        finalize(context, arm, tw, mesh)
     err = frame_error(arm, sk)
     warnings = ()
     if err > FRAME_WARN:
@@ -93,7 +93,9 @@ def frame_error(arm, sk) -> float:
 
 # ----------------------------------------------------------------------------- stage 1: objects
 
-def _create_objects(context, model, name):
+def create_objects(context, model, name):
+    """Stage 1 (object mode): the two armatures and the mesh, linked to the active collection, kinds set.
+    Returns ``(armature, twist armature, mesh)`` objects."""
     coll = context.collection or context.scene.collection
     arm = bpy.data.objects.new(name, bpy.data.armatures.new(name))
     tw = bpy.data.objects.new(f"{name}.twist", bpy.data.armatures.new(f"{name}.twist"))
@@ -106,14 +108,15 @@ def _create_objects(context, model, name):
 
 
 @contextmanager
-def _object_mode(context):
+def object_mode(context):
+    """Leave edit/pose mode of whatever is active before the build (the build runs in object mode)."""
     if context.mode != 'OBJECT' and context.view_layer.objects.active is not None:
         bpy.ops.object.mode_set(mode='OBJECT')
     yield
 
 
 @contextmanager
-def _edit_mode(context, ob):
+def edit_mode(context, ob):
     """Edit mode on ``ob`` alone (other objects deselected so multi-object editing stays out)."""
     for other in context.view_layer.objects:
         if other.select_get():
@@ -130,14 +133,16 @@ def _edit_mode(context, ob):
 
 # ----------------------------------------------------------------------------- stage 2: edit bones
 
-def _set_rest(eb, head, tail, frame):
+def set_rest(eb, head, tail, frame):
     """Rest of an edit bone: head/tail as given, roll such that its axes are ``frame`` columns."""
     eb.head = Vector(head)
     eb.tail = Vector(tail)
     eb.roll = bpy.types.Bone.AxisRollFromMatrix(Matrix(frame.tolist()), axis=Vector(frame[:, 1]))[1]
 
 
-def _edit_main_bones(arm_data, sk):
+def edit_main_bones(arm_data, sk):
+    """Stage 2 (edit mode of the main armature): control bones in bundle order, then the swing helpers;
+    bone collections Controls / Helpers (hidden) and side colours."""
     ctrl = arm_data.collections.new(rig_names.CONTROLS_COLLECTION)
     helpers = arm_data.collections.new(rig_names.HELPERS_COLLECTION)
     helpers.is_visible = False
@@ -145,7 +150,7 @@ def _edit_main_bones(arm_data, sk):
     controls = []
     for b, name in enumerate(sk.names):
         eb = ebs.new(name)
-        _set_rest(eb, sk.heads[b], sk.tails[b], sk.frames[b])
+        set_rest(eb, sk.heads[b], sk.tails[b], sk.frames[b])
         if b > 0:
             eb.parent = controls[sk.parents[b]]
         eb.use_deform = True
@@ -154,37 +159,41 @@ def _edit_main_bones(arm_data, sk):
         controls.append(eb)
     for c in range(1, sk.num_bones):
         eb = ebs.new(rig_names.swing(sk.names[c]))
-        _set_rest(eb, sk.heads[c], sk.tails[c], sk.frames[c])
+        set_rest(eb, sk.heads[c], sk.tails[c], sk.frames[c])
         eb.parent = controls[sk.parents[c]]
         eb.use_deform = True
         eb.hide = True
         helpers.assign(eb)
 
 
-def _edit_twist_bones(arm_data, sk):
+def edit_twist_bones(arm_data, sk):
+    """Stage 2 (edit mode of the twist armature): unparented ``TW-<c>`` at the rest of c, and NEUTRAL."""
     coll = arm_data.collections.new(rig_names.TWIST_COLLECTION)
     ebs = arm_data.edit_bones
     for c in range(1, sk.num_bones):
         eb = ebs.new(rig_names.twist(sk.names[c]))
-        _set_rest(eb, sk.heads[c], sk.tails[c], sk.frames[c])
+        set_rest(eb, sk.heads[c], sk.tails[c], sk.frames[c])
         eb.use_deform = True
         coll.assign(eb)
     eb = ebs.new(rig_names.NEUTRAL)
-    _set_rest(eb, sk.heads[0], sk.tails[0], sk.frames[0])
+    set_rest(eb, sk.heads[0], sk.tails[0], sk.frames[0])
     eb.use_deform = True
     coll.assign(eb)
 
 
 # ----------------------------------------------------------------------------- stage 3: pose pass
 
-def _lock(pb, location=True, rotation=True, scale=True):
+def lock(pb, location=True, rotation=True, scale=True):
+    """Lock the transform channels of pose bone ``pb`` in the UI (drivers and constraints still act)."""
     pb.lock_location = (location,) * 3
     pb.lock_rotation = (rotation,) * 3
     pb.lock_rotation_w = rotation
     pb.lock_scale = (scale,) * 3
 
 
-def _pose_main(scene, arm, sk):
+def pose_main(scene, arm, sk):
+    """Stage 3 (object mode, pose data): rotation modes, locks, widgets, bundle indices of the control
+    bones, and the Damped Track of every swing helper (target: this armature, by ID)."""
     circle, root = bone_shapes.widget(scene, "CIRCLE"), bone_shapes.widget(scene, "ROOT")
     for b, name in enumerate(sk.names):
         arm.data.bones[name][rig_names.BONE_INDEX_PROP] = b
@@ -192,11 +201,11 @@ def _pose_main(scene, arm, sk):
         pb.rotation_mode = 'QUATERNION'
         pb.custom_shape = root if b == 0 else circle
         if b > 0:
-            _lock(pb, location=True, rotation=False, scale=True)
+            lock(pb, location=True, rotation=False, scale=True)
     for c in range(1, sk.num_bones):
         pb = arm.pose.bones[rig_names.swing(sk.names[c])]
         pb.rotation_mode = 'QUATERNION'
-        _lock(pb)
+        lock(pb)
         con = pb.constraints.new('DAMPED_TRACK')
         con.name = "Articula Swing"
         con.target = arm
@@ -205,11 +214,12 @@ def _pose_main(scene, arm, sk):
         con.track_axis = 'TRACK_Y'
 
 
-def _pose_twist(tw, arm, sk):
+def pose_twist(tw, arm, sk):
+    """Stage 3: the twist driver of every ``TW-<c>`` (Y Euler angle = SWING_TWIST_Y twist of control c)."""
     for c in range(1, sk.num_bones):
         pb = tw.pose.bones[rig_names.twist(sk.names[c])]
         pb.rotation_mode = 'XYZ'
-        _lock(pb)
+        lock(pb)
         driver = pb.driver_add("rotation_euler", 1).driver
         driver.type = 'AVERAGE'
         var = driver.variables.new()
@@ -221,7 +231,7 @@ def _pose_twist(tw, arm, sk):
         target.transform_type = 'ROT_Y'
         target.rotation_mode = 'SWING_TWIST_Y'
         target.transform_space = 'LOCAL_SPACE'
-    _lock(tw.pose.bones[rig_names.NEUTRAL])
+    lock(tw.pose.bones[rig_names.NEUTRAL])
 
 
 # ----------------------------------------------------------------------------- stage 4: skin
@@ -246,13 +256,15 @@ def skin_groups(model):
     return names, np.clip(w, 0.0, 1.0).astype(np.float32)
 
 
-def _skin(mesh, model):
+def skin(mesh, model):
+    """Stage 4: vertex groups (:func:`skin_groups`) and the anchor attribute of the rig mesh."""
     names, weights = skin_groups(model)
     write_vertex_groups(mesh, names, weights)
     write_int_attribute(mesh.data, rig_names.ANCHOR_ATTRIBUTE, model.anchor)
 
 
-def _add_armature_modifier(mesh, name, target, preserve_volume):
+def add_armature_modifier(mesh, name, target, preserve_volume):
+    """An Armature modifier on ``mesh`` deforming by vertex groups only (no envelopes, no multi-modifier)."""
     mod = mesh.modifiers.new(name, 'ARMATURE')
     mod.object = target
     mod.use_vertex_groups = True
@@ -262,9 +274,11 @@ def _add_armature_modifier(mesh, name, target, preserve_volume):
     return mod
 
 
-def _finalize(context, arm, tw, mesh):
-    _add_armature_modifier(mesh, rig_names.TWIST_MODIFIER, tw, True)
-    _add_armature_modifier(mesh, rig_names.SWING_MODIFIER, arm, False)
+def finalize(context, arm, tw, mesh):
+    """Stage 5: the two modifiers in order (twist with Preserve Volume, then swing), parenting to the main
+    armature at the identity, hiding the twist armature, the main armature active and selected."""
+    add_armature_modifier(mesh, rig_names.TWIST_MODIFIER, tw, True)
+    add_armature_modifier(mesh, rig_names.SWING_MODIFIER, arm, False)
     for child in (tw, mesh):
         child.parent = arm
         child.matrix_parent_inverse = Matrix.Identity(4)
