@@ -77,6 +77,18 @@ def _speed(args):
     _common.report("hybrid_skin one frame (AnchorGroups reused)", 1e3 * t_one, "ms")
     _common.report("pose_jacobian one frame", 1e3 * t_jac, "ms",
                    f"{t_jac / t_one:.3g} x one hybrid_skin frame; P = {4 + 3 * B} columns")
+    P = 4 + 3 * B
+
+    def central_differences():
+        for j in range(P):
+            d = np.zeros((1, P))
+            d[0, j] = 1e-6
+            skinning.hybrid_skin(model, jacobians.apply_pose_increment(one, d), groups)
+            skinning.hybrid_skin(model, jacobians.apply_pose_increment(one, -d), groups)
+
+    t_fd = _best_time(central_differences, 1)
+    _common.report("central-difference pose Jacobian one frame", 1e3 * t_fd, "ms",
+                   f"analytic is {t_fd / t_jac:.3g} x faster")
 
 
 def _tube_volume(posed, tube, rings, sectors):
