@@ -40,6 +40,7 @@ def add_motion_arguments(p) -> None:
     p.add_argument("--seed", type=int, default=0, help="random seed of the motion (default 0)")
     p.add_argument("--amplitude", type=float, default=1.0, help="rom: scale of the joint limits (0, 1]")
     p.add_argument("--key-every", type=int, default=1, help="rom: key poses every K frames, interpolated")
+    p.add_argument("--step", type=float, default=1.0, help="walk: cycle frames per pose (40-frame cycle)")
     p.add_argument("--root-yaw", type=float, default=0.0, help="random root yaw up to this many degrees")
     p.add_argument("--root-shift", type=float, default=0.0, help="random root shift up to this many metres")
 
@@ -49,6 +50,8 @@ def motion_options(args) -> dict:
     opts = dict(root_yaw=args.root_yaw, root_shift=args.root_shift)
     if args.motion == "rom":
         opts.update(amplitude=args.amplitude, key_every=args.key_every)
+    else:
+        opts.update(step=args.step)
     return opts
 
 

@@ -53,13 +53,13 @@ SKINS = ("lbs", "dqs", "hybrid")
 MOTIONS = ("rom", "walk")
 
 
-def make_poses(skeleton, motion: str, n_poses: int, seed: int, **options):
-    """Poses of ``motion`` ("rom": :func:`.poses.rom_poses`, "walk": :func:`.walk.walk_poses`)."""
+def make_poses(subject, motion: str, n_poses: int, seed: int, **options):
+    """Poses of ``motion`` for a subject ("rom": :func:`.poses.rom_poses`, "walk": :func:`.walk.walk_poses`)."""
     if motion == "rom":
-        return rom_poses(skeleton, n_poses, seed=seed, **options)
+        return rom_poses(subject.skeleton, n_poses, seed=seed, **options)
     if motion == "walk":
         from .walk import walk_poses
-        return walk_poses(skeleton, n_poses, seed=seed, **options)
+        return walk_poses(subject, n_poses, seed=seed, **options)
     raise ArticulaInputError(f"motion: unknown motion {motion!r} (choose from {', '.join(MOTIONS)})")
 
 
@@ -110,7 +110,7 @@ def posed_sequence(rig: str = "cmu_mb", shape=None, n_poses: int = 30, motion: s
     if skin not in SKINS:
         raise ArticulaInputError(f"skin: unknown skin {skin!r} (choose from {', '.join(SKINS)})")
     subject = make_subject(rig, shape, subject_seed)
-    poses = make_poses(subject.skeleton, motion, n_poses, seed, **motion_options)
+    poses = make_poses(subject, motion, n_poses, seed, **motion_options)
     Rm, tm = forward_kinematics(subject.skeleton, poses)
     posed, model = _skin(subject, skin, poses, Rm, tm)
     meta = dict(skin=skin, motion=motion, rig=rig, seed=int(seed),
