@@ -285,7 +285,7 @@ def apply_frame_increment(skeleton, poses, omega):
     return sk, Poses(q, poses.translations.copy(), poses.scales.copy())
 
 
-def _frame_bone_terms(bt, skeleton, poses):
+def _frame_bone_terms(skeleton, poses):
     """Per (frame, bone) derivatives of the world twist w.r.t. a frame rotation ω (world axis-angle)
     with the world rotation fixed: ``T (N, B, 8, 3)`` and ``G (N, B, 3, 3)`` (see :func:`_child_block`).
 
@@ -325,7 +325,7 @@ def frame_jacobian(model, poses, groups=None):
     groups = _groups_for(model, groups)
     sk = model.skeleton
     bt = _pose_bone_terms(sk, poses)
-    T, G = _frame_bone_terms(bt, sk, poses)
+    T, G = _frame_bone_terms(sk, poses)
     N, V, B = len(poses), model.num_vertices, sk.num_bones
     posed = np.empty((N, V, 3))
     J = np.zeros((N, V, 3, 3 * B))
