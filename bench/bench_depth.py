@@ -2,7 +2,8 @@
 
 * ``samples depth`` work: 60 frames of the 13,380-vertex MakeHuman subject at 320x240 and 640x480
   (posing excluded; rendering + noise + PNG writing), with a per-stage split at 640x480;
-* PNG decoding of 300 frames at 640x480: our own files (Up filter), the real Kinect v1 frames of
+* PNG decoding of 300 frames at 640x480 (one by one and batched with ``read_png16_many``): our
+  own files (Up filter), the real Kinect v1 frames of
   ``../shared/data/depth/skeltrack_kinect`` (libpng, mixed Sub/Up/Paeth rows; skipped if absent), and
   an all-Paeth file (worst case: the wavefront unfilter on every row).
 
@@ -68,12 +69,15 @@ def _timeit(fn):
 
 
 def _bench_decode(files, n, label):
-    from articula.solver.png16 import read_png16
-    t0 = time.perf_counter()
-    for i in range(n):
-        read_png16(files[i % len(files)])
-    dt = time.perf_counter() - t0
-    _common.report(f"decode {n} x 640x480 {label}", dt, "s", f"{dt / n * 1000:.1f} ms/frame")
+    from articula.solver.png16 import read_png16, read_png16_many
+    paths = [files[i % len(files)] for i in range(n)]
+    for name, fn in (("read_png16", lambda: [read_png16(p) for p in paths]),
+                     ("read_png16_many", lambda: read_png16_many(paths))):
+        t0, c0 = time.perf_counter(), time.process_time()
+        fn()
+        dt, cpu = time.perf_counter() - t0, time.process_time() - c0
+        _common.report(f"decode {n} x 640x480 {label}, {name}", dt, "s",
+                       f"{dt / n * 1000:.1f} ms/frame wall, {cpu / n * 1000:.1f} ms/frame CPU")
 
 
 def main(argv) -> int:
