@@ -31,3 +31,14 @@ def test_roll_frames_match_blender_edit_bones(pkg, rig):
     # the comparison can fail: a wrong roll sign is visible
     wrong = mr.roll_frames(heads, tails, -spec.rolls)
     assert np.abs(blender - wrong).max() > 0.1
+
+
+def test_euler_xyz_matches_mathutils(pkg):
+    """The walk-cycle Euler convention (sample_scenes.fcurves) is Blender's XYZ Euler."""
+    from mathutils import Euler
+    fc = pkg("sample_scenes.fcurves")
+    rng = np.random.default_rng(0)
+    for e in rng.uniform(-3, 3, (20, 3)):
+        blender = np.array(Euler(e.tolist(), 'XYZ').to_matrix())
+        assert np.abs(fc.euler_xyz_to_matrix(e) - blender).max() < 1e-6
+        assert np.abs(fc.euler_xyz_to_matrix(e[::-1]) - blender).max() > 1e-3 or np.allclose(e, e[::-1])
