@@ -19,6 +19,8 @@ COMMAND_MODULES = (
     ".sample_scenes.cli",
     ".addon.rig_cli",
     ".addon.scan_cli",
+    ".addon.depth_cli",
+    ".addon.demo",
 )
 
 
