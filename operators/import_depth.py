@@ -6,6 +6,7 @@ Thin: gathers the inputs (files, intrinsics, colour frames read by Blender) in `
 ``finish``.  Scripts: ``bpy.ops.articula.import_depth(directory=..., preset='KINECT_V1', ...)``.
 """
 import os
+import time
 
 import bpy
 
@@ -24,6 +25,8 @@ PRESET_ITEMS = (
     ('AZURE_KINECT', "Azure Kinect (NFOV)", "Nominal Azure Kinect DK narrow field of view: 640x576, 75 x 65 degrees"),
     ('REALSENSE_D435', "RealSense D435", "Nominal Intel RealSense D435: 848x480, 87 x 58 degrees"),
 )
+LAST_TIMINGS = {}  # seconds of the last successful import: decode, processing, solver, cache, blender
+
 PRESET_NAMES = {'KINECT_V1': "kinect_v1", 'KINECT_V2': "kinect_v2", 'AZURE_KINECT': "azure_kinect_nfov",
                 'REALSENSE_D435': "realsense_d435"}
 
@@ -166,20 +169,26 @@ class ARTICULA_OT_import_depth(JobOperator, bpy.types.Operator):
         cache_abs = os.path.normpath(bpy.path.abspath(cache))
 
         def work(progress):
+            t0 = time.perf_counter()
             if clouds:
                 seq = ps.import_clouds(paths, opts, progress, intr)
             else:
                 seq = ps.import_depth(frames, intr, opts, progress, background, colors)
+            t1 = time.perf_counter()
             seq.save(cache_abs)
+            seq.timings.update(solver=t1 - t0, cache=time.perf_counter() - t1)
             return seq, cache, cache_abs, name, directory
 
         return work
 
     def finish(self, context, result):
         seq, cache, cache_abs, name, directory = result
+        t0 = time.perf_counter()
         try:
             ob, cam = pcs.create_sequence_objects(context, name, seq, cache, directory, self.frame_start,
                                                   self.point_radius)
+            LAST_TIMINGS.clear()
+            LAST_TIMINGS.update(seq.timings, blender=time.perf_counter() - t0)
         except BaseException:
             pcs.forget_cache(cache_abs)
             if os.path.exists(cache_abs):

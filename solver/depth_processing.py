@@ -43,7 +43,7 @@ class DepthOptions:
     floor_iterations: int = 256         # RANSAC hypotheses
     floor_min_fraction: float = 0.05    # the floor must hold at least this share of the pooled points
     subtract_background: bool = False
-    background_frames: int = 10         # frames used for the median background when no background file
+    background_frames: int = 10         # frames (spread over the recording) for the median background
     background_tolerance: float = 0.05  # pixels not at least this much in front of the background are removed
     voxel_size: float = 0.0             # 0 = keep every point
     estimate_normals: bool = True
@@ -208,44 +208,57 @@ def world_from_sensor(floor=None) -> np.ndarray:
 
 # --------------------------------------------------------------------------------------- normals
 
-def grid_normals(grid: np.ndarray, jump: float = 0.01) -> np.ndarray:
+def grid_normals(grid: np.ndarray, rows=None, cols=None, jump: float = 0.01, mask=None) -> np.ndarray:
     """Normals of a back-projected depth grid (H, W, 3) (NaN = invalid) from pixel neighbours.
 
     Along each image axis the tangent is the central difference when both neighbours are valid and
     their depth steps are alike (``max <= 2 min + jump`` metres); otherwise the one-sided difference with
     the smaller depth step, so normals next to depth discontinuities come from the same surface.
     Normals face the camera (``n . p < 0``); where no neighbour exists the normal is the reversed
-    viewing ray.  Returns (H, W, 3) float32.
+    viewing ray.  With ``rows, cols`` (K,) only those pixels are computed (gathers, no full-image
+    temporaries) and (K, 3) is returned; otherwise (H, W, 3).  ``mask`` (H, W): pixels outside it count
+    as invalid neighbours.  float32.
     """
     g = grid.astype(np.float32, copy=False)
+    full = rows is None
+    if full:
+        rows, cols = np.nonzero(np.ones(g.shape[:2], bool))
+    h, w = g.shape[:2]
+    padded = np.full((h + 2, w + 2, 3), np.nan, np.float32)
+    if mask is None:
+        padded[1:-1, 1:-1] = g
+    else:
+        np.copyto(padded[1:-1, 1:-1], g, where=mask[..., None])
+    r, c = np.asarray(rows) + 1, np.asarray(cols) + 1
+    p = padded[r, c]
 
-    def tangent(axis):
-        diff = np.diff(g, axis=axis)
-        pad_shape = list(g.shape)
-        pad_shape[axis] = 1
-        nanpad = np.full(pad_shape, np.nan, np.float32)
-        fwd = np.concatenate((diff, nanpad), axis=axis)
-        bwd = np.concatenate((nanpad, diff), axis=axis)
-        jf = np.abs(fwd[..., 2])
-        jb = np.abs(bwd[..., 2])
+    def tangent(dr, dc):
+        fwd = padded[r + dr, c + dc] - p
+        bwd = p - padded[r - dr, c - dc]
+        jf = np.abs(fwd[:, 2])
+        jb = np.abs(bwd[:, 2])
         jf = np.where(np.isfinite(jf), jf, np.inf)
         jb = np.where(np.isfinite(jb), jb, np.inf)
         lo, hi = np.minimum(jf, jb), np.maximum(jf, jb)
         central = np.isfinite(hi) & (hi <= 2 * lo + jump)
-        one_sided = np.where((jf <= jb)[..., None], fwd, bwd)
-        return np.where(central[..., None], 0.5 * (fwd + bwd), one_sided)
+        one_sided = np.where((jf <= jb)[:, None], fwd, bwd)
+        return np.where(central[:, None], 0.5 * (fwd + bwd), one_sided)
 
-    tu, tv = tangent(1), tangent(0)
-    n = np.cross(tu, tv)
-    length = np.linalg.norm(n, axis=-1, keepdims=True)
+    tu, tv = tangent(0, 1), tangent(1, 0)
+    n = np.empty_like(tu)
+    n[:, 0] = tu[:, 1] * tv[:, 2] - tu[:, 2] * tv[:, 1]
+    n[:, 1] = tu[:, 2] * tv[:, 0] - tu[:, 0] * tv[:, 2]
+    n[:, 2] = tu[:, 0] * tv[:, 1] - tu[:, 1] * tv[:, 0]
+    length = np.sqrt(np.einsum("ij,ij->i", n, n))[:, None]
     with np.errstate(invalid="ignore", divide="ignore"):
         n = n / length
-        ray = -g / np.linalg.norm(g, axis=-1, keepdims=True)
-    bad = ~(np.isfinite(n).all(axis=-1) & (length[..., 0] > 0))
+        ray = -p / np.sqrt(np.einsum("ij,ij->i", p, p))[:, None]
+    bad = ~(np.isfinite(n).all(axis=1) & (length[:, 0] > 0))
     n[bad] = ray[bad]
-    flip = np.einsum("...i,...i->...", n, g) > 0
+    flip = np.einsum("ij,ij->i", n, p) > 0
     n[flip] *= -1
-    return n.astype(np.float32)
+    n = n.astype(np.float32)
+    return n.reshape(h, w, 3) if full else n
 
 
 def pca_normals(points: np.ndarray, k: int = 12, viewpoint=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -274,7 +287,7 @@ def voxel_downsample(points: np.ndarray, voxel: float, *attributes):
     """Average points (and per-point attributes) per cubic voxel of edge ``voxel``.
 
     points (N, 3); each attribute (N, C).  Voxels are integer keys ``floor(p / voxel)`` packed into one
-    int64, grouped with one sort.  Returns ``(points, *attributes)`` with one row per occupied voxel,
+    int64, grouped with one sort; the sums are ``np.bincount`` with weights.  Returns ``(points, *attributes)`` with one row per occupied voxel,
     ordered by key (deterministic).  Attributes named normals should be re-normalised by the caller.
     """
     p = np.asarray(points)
@@ -286,15 +299,20 @@ def voxel_downsample(points: np.ndarray, voxel: float, *attributes):
     if float(dims[0]) * float(dims[1]) * float(dims[2]) >= 2.0 ** 62:
         raise ArticulaInputError(f"voxel size {voxel} m is too small for a cloud this large")
     key = (q[:, 0] * dims[1] + q[:, 1]) * dims[2] + q[:, 2]
-    order = np.argsort(key, kind="stable")
+    order = np.argsort(key)
     ks = key[order]
-    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
-    counts = np.diff(np.r_[starts, len(ks)]).astype(np.float64)
+    first = np.empty(len(ks), bool)
+    first[0] = True
+    np.not_equal(ks[1:], ks[:-1], out=first[1:])
+    group = np.empty(len(ks), np.intp)
+    group[order] = np.cumsum(first) - 1          # voxel index of every point, in key order
+    m = int(group.max()) + 1
+    counts = np.bincount(group, minlength=m).astype(np.float64)
 
     def mean(a):
         a = np.asarray(a)
-        sums = np.add.reduceat(a[order].astype(np.float64), starts, axis=0)
-        return (sums / counts[:, None]).astype(a.dtype)
+        cols = [np.bincount(group, weights=a[:, j], minlength=m) for j in range(a.shape[1])]
+        return (np.stack(cols, axis=1) / counts[:, None]).astype(a.dtype)
 
     return (mean(p), *(mean(a) for a in attributes))
 
@@ -340,7 +358,7 @@ def process_depth(depth_m: np.ndarray, rays, opts: DepthOptions, background=None
     pts = grid[rows, cols]
     attrs = {"pixels": np.stack((cols, rows), axis=1).astype(np.float32)}
     if opts.estimate_normals:
-        attrs["normals"] = grid_normals(np.where(keep[..., None], grid, np.nan))[rows, cols]
+        attrs["normals"] = grid_normals(grid, rows, cols, mask=keep)
     if color is not None:
         hc, wc = color.shape[:2]
         h, w = depth_m.shape

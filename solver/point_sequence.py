@@ -242,10 +242,12 @@ def import_depth(frames: list, intr, opts: dp.DepthOptions, progress=_no_progres
     ``intr``: :class:`~.camera.Intrinsics`; when the frames have another size with the same aspect
     ratio the intrinsics are rescaled (noted in ``notes``), otherwise the import fails.
     ``background``: a frame of the empty scene for background subtraction; without one the per-pixel
-    median of the first ``opts.background_frames`` frames is used (works when the subject moves).
+    median of ``opts.background_frames`` frames spread evenly over the recording is used (right
+    wherever the subject covers a pixel in fewer than half of those frames, i.e. when it moves).
     ``colors``: optional list (one per frame) of callables returning (H, W, 3) float images.
     The floor plane is fitted once, on points pooled from up to 8 frames spread over the recording
-    (after range clip and background subtraction), and removed from every frame.
+    (after the range clip, before background subtraction: the floor is part of the static scene), and
+    points on or below it are removed from every frame.
     """
     opts.validate()
     if not frames:
@@ -282,8 +284,9 @@ def import_depth(frames: list, intr, opts: dp.DepthOptions, progress=_no_progres
         if background is not None:
             bg = _frame_metres(background, opts, shape, frames[0].name)
         else:
-            bg = dp.median_background([metres(k) for k in range(min(opts.background_frames, len(frames)))])
-            notes.append(f"background = per-pixel median of the first {min(opts.background_frames, len(frames))} frames")
+            picked = _pick(len(frames), opts.background_frames)
+            bg = dp.median_background([metres(k) for k in picked])
+            notes.append(f"background = per-pixel median of {len(picked)} frames spread over the recording")
     floor = None
     if opts.remove_floor:
         progress(0.02, "floor")
@@ -292,7 +295,7 @@ def import_depth(frames: list, intr, opts: dp.DepthOptions, progress=_no_progres
         for k in _pick(len(frames), 8):
             z = metres(k)
             grid = dp.backproject_grid(z, rays)
-            keep = dp.frame_mask(z, grid, opts, bg)
+            keep = dp.frame_mask(z, grid, opts)  # the floor is static: fit it before background removal
             pts = grid[keep]
             if len(pts) > 5000:
                 pts = pts[rng.choice(len(pts), 5000, replace=False)]
