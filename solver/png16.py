@@ -83,8 +83,11 @@ def read_png16_many(paths, batch: int = 8) -> list:
         parsed.append(_inflate(data, path))
     out = [None] * len(parsed)
     groups = {}
-    for i, (info, filtered, _) in enumerate(parsed):
-        groups.setdefault((filtered.shape[1:], info[2]), []).append(i)
+    for i, (info, filtered, ftypes) in enumerate(parsed):
+        if ftypes.max(initial=0) < 3:      # no wavefront needed: nothing to share
+            out[i] = _samples(unfilter(filtered, ftypes), info[2])
+        else:
+            groups.setdefault((filtered.shape[1:], info[2]), []).append(i)
     for (_, depth), members in groups.items():
         for k in range(0, len(members), max(1, int(batch))):
             chunk = members[k:k + batch]
@@ -346,17 +349,27 @@ def _filter_types(filter_type, height, name):
 
 
 def apply_filters(raw: np.ndarray, types: np.ndarray) -> np.ndarray:
-    """Forward PNG filters: (H, W, bpp) uint8 raw bytes, (H,) types -> (H, W, bpp) uint8."""
-    r = raw.astype(np.int16)
-    a = np.zeros_like(r)
-    a[:, 1:] = r[:, :-1]
-    b = np.zeros_like(r)
-    b[1:] = r[:-1]
-    c = np.zeros_like(r)
-    c[1:, 1:] = r[:-1, :-1]
-    preds = (np.zeros_like(r), a, b, (a + b) >> 1, _paeth(a, b, c))
-    pred = np.choose(types[:, None, None], preds)
-    return ((r - pred) & 255).astype(np.uint8)
+    """Forward PNG filters: (H, W, bpp) uint8 raw bytes, (H,) types -> (H, W, bpp) uint8.
+
+    Only the predictors of the types present are computed, each on its rows only."""
+    out = raw.copy()
+    for t in np.unique(types).tolist():
+        rows = np.flatnonzero(types == t)
+        cur = raw[rows]
+        a = np.zeros_like(cur)
+        a[:, 1:] = cur[:, :-1]
+        up = np.where((rows > 0)[:, None, None], raw[np.maximum(rows - 1, 0)], 0).astype(np.uint8)
+        if t == 1:
+            out[rows] = cur - a
+        elif t == 2:
+            out[rows] = cur - up
+        elif t == 3:
+            out[rows] = cur - ((a.astype(np.int16) + up) >> 1).astype(np.uint8)
+        elif t == 4:
+            c = np.zeros_like(up)
+            c[:, 1:] = up[:, :-1]
+            out[rows] = cur - _paeth(a.astype(np.int16), up.astype(np.int16), c.astype(np.int16)).astype(np.uint8)
+    return out
 
 
 def _chunk(kind: bytes, body: bytes) -> bytes:
