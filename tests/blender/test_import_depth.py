@@ -313,3 +313,61 @@ def test_real_kinect_frames_with_the_kinect_v1_preset(tmp_path):
     bpy.context.scene.frame_set(7)
     world, _ = evaluated_points(ob)
     assert len(world) == len(seq.points[seq.frame(6)])
+
+
+def test_background_subtraction_through_the_operator(tmp_path):
+    """A wall and floor with the box moving across: with a background frame, or the median of the
+    frames, only the box remains."""
+    folder = tmp_path / "bg"
+    folder.mkdir()
+    camera.save_intrinsics(str(folder / "intrinsics.json"), INTR)
+    empty, c2w, _ = floor_box_scene(INTR, box=None, wall_y=3.5)
+    write_png16(str(tmp_path / "background.png"), (empty * 1000).round().astype(np.uint16))
+    labels = []
+    for k in range(5):
+        x = box_x(k, 5) * 1.6
+        depth, _, label = floor_box_scene(INTR, box=((x - .2, 2.2, 0), (x + .2, 2.6, .8)), wall_y=3.5)
+        write_png16(str(folder / f"depth_{k}.png"), (depth * 1000).round().astype(np.uint16))
+        labels.append(label)
+    for kw in (dict(background=str(tmp_path / "background.png")), dict(background_frames=5)):
+        bpy.ops.wm.read_homefile(use_empty=True)
+        assert bpy.ops.articula.import_depth(directory=str(folder), subtract_background=True,
+                                             cache_file=str(tmp_path / "c.npz"), **kw) == {'FINISHED'}
+        seq = pkg_pcs().load_sequence(str(tmp_path / "c.npz"))
+        for k in range(5):
+            uv, _ = camera.project(seq.points[seq.frame(k)], INTR)
+            u, v = np.round(uv).astype(int).T
+            assert len(u) > 300
+            assert (labels[k][v, u] == 2).all(), kw            # nothing of the wall or floor is left
+
+
+def test_points_render_in_cycles(tmp_path):
+    folder, _ = make_recording(tmp_path / "rec", n=1)
+    assert bpy.ops.articula.import_depth(directory=folder, point_radius=0.01) == {'FINISHED'}
+    scene = bpy.context.scene
+    scene.render.engine = 'CYCLES'
+    scene.cycles.device, scene.cycles.samples, scene.cycles.use_denoising = 'CPU', 1, False
+    scene.render.film_transparent = True
+    scene.render.filepath = str(tmp_path / "r.png")
+    scene.render.image_settings.color_mode = 'RGBA'
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(str(tmp_path / "r.png"))
+    alpha = np.array(img.pixels[:], np.float32).reshape(INTR.height, INTR.width, 4)[::-1, :, 3]
+    pts = sensor_points(bpy.data.objects["rec Points"], 0)
+    uv, _ = camera.project(pts, INTR)
+    u, v = np.round(uv).astype(int).T
+    covered = np.zeros(alpha.shape, bool)
+    covered[v, u] = True
+    assert alpha[covered].mean() > 0.9                 # the points are drawn where their pixels are
+    far = ~np.isin(np.arange(INTR.width), np.unique(u))[None, :] & np.ones_like(covered)
+    assert alpha[far].max() < 0.05                     # and nothing in columns without points
+
+
+def test_batch_command(tmp_path, pkg):
+    folder, _ = make_recording(tmp_path / "rec", n=3)
+    cli = pkg("addon.cli")
+    blend = tmp_path / "out" / "depth.blend"
+    assert cli.main(["import-depth", "--depth", folder, "--voxel", "0.02", "--blend", str(blend)]) == 0
+    assert blend.exists() and (tmp_path / "out" / "rec.points.npz").exists()
+    assert bpy.data.objects["rec Points"].articula.cache_file == "//rec.points.npz"
+    assert cli.main(["import-depth", "--depth", str(tmp_path / "missing")]) == 2
