@@ -31,7 +31,7 @@ _ROLE_PATTERNS = (
     ("knee", r"^(leg|calf|lowerleg)"),
     ("upper_arm", r"^(arm|upperarm)"),
     ("hip", r"^(upleg|thigh|upperleg)"),
-    ("hip_girdle", r"^(hipjoint|pelvis\.)"),
+    ("hip_girdle", r"^hipjoint"),
     ("clavicle", r"^(shoulder|clavicle)"),
     ("wrist", r"^(hand|wrist)"),
     ("ankle", r"^foot"),
@@ -69,6 +69,8 @@ def bone_role(name: str, index: int | None = None) -> str:
     if index == 0:
         return "root"
     base = re.sub(r"\.[LR]$", "", name).lower()
+    if base == "pelvis" and base != name.lower():        # default rig: pelvis.L/.R carry the legs
+        return "hip_girdle"
     for role, pattern in _ROLE_PATTERNS:
         if re.search(pattern, base):
             return role

@@ -45,6 +45,7 @@ from ..solver import skinning
 from ..solver.bundle import save_bundle
 from ..solver.errors import ArticulaInputError
 from ..solver.kinematics import forward_kinematics
+from ..solver.model import Model, Poses, Skeleton
 from .mesh_files import FORMATS, SequenceWriter
 from .poses import rom_poses
 from .subjects import make_subject
@@ -151,7 +152,6 @@ def _save_npz(path, arrays: dict) -> None:
 
 
 def _save_model_bundle(path, gt) -> None:
-    from ..solver.model import Model, Poses, Skeleton
     sk = Skeleton(list(gt["bone_names"]), gt["parents"], gt["heads"], gt["tails"], gt["frames"])
     model = Model(gt["rest_vertices"], gt["faces"], sk, gt["anchor"], gt["twist_weights"], gt["swing_weights"])
     poses = Poses(gt["pose_rotations"], gt["pose_translations"], gt["pose_scales"])

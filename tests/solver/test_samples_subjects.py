@@ -113,6 +113,16 @@ def test_determinism_and_shapes():
     assert d.macros == subjects.resolve_macros("female")
 
 
+def test_roles_of_look_alike_names():
+    from articula.sample_scenes.bone_roles import bone_role
+    assert bone_role("pelvis.L") == "hip_girdle" and bone_role("HipJoint.R") == "hip_girdle"
+    assert bone_role("pelvis") == "spine" and bone_role("Hips", 0) == "root"
+    assert bone_role("HandFinger1.L") == "finger" and bone_role("Hand.L") == "wrist"
+    assert bone_role("lowerarm02.L") == "twist_arm" and bone_role("lowerarm01.L") == "forearm"
+    assert bone_role("Leg.R") == "knee" and bone_role("UpLeg.R") == "hip" and bone_role("ToeBase.L") == "toe"
+    assert bone_role("levator03.L") == "other"
+
+
 @pytest.mark.parametrize("name, expect", [("LeftArm", "Arm.L"), ("RHipJoint", "HipJoint.R"),
                                           ("upperarm_l", "upperarm.L"), ("mixamorig:RightHand", "Hand.R"),
                                           ("finger1-2.L", "finger1-2.L"), ("Hips", "Hips"), ("LowerBack", "LowerBack")])
