@@ -171,7 +171,9 @@ def _on_load(*_args):
 
 
 _HANDLERS = ((bpy.app.handlers.frame_change_pre, _on_frame_change),
-             (bpy.app.handlers.load_post, _on_load))
+             (bpy.app.handlers.load_post, _on_load),
+             (bpy.app.handlers.undo_post, _on_load),   # undo/redo restore a mesh holding some frame:
+             (bpy.app.handlers.redo_post, _on_load))   # show the current one again
 
 
 def register_extra():

@@ -341,26 +341,32 @@ def test_background_subtraction_through_the_operator(tmp_path):
             assert (labels[k][v, u] == 2).all(), kw            # nothing of the wall or floor is left
 
 
-def test_points_render_in_cycles(tmp_path):
-    folder, _ = make_recording(tmp_path / "rec", n=1)
+def test_points_render_in_cycles_animation(tmp_path):
+    """Rendering an animation shows each frame's points (the frame_change_pre handler runs before the
+    render's own evaluation of the frame)."""
+    folder, _ = make_recording(tmp_path / "rec", n=2)
     assert bpy.ops.articula.import_depth(directory=folder, point_radius=0.01) == {'FINISHED'}
     scene = bpy.context.scene
     scene.render.engine = 'CYCLES'
     scene.cycles.device, scene.cycles.samples, scene.cycles.use_denoising = 'CPU', 1, False
     scene.render.film_transparent = True
-    scene.render.filepath = str(tmp_path / "r.png")
+    scene.render.filepath = str(tmp_path / "r_")
+    scene.render.image_settings.file_format = 'PNG'
     scene.render.image_settings.color_mode = 'RGBA'
-    bpy.ops.render.render(write_still=True)
-    img = bpy.data.images.load(str(tmp_path / "r.png"))
-    alpha = np.array(img.pixels[:], np.float32).reshape(INTR.height, INTR.width, 4)[::-1, :, 3]
-    pts = sensor_points(bpy.data.objects["rec Points"], 0)
-    uv, _ = camera.project(pts, INTR)
-    u, v = np.round(uv).astype(int).T
-    covered = np.zeros(alpha.shape, bool)
-    covered[v, u] = True
-    assert alpha[covered].mean() > 0.9                 # the points are drawn where their pixels are
-    far = ~np.isin(np.arange(INTR.width), np.unique(u))[None, :] & np.ones_like(covered)
-    assert alpha[far].max() < 0.05                     # and nothing in columns without points
+    scene.frame_set(1)
+    bpy.ops.render.render(animation=True)
+    ob = bpy.data.objects["rec Points"]
+    for k in range(2):
+        img = bpy.data.images.load(str(tmp_path / f"r_{k + 1:04d}.png"))
+        alpha = np.array(img.pixels[:], np.float32).reshape(INTR.height, INTR.width, 4)[::-1, :, 3]
+        uv, _ = camera.project(sensor_points(ob, k), INTR)
+        u, v = np.round(uv).astype(int).T
+        covered = np.zeros(alpha.shape, bool)
+        covered[v, u] = True
+        assert alpha[covered].mean() > 0.9             # the points are drawn where their pixels are
+        empty_cols = ~np.isin(np.arange(INTR.width), u)
+        assert empty_cols.sum() > 20
+        assert alpha[:, empty_cols].max() < 0.05       # and nothing in columns without points
 
 
 def test_batch_command(tmp_path, pkg):
