@@ -110,3 +110,25 @@ def test_slope_aware_edges_keep_tilted_surfaces():
     step = depth.copy()
     step[:, 50:] += 0.4                                       # a real discontinuity is still found
     assert dn.depth_edges(step, 0.03, slope)[5, 49] and dn.depth_edges(step, 0.03, slope)[5, 50]
+
+
+def test_quantisation_step_matches_real_kinect_frames():
+    """Real Kinect v1 frames hold depth on the disparity lattice: consecutive distinct values differ
+    by z^2 / (8 b f).  Measured on the Skeltrack frames: 8 b f ~ 346-348 (model: 348)."""
+    import glob
+    import os
+
+    from articula.solver import png16
+
+    from ..conftest import SHARED_DATA
+    files = sorted(glob.glob(os.path.join(SHARED_DATA, "depth", "skeltrack_kinect", "*.png")))
+    if not files:
+        pytest.skip("shared Kinect depth frames not available")
+    values = np.unique(np.concatenate([png16.read_png16(f).ravel() for f in files]))
+    z = values[values > 0] / 1000.0
+    mid, step = (z[1:] + z[:-1]) / 2, np.diff(z)
+    sel = (mid > 1.0) & (mid < 2.0)
+    assert sel.sum() > 50
+    p = dn.NoiseParams()
+    model = p.subpixel * p.baseline_m * p.focal_px
+    assert np.median(mid[sel] ** 2 / step[sel]) == pytest.approx(model, rel=0.05)
