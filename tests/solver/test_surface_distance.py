@@ -1,0 +1,82 @@
+"""Point-to-surface distances (vertex, edge and face regions; exact pruning) and the error statistics."""
+import numpy as np
+import pytest
+
+from articula.solver.surface_distance import (closest_points_on_triangles, distance_to_surface,
+                                              error_statistics, per_vertex_scan_distances)
+
+A, B, C = np.array([0.0, 0, 0]), np.array([2.0, 0, 0]), np.array([0.0, 2, 0])
+
+
+@pytest.mark.parametrize("p, expected", [
+    ((0.5, 0.5, 3.0), (0.5, 0.5, 0.0)),      # face region: straight down
+    ((-1.0, -1.0, 1.0), (0.0, 0.0, 0.0)),    # vertex A
+    ((3.0, -0.5, 0.0), (2.0, 0.0, 0.0)),     # vertex B
+    ((-0.5, 3.0, 0.0), (0.0, 2.0, 0.0)),     # vertex C
+    ((1.0, -2.0, 0.5), (1.0, 0.0, 0.0)),     # edge AB
+    ((-2.0, 1.0, 0.0), (0.0, 1.0, 0.0)),     # edge AC
+    ((2.0, 2.0, 1.0), (1.0, 1.0, 0.0)),      # edge BC
+])
+def test_closest_point_regions(p, expected):
+    q = closest_points_on_triangles(np.array([p]), A[None], B[None], C[None])
+    np.testing.assert_allclose(q[0], expected, atol=1e-12)
+
+
+def test_degenerate_triangle_uses_its_edges():
+    a, b, c = np.array([[0.0, 0, 0]]), np.array([[1.0, 0, 0]]), np.array([[2.0, 0, 0]])   # collinear
+    q = closest_points_on_triangles(np.array([[1.5, 1.0, 0.0]]), a, b, c)
+    np.testing.assert_allclose(q[0], [1.5, 0, 0], atol=1e-12)
+
+
+def _sampled_distance(points, vertices, faces, n=60):
+    """Reference: minimum over a dense barycentric sampling of every triangle (an upper bound that is
+    within the sampling spacing of the true distance)."""
+    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    keep = i + j <= n
+    u, v = i[keep] / n, j[keep] / n
+    tri = vertices[faces]
+    samples = (tri[:, 0, None] * (1 - u - v)[:, None] + tri[:, 1, None] * u[:, None]
+               + tri[:, 2, None] * v[:, None]).reshape(-1, 3)
+    from scipy.spatial import cKDTree
+    return cKDTree(samples).query(points)[0]
+
+
+def test_distance_to_surface_matches_dense_sampling_and_never_exceeds_it():
+    rng = np.random.default_rng(3)
+    vertices = rng.normal(size=(30, 3))
+    faces = rng.integers(0, 30, size=(40, 3))
+    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])]
+    points = rng.normal(size=(200, 3)) * 1.5
+    d = distance_to_surface(points, vertices, faces)
+    ref = _sampled_distance(points, vertices, faces)
+    assert np.all(d <= ref + 1e-9)                      # exact distance is never above a sampled one
+    np.testing.assert_allclose(d, ref, atol=0.05)        # and close to it (sampling spacing)
+    # brute force over all triangles with the same closest-point routine: pruning loses nothing
+    P = np.repeat(points, len(faces), axis=0)
+    T = vertices[np.tile(faces, (len(points), 1))]
+    brute = np.linalg.norm(closest_points_on_triangles(P, T[:, 0], T[:, 1], T[:, 2]) - P, axis=1)
+    np.testing.assert_allclose(d, brute.reshape(len(points), -1).min(axis=1), atol=1e-12)
+
+
+def test_per_vertex_scan_distances_of_an_offset_plane():
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 6), np.linspace(0, 1, 6), indexing="ij"), -1).reshape(-1, 2)
+    verts = np.column_stack([g, np.zeros(len(g))])
+    idx = np.arange(36).reshape(6, 6)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    scans = np.stack([verts, verts + [0, 0, 0.5]])
+    posed = np.stack([verts + [0, 0, 0.01], verts + [0.3, 0.1, 0.5 - 0.02]])   # in-plane slide costs nothing
+    dist = per_vertex_scan_distances(posed, scans, faces)
+    # frame 1: points that slid off the plane's edges (x > 1 or y > 1) are farther than 0.02
+    inside = (posed[1, :, 0] <= 1.0) & (posed[1, :, 1] <= 1.0)
+    np.testing.assert_allclose(dist[0], 0.01, atol=1e-12)
+    np.testing.assert_allclose(dist[1, inside], 0.02, atol=1e-12)
+    assert np.all(dist[1, ~inside] > 0.02)
+
+
+def test_error_statistics_as_the_spec_defines_them():
+    s = error_statistics([1, 2, 3, 4, 100])
+    assert s["median"] == 3 and s["mad"] == 1 and s["max"] == 100 and s["count"] == 5
+    assert s["iqr"] == pytest.approx(52 - 1.5)           # Q1 = median(1, 2), Q3 = median(4, 100)
+    assert s["mean"] == pytest.approx(22.0) and s["std"] == pytest.approx(np.std([1, 2, 3, 4, 100]))
+    assert error_statistics([[2.0, 4.0], [6.0, 8.0]])["iqr"] == pytest.approx(7 - 3)
