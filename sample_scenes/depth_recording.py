@@ -107,7 +107,8 @@ def to_millimetres(depth_m: np.ndarray) -> np.ndarray:
     return np.where((mm > 0) & (mm <= 65535), mm, 0).astype(np.uint16)
 
 
-def _check_frames(frames, faces):
+def check_frames(frames, faces):
+    """Validate a mesh sequence: (N, V, 3) finite float frames and (F, 3) int64 faces."""
     frames = np.asarray(frames, dtype=float)
     faces = np.asarray(faces)
     if frames.ndim != 3 or frames.shape[2] != 3 or len(frames) == 0:
@@ -130,7 +131,7 @@ def generate_depth(out_dir, frames, faces, gt: dict | None = None, resolution=(3
     uses ``numpy.random.default_rng([seed, k])`` only, so any frame can be regenerated alone.
     ``progress(k, N)`` is called after each frame.  Returns a summary dict (paths, timings).
     """
-    frames, faces = _check_frames(frames, faces)
+    frames, faces = check_frames(frames, faces)
     noise.validate()
     intr = cam.preset(camera, tuple(int(x) for x in resolution))
     os.makedirs(out_dir, exist_ok=True)

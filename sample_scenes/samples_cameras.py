@@ -31,10 +31,13 @@ def parse_resolution(text: str) -> tuple:
 
 
 def _noise(args) -> NoiseParams:
-    if args.noise == "none":
+    kind = args.noise
+    if kind == "auto":
+        kind = "kinect_v1" if args.camera == "kinect_v1" else "mm"
+    if kind == "none":
         return NOISELESS
     params = NoiseParams()
-    if args.noise == "mm":
+    if kind == "mm":
         params = dataclasses.replace(params, quantization="mm")
     if args.dropout is not None:
         params = dataclasses.replace(params, dropout=args.dropout)
@@ -46,8 +49,9 @@ def _add_common(p) -> None:
     add_motion_arguments(p)
     p.add_argument("--camera", default="kinect_v1",
                    help="camera preset: kinect_v1, kinect_v2, azure_kinect_nfov, realsense_d435")
-    p.add_argument("--noise", default="kinect_v1", choices=("kinect_v1", "mm", "none"),
-                   help="kinect_v1: full model with 1/8 px disparity steps; mm: same but mm rounding; none")
+    p.add_argument("--noise", default="auto", choices=("auto", "kinect_v1", "mm", "none"),
+                   help="kinect_v1: Kinect v1 model with 1/8 px disparity steps; mm: the same noise with "
+                   "millimetre rounding only (used for the other cameras by auto); none: exact depth")
     p.add_argument("--dropout", type=float, default=None, help="random missing-pixel rate (default 0.002)")
     p.add_argument("--noise-seed", type=int, default=None, help="seed of the sensor noise (default --seed)")
     p.add_argument("--out", required=True, help="output folder")

@@ -35,7 +35,7 @@ import numpy as np
 from ..solver import camera as cam
 from ..solver.errors import ArticulaInputError
 from .depth_noise import NoiseParams, apply_noise
-from .depth_recording import _check_frames
+from .depth_recording import check_frames
 from .depth_render import incidence_cosine, render_depth
 from .mesh_files import FORMATS, SequenceWriter
 
@@ -151,7 +151,7 @@ def generate_unregistered(out_dir, frames, faces, gt: dict | None = None, rig: S
     """Write one scan per frame of ``frames`` (N, V, 3) to ``out_dir`` (module docstring).
 
     Returns a summary dict (vertex counts, paths)."""
-    frames, faces = _check_frames(frames, faces)
+    frames, faces = check_frames(frames, faces)
     rig.validate()
     noise.validate()
     if fmt not in FORMATS:

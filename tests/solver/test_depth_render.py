@@ -4,6 +4,7 @@ import pytest
 
 from articula.sample_scenes import depth_render as dr
 from articula.solver import camera
+from articula.solver.errors import ArticulaInputError
 
 
 def _grid_plane(origin, e1, e2, n=12):
@@ -138,7 +139,7 @@ def test_behind_camera_and_bad_input():
     verts = np.array([[0, 0, -1.0], [1, 0, -1.0], [0, 1, -1.0]])
     depth, tri = dr.render_depth(verts, np.array([[0, 1, 2]]), intr)
     assert not depth.any() and (tri == -1).all()
-    with pytest.raises(Exception, match="out of range"):
+    with pytest.raises(ArticulaInputError, match="out of range"):
         dr.render_depth(verts, np.array([[0, 1, 3]]), intr)
 
 
