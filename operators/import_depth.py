@@ -184,12 +184,20 @@ class ARTICULA_OT_import_depth(JobOperator, bpy.types.Operator):
     def finish(self, context, result):
         seq, cache, cache_abs, name, directory = result
         t0 = time.perf_counter()
+        scene, render = context.scene, context.scene.render
+        settings = (scene.camera, scene.frame_start, scene.frame_end, render.resolution_x, render.resolution_y,
+                    render.resolution_percentage, render.pixel_aspect_x, render.pixel_aspect_y)
         try:
             ob, cam = pcs.create_sequence_objects(context, name, seq, cache, directory, self.frame_start,
                                                   self.point_radius)
             LAST_TIMINGS.clear()
             LAST_TIMINGS.update(seq.timings, blender=time.perf_counter() - t0)
         except BaseException:
+            # scene_guard removes the new datablocks; put the scene settings back as well
+            if scene.camera is not settings[0] and (settings[0] is None or settings[0].name in bpy.data.objects):
+                scene.camera = settings[0]
+            (scene.frame_start, scene.frame_end, render.resolution_x, render.resolution_y,
+             render.resolution_percentage, render.pixel_aspect_x, render.pixel_aspect_y) = settings[1:]
             pcs.forget_cache(cache_abs)
             if os.path.exists(cache_abs):
                 os.remove(cache_abs)

@@ -89,15 +89,20 @@ def depth_in_metres(raw: np.ndarray, opts: DepthOptions) -> np.ndarray:
 # ----------------------------------------------------------------------------------- background
 
 def median_background(depths_m) -> np.ndarray:
-    """Per-pixel median of valid depths over frames ((F, H, W) or a list of (H, W)); NaN where never valid."""
+    """Per-pixel median of valid depths over frames ((F, H, W) or a list of (H, W)); NaN where never
+    valid.  (One sort along the frame axis, NaN last; the same values as ``np.nanmedian``, faster.)"""
     stack = np.asarray(depths_m, dtype=np.float32)
     if stack.ndim == 2:
         return stack.copy()
-    with np.errstate(all="ignore"):
-        import warnings
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN pixels -> NaN, as wanted
-            return np.nanmedian(stack, axis=0).astype(np.float32)
+    s = np.sort(stack, axis=0)                      # NaN sort to the end
+    n = np.isfinite(stack).sum(axis=0)
+    lo = np.maximum((n - 1) // 2, 0)
+    hi = np.maximum(n // 2, 0)
+    a = np.take_along_axis(s, lo[None], axis=0)[0]
+    b = np.take_along_axis(s, hi[None], axis=0)[0]
+    med = (a + b) * np.float32(0.5)
+    med[n == 0] = np.nan
+    return med
 
 
 def foreground_mask(depth_m: np.ndarray, background_m: np.ndarray, tolerance: float) -> np.ndarray:

@@ -377,3 +377,23 @@ def test_batch_command(tmp_path, pkg):
     assert blend.exists() and (tmp_path / "out" / "rec.points.npz").exists()
     assert bpy.data.objects["rec Points"].articula.cache_file == "//rec.points.npz"
     assert cli.main(["import-depth", "--depth", str(tmp_path / "missing")]) == 2
+
+
+def test_failure_while_building_restores_scene_settings(tmp_path, monkeypatch):
+    folder, _ = make_recording(tmp_path / "rec", n=2)
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 10, 20
+    scene.render.resolution_x, scene.render.resolution_y = 1000, 500
+    pcs = pkg_pcs()
+    errors = __import__(pcs.__name__.rsplit(".", 2)[0] + ".solver.errors", fromlist=["x"])
+
+    def broken(*a, **k):
+        raise errors.ArticulaInputError("simulated failure after the camera was made")
+    monkeypatch.setattr(pcs, "add_points_modifier", broken)
+    before = counts()
+    with pytest.raises(RuntimeError, match="simulated failure"):
+        bpy.ops.articula.import_depth(directory=folder, cache_file=str(tmp_path / "c.npz"))
+    assert counts() == before
+    assert (scene.frame_start, scene.frame_end, scene.render.resolution_x, scene.render.resolution_y) == (10, 20, 1000, 500)
+    assert scene.camera is None
+    assert not (tmp_path / "c.npz").exists()

@@ -149,6 +149,33 @@ def test_background_subtraction_keeps_only_the_new_object():
     assert np.abs(med[ok] - bg[ok]).max() < 1e-6  # float32
 
 
+@pytest.mark.filterwarnings("ignore:All-NaN slice")   # the reference's warning for the never-valid pixel
+def test_median_background_equals_nanmedian():
+    rng = np.random.default_rng(4)
+    for frames in (1, 2, 5, 6):
+        stack = rng.uniform(0.5, 4, size=(frames, 30, 40)).astype(np.float32)
+        stack[rng.random(stack.shape) < 0.4] = np.nan
+        stack[:, 0, 0] = np.nan                                   # never valid
+        ref = np.nanmedian(stack, axis=0) if frames > 1 else stack[0]
+        got = dp.median_background(stack if frames > 1 else stack[0])
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(ref))
+        np.testing.assert_allclose(got[~np.isnan(ref)], ref[~np.isnan(ref)], rtol=1e-6)
+
+
+def test_frames_with_another_resolution_rescale_the_intrinsics():
+    depth, _, _ = floor_box_scene(INTR.with_resolution(80, 60))
+    folder_raw = (depth * 1000).round().astype(np.uint16)
+    frame = ps.DepthFrame("small.png", lambda: folder_raw)
+    seq = ps.import_depth([frame], INTR, opts())
+    assert any("rescaled" in n for n in seq.notes)
+    small = INTR.with_resolution(80, 60)
+    assert seq.intrinsics == (80, 60, small.fx, small.fy, small.cx, small.cy)
+    uv, _ = camera.project(seq.points, small)
+    np.testing.assert_allclose(uv, np.round(uv), atol=1e-3)
+    with pytest.raises(ArticulaInputError, match="small.png: 80x60 pixels, but the intrinsics"):
+        ps.import_depth([frame], camera.Intrinsics(160, 100, 140.0, 138.0, 80, 50), opts())
+
+
 def test_range_clip_and_colours():
     depth, _, _ = floor_box_scene(INTR, wall_y=3.5)
     raw = (depth * 1000).round().astype(np.uint16)
