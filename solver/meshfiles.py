@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 import re
 import struct
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -132,6 +133,12 @@ def _finish(path: str, vertices: np.ndarray, sizes: np.ndarray, corners: np.ndar
 
 def _drop_degenerate(sizes: np.ndarray, corners: np.ndarray):
     """Remove faces that use a vertex more than once."""
+    if sizes.size and (sizes == sizes[0]).all():     # one face size: a row-wise check
+        rows = np.sort(corners.reshape(len(sizes), -1), axis=1)
+        bad = (rows[:, 1:] == rows[:, :-1]).any(axis=1)
+        if not bad.any():
+            return sizes, corners
+        return sizes[~bad], corners.reshape(len(sizes), -1)[~bad].reshape(-1)
     face_of = np.repeat(np.arange(len(sizes)), sizes)
     order = np.lexsort((corners, face_of))
     same = (face_of[order][1:] == face_of[order][:-1]) & (corners[order][1:] == corners[order][:-1])
@@ -144,17 +151,23 @@ def _drop_degenerate(sizes: np.ndarray, corners: np.ndarray):
 
 # -- OBJ ------------------------------------------------------------------------------------------
 _SLASH_PART = re.compile(rb"/\S*")
-_V_ROWS = re.compile(rb"^[ \t]*v[ \t]+([^\n]*)", re.M)
-_F_ROWS = re.compile(rb"^[ \t]*f[ \t]+([^\n]*)", re.M)
+_V_ROWS = re.compile(rb"^v[ \t]([^\n]*)", re.M)
+_F_ROWS = re.compile(rb"^f[ \t]([^\n]*)", re.M)
+_V_ROWS_INDENTED = re.compile(rb"^[ \t]*v[ \t]+([^\n]*)", re.M)   # slower; only when lines are indented
+_F_ROWS_INDENTED = re.compile(rb"^[ \t]*f[ \t]+([^\n]*)", re.M)
 
 
-def _parse_numbers(text: bytes, dtype, expected: int):
-    """Whitespace-separated numbers, or None unless exactly ``expected`` of them parse (C speed)."""
+def _parse_numbers(text: bytes, dtype, expected):
+    """Whitespace-separated numbers at C speed, or None when parsing fails or (``expected`` given) the
+    count differs.  (numpy < 2 stops at a bad token with a warning instead of raising: the count or the
+    caller's own check catches that.)"""
     try:
-        out = np.fromstring(text, dtype=dtype, sep=" ")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DeprecationWarning)
+            out = np.fromstring(text, dtype=dtype, sep=" ")
     except ValueError:
         return None
-    return out if out.size == expected else None
+    return out if expected is None or out.size == expected else None
 
 
 def read_obj(path: str) -> PolyMesh:
@@ -165,7 +178,9 @@ def read_obj(path: str) -> PolyMesh:
     if b"\0" in data[:4096]:
         raise ArticulaInputError(f"{path}: not an OBJ text file (binary data)")
     data = data.replace(b"\\\r\n", b" ").replace(b"\\\n", b" ")
-    v_rows = _V_ROWS.findall(data)
+    indented = data[:1] in (b" ", b"\t") or b"\n " in data or b"\n\t" in data
+    v_re, f_re = (_V_ROWS_INDENTED, _F_ROWS_INDENTED) if indented else (_V_ROWS, _F_ROWS)
+    v_rows = v_re.findall(data)
     if not v_rows:
         raise ArticulaInputError(f"{path}: no vertices ('v' lines) in this OBJ file")
     vertices = _parse_numbers(b" ".join(v_rows), np.float64, 3 * len(v_rows))
@@ -176,17 +191,17 @@ def read_obj(path: str) -> PolyMesh:
             raise ArticulaInputError(f"{path}: vertex {short[0]} has fewer than 3 coordinates")
         vertices = _numbers(rows, np.float64, path, "vertex coordinate")
     vertices = vertices.reshape(-1, 3)
-    f_rows = _F_ROWS.findall(data)
+    f_rows = f_re.findall(data)
     if not f_rows:
         return _finish(path, vertices, np.zeros(0, np.int64), np.zeros(0, np.int64))
     # Faces joined with " 0 " (0 is never a valid OBJ index) so row ends survive number parsing.
     text = _SLASH_PART.sub(b"", b" 0 ".join(f_rows)) + b" 0"
-    idx = _parse_numbers(text, np.int64, len(text.split()))
-    if idx is None:
-        bad = next(t for t in text.split() if not t.lstrip(b"-").isdigit())
-        raise ArticulaInputError(f"{path}: bad face index {bad.decode(errors='replace')!r}")
-    ends = np.flatnonzero(idx == 0)
-    if len(ends) != len(f_rows):
+    idx = _parse_numbers(text, np.int64, None)
+    ends = np.flatnonzero(idx == 0) if idx is not None else None
+    if ends is None or len(ends) != len(f_rows) or idx[-1] != 0:   # bad token (parsing stopped) or index 0
+        bad = next((t for t in text.split() if not t.lstrip(b"-").isdigit()), None)
+        if bad is not None:
+            raise ArticulaInputError(f"{path}: bad face index {bad.decode(errors='replace')!r}")
         k = next(k for k, r in enumerate(f_rows) if b"0" in _SLASH_PART.sub(b"", r).split())
         raise ArticulaInputError(f"{path}: face {k} uses vertex index 0 (OBJ indices start at 1)")
     sizes = np.diff(np.append(-1, ends)) - 1
@@ -467,12 +482,17 @@ def _weld(path, corners):
     check_finite(corners, path)
     if not len(corners):
         return _finish(path, corners, np.zeros(0, np.int64), np.zeros(0, np.int64))
-    _, first, inverse = np.unique(corners, axis=0, return_index=True, return_inverse=True)
-    order = np.argsort(first)          # unique vertices in order of first appearance
-    rank = np.empty_like(order)
-    rank[order] = np.arange(len(order))
-    return _finish(path, corners[first[order]], np.full(len(corners) // 3, 3),
-                   rank[np.asarray(inverse).reshape(-1)])
+    order = np.lexsort(corners.T[::-1])                 # equal positions become neighbours
+    srt = corners[order]
+    new = np.ones(len(srt), bool)
+    new[1:] = (srt[1:] != srt[:-1]).any(axis=1)
+    group = np.cumsum(new) - 1                          # weld group of each sorted corner
+    first = np.minimum.reduceat(order, np.flatnonzero(new))   # first corner index of each group
+    rank = np.empty(len(first), np.int64)
+    rank[np.argsort(first)] = np.arange(len(first))     # groups numbered by first appearance
+    inverse = np.empty(len(corners), np.int64)
+    inverse[order] = rank[group]
+    return _finish(path, corners[np.sort(first)], np.full(len(corners) // 3, 3), inverse)
 
 
 # -- OFF ------------------------------------------------------------------------------------------
@@ -480,14 +500,15 @@ def read_off(path: str) -> PolyMesh:
     """Object File Format: ``OFF`` (or ``COFF``/``NOFF``/``CNOFF``) header, counts, vertex lines
     (first three numbers used), face lines ``n i1 .. in [colour]``.  ``#`` starts a comment."""
     data = read_bytes(path)
-    lines = [ln.split(b"#", 1)[0].split() for ln in data.splitlines()]
-    lines = [ln for ln in lines if ln]
-    if not lines or not lines[0][0].endswith(b"OFF") or lines[0][0].startswith(b"4"):
+    if b"#" in data:
+        data = re.sub(rb"#[^\n]*", b"", data)
+    lines = [ln for ln in data.splitlines() if ln.strip()]
+    head = lines[0].split() if lines else []
+    if not head or not head[0].endswith(b"OFF") or head[0].startswith(b"4"):
         raise ArticulaInputError(f"{path}: not an OFF file (first word must be OFF)")
-    counts = lines[0][1:]
-    rest = 1
+    counts, rest = head[1:], 1
     if len(counts) < 3 and len(lines) > 1:
-        counts, rest = counts + lines[1], 2
+        counts, rest = counts + lines[1].split(), 2
     try:
         nv, nf = int(counts[0]), int(counts[1])
     except (IndexError, ValueError):
@@ -495,14 +516,25 @@ def read_off(path: str) -> PolyMesh:
     vlines, flines = lines[rest:rest + nv], lines[rest + nv:rest + nv + nf]
     if len(vlines) < nv or len(flines) < nf:
         raise ArticulaInputError(f"{path}: OFF file declares {nv} vertices and {nf} faces but ends early")
-    if any(len(r) < 3 for r in vlines):
-        i = next(i for i, r in enumerate(vlines) if len(r) < 3)
-        raise ArticulaInputError(f"{path}: vertex {i} has fewer than 3 coordinates")
-    vertices = _numbers([r[:3] for r in vlines], np.float64, path, "vertex coordinate")
-    sizes = _numbers([r[0] for r in flines], np.int64, path, "face size") if nf else np.zeros(0, np.int64)
-    for k, (n, r) in enumerate(zip(sizes.tolist(), flines)):
+    vertices = _parse_numbers(b" ".join(vlines), np.float64, 3 * nv)
+    if vertices is None:   # colours after the coordinates, or bad numbers: line by line
+        rows = [ln.split()[:3] for ln in vlines]
+        if any(len(r) < 3 for r in rows):
+            i = next(i for i, r in enumerate(rows) if len(r) < 3)
+            raise ArticulaInputError(f"{path}: vertex {i} has fewer than 3 coordinates")
+        vertices = _numbers(rows, np.float64, path, "vertex coordinate")
+    if not nf:
+        return _finish(path, vertices, np.zeros(0, np.int64), np.zeros(0, np.int64))
+    k = int(flines[0].split()[0]) if flines[0].split()[0].isdigit() else -1
+    flat = _parse_numbers(b" ".join(flines), np.int64, nf * (k + 1)) if k > 0 else None
+    if flat is not None and (flat[::k + 1] == k).all():   # every face has k corners and nothing else
+        table = flat.reshape(nf, k + 1)
+        return _finish(path, vertices, table[:, 0], table[:, 1:].reshape(-1))
+    rows = [ln.split() for ln in flines]
+    sizes = _numbers([r[0] for r in rows], np.int64, path, "face size")
+    for i, (n, r) in enumerate(zip(sizes.tolist(), rows)):
         if len(r) < n + 1:
-            raise ArticulaInputError(f"{path}: face {k} declares {n} corners but lists {len(r) - 1}")
-    corners = _numbers([t for n, r in zip(sizes.tolist(), flines) for t in r[1:n + 1]], np.int64, path,
-                       "face index") if nf else np.zeros(0, np.int64)
+            raise ArticulaInputError(f"{path}: face {i} declares {n} corners but lists {len(r) - 1}")
+    corners = _numbers([t for n, r in zip(sizes.tolist(), rows) for t in r[1:n + 1]], np.int64, path,
+                       "face index")
     return _finish(path, vertices, sizes, corners)

@@ -144,3 +144,18 @@ def test_degenerate_faces_dropped(tmp_path):
     path = tmp_path / "d.obj"
     path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 1 2\nf 3 2 1\n")
     assert faces_of(read_obj(str(path))) == [[0, 1, 2], [2, 1, 0]]
+
+
+def test_degenerate_faces_dropped_mixed_sizes(tmp_path):
+    path = tmp_path / "m.off"
+    path.write_text("OFF\n4 3 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n4 0 1 1 2\n3 2 3 0\n")
+    mesh = read_mesh(str(path))
+    assert faces_of(mesh) == [[0, 1, 2, 3], [2, 3, 0]]
+
+
+def test_off_triangles_fast_path_and_colours_on_faces(tmp_path):
+    path = tmp_path / "t.off"
+    path.write_text("OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3 255 0 0\n")
+    assert faces_of(read_mesh(str(path))) == [[0, 1, 2], [0, 2, 3]]
+    path.write_text("OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n")
+    assert faces_of(read_mesh(str(path))) == [[0, 1, 2], [0, 2, 3]]
