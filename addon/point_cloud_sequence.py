@@ -133,7 +133,8 @@ def frame_index(ob, scene, count: int) -> int:
 
 def sequence_objects(scene):
     return [ob for ob in scene.objects
-            if ob.type == 'MESH' and ob.articula.kind == 'POINT_CLOUD_SEQUENCE' and ob.articula.cache_file]
+            if ob.type == 'MESH' and ob.articula.kind == 'POINT_CLOUD_SEQUENCE' and ob.articula.cache_file
+            and ob.data.library is None]  # linked meshes cannot be rewritten
 
 
 def update_scene(scene, force: bool = False) -> None:
