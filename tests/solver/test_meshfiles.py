@@ -159,3 +159,11 @@ def test_off_triangles_fast_path_and_colours_on_faces(tmp_path):
     assert faces_of(read_mesh(str(path))) == [[0, 1, 2], [0, 2, 3]]
     path.write_text("OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n")
     assert faces_of(read_mesh(str(path))) == [[0, 1, 2], [0, 2, 3]]
+
+
+def test_obj_indented_lines_crlf_and_colours(tmp_path):
+    path = tmp_path / "i.obj"
+    path.write_bytes(b"  v 0 0 0 1 0 0\r\n\tv 1 0 0 0 1 0\r\n v 0 1 0 0 0 1\r\n  f 1/1 2/2 3/3\r\n\tf 3 2 1\r\n")
+    mesh = read_obj(str(path))
+    assert mesh.vertices.tolist() == [[0, 0, 0], [1, 0, 0], [0, 1, 0]]
+    assert faces_of(mesh) == [[0, 1, 2], [2, 1, 0]]
