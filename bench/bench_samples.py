@@ -1,7 +1,8 @@
 """Time to generate registered sample sequences (``./run bench samples [--poses N] [--rig R]``).
 
 Reports, per skin, the in-memory posing time (``posed_sequence``) and the full ``generate_registered``
-time (OBJ and PLY files + ground_truth.npz, + model bundle for hybrid) for N poses (default 30)."""
+time (OBJ and PLY files + ground_truth.npz, + model bundle for hybrid) for N poses (default 30), and
+the walk cycle (hybrid skin) in memory."""
 import argparse
 import os
 import sys
@@ -36,6 +37,8 @@ def main(argv) -> int:
                 t = _timed(registered.generate_registered, out, args.rig, "female,heavy", args.poses,
                            skin=skin, fmt=fmt, seed=0)
             _common.report(f"generate_registered {skin} {fmt}", t, "s", f"{args.poses} files + ground truth")
+    t = _timed(registered.posed_sequence, args.rig, "female,heavy", args.poses, motion="walk", skin="hybrid")
+    _common.report("posed_sequence hybrid walk", t, "s", f"{args.poses} poses in memory (IK retargeting)")
     return 0
 
 
