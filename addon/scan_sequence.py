@@ -51,6 +51,9 @@ def set_geometry(me: bpy.types.Mesh, vertices, face_sizes, corner_verts) -> None
     starts = np.zeros(len(sizes), np.int32)
     np.cumsum(sizes[:-1], out=starts[1:])
     me.clear_geometry()
+    if not len(v):
+        me.update()
+        return
     me.vertices.add(len(v) // 3)
     me.attributes["position"].data.foreach_set("vector", v)
     me.loops.add(len(corner_verts))
@@ -63,7 +66,8 @@ def set_geometry(me: bpy.types.Mesh, vertices, face_sizes, corner_verts) -> None
 def read_polymesh(me: bpy.types.Mesh, matrix=None) -> PolyMesh:
     """The polygons and positions (float64; transformed by the 4x4 ``matrix`` if given) of ``me``."""
     pos = np.empty(3 * len(me.vertices), np.float32)
-    me.attributes["position"].data.foreach_get("vector", pos)
+    if len(pos):   # an empty mesh has no position attribute
+        me.attributes["position"].data.foreach_get("vector", pos)
     pos = pos.reshape(-1, 3).astype(np.float64)
     if matrix is not None:
         m = np.array(matrix, np.float64)
@@ -236,8 +240,9 @@ def show_frame(ob: bpy.types.Object, scene_frame: int, force: bool = False) -> b
     if ob.articula.registered:
         if data.ndim != 3 or data.shape[1] != len(me.vertices) or k >= len(data):
             return False     # topology was edited or the cache belongs to something else
-        me.attributes["position"].data.foreach_set("vector", np.ascontiguousarray(data[k]).reshape(-1))
-        me.update()
+        if len(me.vertices):
+            me.attributes["position"].data.foreach_set("vector", np.ascontiguousarray(data[k]).reshape(-1))
+            me.update()
     else:
         if k + 1 >= len(data["vertex_offsets"]):
             return False

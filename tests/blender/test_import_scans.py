@@ -340,3 +340,60 @@ def test_unwritable_cache_is_reported(tmp_path, monkeypatch):
     with pytest.raises(RuntimeError, match="cannot write the frame cache"):
         bpy.ops.articula.import_scans(directory=folder)
     assert counts() == before
+
+
+def _export_alembic(path, ob, first, last):
+    assert list(bpy.context.scene.objects) == [ob]   # the whole (one-object) scene is exported
+    bpy.ops.wm.alembic_export(filepath=path, start=first, end=last, as_background_job=False)
+
+
+def test_alembic_round_trip_of_an_animated_mesh(tmp_path, pkg):
+    """A self-made .abc (no shared data): an animated, shape-keyed mesh exported by Blender and imported
+    back must give the source's world-space evaluated positions per frame, and no leftovers."""
+    me = bpy.data.meshes.new("m")
+    me.from_pydata(CUBE_VERTS.tolist(), [], CUBE_FACES)
+    ob = bpy.data.objects.new("Src", me)
+    bpy.context.scene.collection.objects.link(ob)
+    ob.shape_key_add(name="Basis")
+    kb = ob.shape_key_add(name="bend")
+    kb.data.foreach_set("co", make_frames(1, seed=10)[0].ravel())
+    for f, value, x in ((1, 0.0, 0.0), (6, 1.0, 2.0)):
+        kb.value = value
+        kb.keyframe_insert("value", frame=f)
+        ob.location = (x, 1.0, 0.5)
+        ob.keyframe_insert("location", frame=f)
+    path = str(tmp_path / "anim.abc")
+    _export_alembic(path, ob, 1, 6)
+    expected = []
+    for f in range(1, 7):
+        bpy.context.scene.frame_set(f)
+        m = np.array(ob.matrix_world)
+        expected.append(evaluated(ob) @ m[:3, :3].T + m[:3, 3])
+    bpy.data.objects.remove(ob)
+    bpy.context.scene.frame_set(1)
+    before = counts()
+    assert bpy.ops.articula.import_scans(filepath=path) == {'FINISHED'}
+    after = counts()
+    assert after[:5] == (before[0] + 1, before[1] + 1) + before[2:5]
+    got, _ = pkg("addon.scan_sequence").scan_frames(bpy.context.active_object)
+    assert got.shape == (6, 8, 3)
+    assert np.allclose(got, np.array(expected), atol=1e-5)
+
+
+def test_alembic_with_changing_topology_is_unregistered(tmp_path, pkg):
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=4, y_subdivisions=4)
+    ob = bpy.context.active_object
+    build = ob.modifiers.new("build", 'BUILD')      # faces appear one by one: topology changes per frame
+    build.frame_start, build.frame_duration = 1, 5
+    path = str(tmp_path / "grow.abc")
+    _export_alembic(path, ob, 1, 5)
+    bpy.data.objects.remove(ob)
+    with pytest.raises(RuntimeError, match="not registered: grow.abc frame 2 differs from grow.abc frame 1"):
+        bpy.ops.articula.import_scans(filepath=path, require_registered=True)
+    assert bpy.ops.articula.import_scans(filepath=path) == {'FINISHED'}
+    seq_ob = bpy.context.active_object
+    assert not seq_ob.articula.registered and seq_ob.articula.frame_count == 5
+    sizes = [len(m.face_sizes) for m in pkg("addon.scan_sequence").scan_frame_meshes(seq_ob)]
+    assert sizes == sorted(sizes) and sizes[0] < sizes[-1]
+    bpy.context.scene.frame_set(5)
+    assert len(seq_ob.data.polygons) == sizes[-1]
