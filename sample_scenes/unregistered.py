@@ -18,6 +18,7 @@ camera that saw them; ``ground_truth.npz`` ("articula-unregistered-gt/1"):
 vertex_counts (N,)         vertices per scan;  face_counts (N,)
 source_face, offsets       (sum V,) int32 subject triangle each scan vertex was measured on (-1 =
                            outlier), frame k = ``source_face[source_offsets[k]:source_offsets[k+1]]``
+source_camera              (sum V,) int8 the camera (index into cam_to_world[k]) that saw it (-1 = outlier)
 cam_to_world (N,C,4,4)     every virtual camera (OpenCV axes); intrinsics (N,C,6): w, h, fx, fy, cx, cy
 faces (F,3)                the subject's triangles (``source_face`` indexes them)
 noise_params, seed         JSON str, int
@@ -121,13 +122,13 @@ def _outliers(rng, lo, hi, n, margin):
 def scan_frame(vertices, faces, rng, rig: ScanRig = ScanRig(), noise: NoiseParams = NoiseParams()):
     """One unregistered scan of the posed mesh ``vertices`` (V, 3) world metres, ``faces`` (F, 3).
 
-    Returns ``(scan_vertices (K, 3), scan_faces (T, 3), source_face (K,), cameras)`` where
-    source_face is the subject triangle each vertex lies on (-1 for outliers) and cameras a list of
-    ``(cam_to_world (4, 4), Intrinsics)``."""
+    Returns ``(scan_vertices (K, 3), scan_faces (T, 3), source_face (K,), source_camera (K,),
+    cameras)``: the subject triangle each vertex lies on and the camera that saw it (-1 for
+    outliers), and the cameras as a list of ``(cam_to_world (4, 4), Intrinsics)``."""
     lo, hi = vertices.min(0), vertices.max(0)
     cameras = _cameras(rng, (lo + hi) / 2, rig)
-    parts_v, parts_f, parts_src, offset = [], [], [], 0
-    for c2w, intr in cameras:
+    parts_v, parts_f, parts_src, parts_cam, offset = [], [], [], [], 0
+    for index, (c2w, intr) in enumerate(cameras):
         vc = cam.world_to_camera(vertices, c2w)
         clean, tri = render_depth(vc, faces, intr)
         noisy = apply_noise(clean, incidence_cosine(vc, faces, tri, intr), rng, noise, intr.fx)
@@ -135,14 +136,16 @@ def scan_frame(vertices, faces, rng, rig: ScanRig = ScanRig(), noise: NoiseParam
         parts_v.append(v)
         parts_f.append(f + offset)
         parts_src.append(tri.ravel()[pix])   # lateral noise may move a pixel's depth to a
-        offset += len(v)                     # neighbour's surface: the source is that pixel's face
+        parts_cam.append(np.full(len(v), index))  # neighbour's surface: the source is that pixel's face
+        offset += len(v)
     n_out = int(round(rig.outlier_fraction * offset))
     ov, of = _outliers(rng, lo, hi, n_out, rig.outlier_margin_m)
     parts_v.append(ov)
     parts_f.append(of + offset)
     parts_src.append(np.full(len(ov), -1))
+    parts_cam.append(np.full(len(ov), -1))
     return (np.concatenate(parts_v), np.concatenate(parts_f), np.concatenate(parts_src).astype(np.int32),
-            cameras)
+            np.concatenate(parts_cam).astype(np.int8), cameras)
 
 
 def generate_unregistered(out_dir, frames, faces, gt: dict | None = None, rig: ScanRig = ScanRig(),
@@ -157,19 +160,21 @@ def generate_unregistered(out_dir, frames, faces, gt: dict | None = None, rig: S
     if fmt not in FORMATS:
         raise ArticulaInputError(f"format: unknown mesh format {fmt!r} (choose from {', '.join(FORMATS)})")
     os.makedirs(out_dir, exist_ok=True)
-    counts, fcounts, sources, c2ws, intrs = [], [], [], [], []
+    counts, fcounts, sources, seen_by, c2ws, intrs = [], [], [], [], [], []
     for k, verts in enumerate(frames):
-        sv, sf, src, cams = scan_frame(verts, faces, np.random.default_rng([seed, k]), rig, noise)
+        sv, sf, src, src_cam, cams = scan_frame(verts, faces, np.random.default_rng([seed, k]), rig, noise)
         SequenceWriter(sf, fmt).write(os.path.join(out_dir, f"scan_{k:04d}.{fmt}"), sv)
         counts.append(len(sv))
         fcounts.append(len(sf))
         sources.append(src)
+        seen_by.append(src_cam)
         c2ws.append(np.stack([c for c, _ in cams]))
         intrs.append(np.array([[i.width, i.height, i.fx, i.fy, i.cx, i.cy] for _, i in cams]))
         if progress:
             progress(k + 1, len(frames))
     out = {"format": np.array(GT_FORMAT), "vertex_counts": np.array(counts), "face_counts": np.array(fcounts),
-           "source_face": np.concatenate(sources), "source_offsets": np.r_[0, np.cumsum(counts)].astype(np.int64),
+           "source_face": np.concatenate(sources), "source_camera": np.concatenate(seen_by),
+           "source_offsets": np.r_[0, np.cumsum(counts)].astype(np.int64),
            "cam_to_world": np.stack(c2ws), "intrinsics": np.stack(intrs), "faces": faces.astype(np.int32),
            "seed": np.array(seed), "noise_params": np.array(json.dumps(dataclasses.asdict(noise))),
            "scan_rig": np.array(json.dumps(dataclasses.asdict(rig)))}

@@ -52,6 +52,11 @@ def test_noiseless_scans_lie_on_their_source_faces(tmp_path):
         assert len(v) == len(src) == g["vertex_counts"][k]
         out = src < 0
         assert 0 < out.sum() <= 3 * 0.011 * len(v)
+        seen_by = g["source_camera"][g["source_offsets"][k]:g["source_offsets"][k + 1]]
+        assert np.array_equal(seen_by < 0, out) and set(seen_by[~out]) == {0, 1, 2}
+        eyes = g["cam_to_world"][k][:, :3, 3]
+        # each vertex is on the hemisphere facing the camera that saw it
+        assert (np.einsum("ij,ij->i", v[~out] - centres[k], eyes[seen_by[~out]] - centres[k]) > 0).all()
         # noiseless: every measured vertex lies on the plane of the triangle it was seen on
         tri = frames[k][faces[src[~out]]]
         normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
@@ -75,7 +80,7 @@ def test_noisy_scans_deterministic_and_near_surface(tmp_path):
     a = unreg.scan_frame(frames[0], faces, np.random.default_rng([1, 0]), RIG)
     b = unreg.scan_frame(frames[0], faces, np.random.default_rng([1, 0]), RIG)
     c = unreg.scan_frame(frames[0], faces, np.random.default_rng([2, 0]), RIG)
-    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]) and np.array_equal(a[3], b[3])
     assert len(a[0]) != len(c[0]) or not np.array_equal(a[0], c[0])
     r = np.linalg.norm(a[0][a[2] >= 0] - centres[0], axis=1)
     assert np.median(np.abs(r - 0.4)) < 0.01                            # Kinect noise at ~2.5 m
