@@ -1,5 +1,7 @@
-"""Scan sequences read from Blender data: an Alembic file (through Blender's importer), a mesh
-object's shape keys, or a mesh object's animation.  Main thread only.  All positions are in world
+"""Where the frames of an import come from: :func:`plan_import` turns the operator's inputs into a
+reader, and the Blender-side sources live here: an Alembic file (through Blender's importer), a mesh
+object's shape keys, or a mesh object's animation.  Main thread only (the plan's ``read`` runs in the
+worker and does not touch bpy).  All positions are in world
 space (the object transform applied), so the new scan-sequence object sits at the origin and overlaps
 its source.
 
@@ -14,12 +16,17 @@ from __future__ import annotations
 
 import contextlib
 import os
+from dataclasses import dataclass
+from typing import Callable
 
 import bpy
 import numpy as np
 
 from ..solver.errors import ArticulaInputError
-from ..solver.scan_sequence import ScanSequence, SequenceAssembler
+from ..solver.meshfiles import MESH_EXTENSIONS, read_mesh
+from ..solver.pointcache import CACHE_EXTENSIONS, read_point_cache
+from ..solver.scan_sequence import (ScanSequence, SequenceAssembler, list_scan_files, natural_sorted,
+                                    read_scan_files, sequence_from_cache)
 from .scan_sequence import read_polymesh
 
 _ID_COLLECTIONS = ("objects", "meshes", "cache_files", "materials", "collections", "curves", "pointclouds",
@@ -164,3 +171,96 @@ def sample_animation(context, ob, first: int, last: int, require_registered: boo
     finally:
         scene.frame_set(current)
     return asm.result()
+
+
+# -- the operator's inputs -> a reader ---------------------------------------------------------------
+
+
+@dataclass
+class ImportPlan:
+    read: Callable          # read(progress) -> ScanSequence; no bpy (runs in the worker thread)
+    name: str               # name for the new object
+    source: str             # what was imported, for ``ob.articula.source``
+
+
+def resolve_files(filepath: str, directory: str, names) -> tuple:
+    """(kind, paths) with kind 'MESHES', 'ALEMBIC', 'CACHE', or None when no file input was given."""
+    directory = bpy.path.abspath(directory) if directory else ""
+    names = [n for n in names if n]
+    filepath = bpy.path.abspath(filepath) if filepath else ""
+    if names:
+        paths = [os.path.join(directory, n) for n in natural_sorted(names)]
+    elif filepath and not os.path.isdir(filepath):
+        if not os.path.exists(filepath):
+            raise ArticulaInputError(f"{filepath}: file or folder not found")
+        paths = [filepath]
+    elif filepath or directory:
+        return 'MESHES', list_scan_files(filepath or directory)
+    else:
+        return None, []
+    exts = {os.path.splitext(p)[1].lower() for p in paths}
+    if exts <= set(MESH_EXTENSIONS):
+        if len(exts) > 1:
+            raise ArticulaInputError(f"mixed file types ({', '.join(sorted(exts))}); pick one format")
+        return 'MESHES', paths
+    if len(paths) == 1 and exts == {".abc"}:
+        return 'ALEMBIC', paths
+    if len(paths) == 1 and exts <= set(CACHE_EXTENSIONS):
+        return 'CACHE', paths
+    raise ArticulaInputError(f"cannot import {', '.join(os.path.basename(p) for p in paths[:3])}: pick mesh "
+                             f"files ({', '.join(MESH_EXTENSIONS)}), a folder of them, one .abc, or one "
+                             f".mdd/.pc2 with a base mesh")
+
+
+def plan_import(context, filepath="", directory="", names=(), source_object="", base_mesh="", name="",
+                require_registered=False, object_frames='AUTO', source_range=(0, 0)) -> ImportPlan:
+    """Validate the inputs (see ``operators/import_scans.py``) and prepare the reading.  Blender data
+    (Alembic, objects) is sampled here; files are read later by ``plan.read`` in the worker."""
+    kind, paths = resolve_files(filepath, directory, names)
+    if kind is None and not source_object:
+        raise ArticulaInputError("nothing to import: give files, a folder, or a source object")
+    if kind == 'MESHES':
+        if len(paths) == 1:
+            default, source = os.path.splitext(os.path.basename(paths[0]))[0], paths[0]
+        else:
+            source = os.path.dirname(os.path.abspath(paths[0]))
+            default = os.path.basename(source) or "scans"
+        return ImportPlan(lambda progress: read_scan_files(paths, progress, require_registered),
+                          name or default, source)
+    if kind == 'CACHE':
+        return _plan_point_cache(context, paths[0], base_mesh, source_object, name)
+    if kind == 'ALEMBIC':
+        seq = sample_alembic(context, paths[0], require_registered)
+        return ImportPlan(lambda progress: seq, name or os.path.splitext(os.path.basename(paths[0]))[0], paths[0])
+    ob = source_mesh_object(source_object)
+    mode = object_frames
+    if mode == 'AUTO':
+        mode = 'ANIMATION' if object_has_animation(ob) else 'SHAPE_KEYS'
+    if mode == 'SHAPE_KEYS':
+        seq = sample_shape_keys(ob)
+    else:
+        first = source_range[0] or context.scene.frame_start
+        last = source_range[1] or context.scene.frame_end
+        seq = sample_animation(context, ob, first, last, require_registered)
+    what = "shape keys" if mode == 'SHAPE_KEYS' else "animation"
+    return ImportPlan(lambda progress: seq, name or f"{ob.name}_scans", f"object {ob.name} ({what})")
+
+
+def _plan_point_cache(context, cache: str, base_mesh: str, source_object: str, name: str) -> ImportPlan:
+    cache_name = os.path.basename(cache)
+    base_file = bpy.path.abspath(base_mesh) if base_mesh else ""
+    base = None
+    if not base_file:
+        base_ob = source_mesh_object(source_object) if source_object else context.active_object
+        if base_ob is None or base_ob.type != 'MESH':
+            raise ArticulaInputError(f"{cache_name}: a point cache has no faces; give a base mesh file or "
+                                     f"select the mesh it belongs to")
+        base = (read_polymesh(base_ob.data), base_ob.name)
+
+    def read(progress):
+        progress(0.1, f"reading {cache_name}")
+        frames = read_point_cache(cache)
+        mesh, mesh_name = base or (read_mesh(base_file), os.path.basename(base_file))
+        return sequence_from_cache(frames, mesh, cache_name, mesh_name)
+
+    return ImportPlan(read, name or os.path.splitext(cache_name)[0], cache)

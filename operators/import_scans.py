@@ -15,10 +15,6 @@ from bpy_extras.io_utils import ImportHelper
 
 from ..addon import scan_sequence, scan_sources
 from ..addon.jobs import JobOperator
-from ..solver.errors import ArticulaInputError
-from ..solver.meshfiles import MESH_EXTENSIONS, read_mesh
-from ..solver.pointcache import CACHE_EXTENSIONS, read_point_cache
-from ..solver.scan_sequence import list_scan_files, natural_sorted, read_scan_files, sequence_from_cache
 
 
 class ARTICULA_OT_import_scans(JobOperator, bpy.types.Operator, ImportHelper):
@@ -80,87 +76,13 @@ class ARTICULA_OT_import_scans(JobOperator, bpy.types.Operator, ImportHelper):
         return JobOperator.execute(self, context)
 
     # -- job parts -----------------------------------------------------------------------------------
-    def _paths(self):
-        """(kind, paths): kind 'MESHES', 'ALEMBIC', 'CACHE' or None (no file input)."""
-        directory = bpy.path.abspath(self.directory) if self.directory else ""
-        names = [f.name for f in self.files if f.name]
-        if names:
-            paths = [os.path.join(directory, n) for n in natural_sorted(names)]
-        elif self.filepath and not os.path.isdir(bpy.path.abspath(self.filepath)):
-            paths = [bpy.path.abspath(self.filepath)]
-            if not os.path.exists(paths[0]):
-                raise ArticulaInputError(f"{paths[0]}: file or folder not found")
-        elif self.filepath or directory:
-            return 'MESHES', list_scan_files(bpy.path.abspath(self.filepath) or directory)
-        else:
-            return None, []
-        exts = {os.path.splitext(p)[1].lower() for p in paths}
-        if exts <= set(MESH_EXTENSIONS):
-            if len(exts) > 1:
-                raise ArticulaInputError(f"mixed file types ({', '.join(sorted(exts))}); pick one format")
-            return 'MESHES', paths
-        if len(paths) == 1 and exts == {".abc"}:
-            return 'ALEMBIC', paths
-        if len(paths) == 1 and exts <= set(CACHE_EXTENSIONS):
-            return 'CACHE', paths
-        raise ArticulaInputError(f"cannot import {', '.join(os.path.basename(p) for p in paths[:3])}: pick mesh "
-                                 f"files ({', '.join(MESH_EXTENSIONS)}), a folder of them, one .abc, or one "
-                                 f".mdd/.pc2 with a base mesh")
-
     def prepare(self, context):
-        kind, paths = self._paths()
-        required = self.require_registered
-        if kind is None and not self.source_object:
-            raise ArticulaInputError("nothing to import: give files, a folder, or a source object")
-        if kind == 'MESHES':
-            name = self.name or _folder_name(paths)
-            source = os.path.dirname(paths[0]) if len(paths) > 1 else paths[0]
-
-            def read(progress):
-                return read_scan_files(paths, progress, required)
-        elif kind == 'CACHE':
-            cache = paths[0]
-            name = self.name or os.path.splitext(os.path.basename(cache))[0]
-            source = cache
-            base_file = bpy.path.abspath(self.base_mesh) if self.base_mesh else ""
-            base_polys = None
-            if not base_file:
-                base_ob = (scan_sources.source_mesh_object(self.source_object) if self.source_object
-                           else context.active_object)
-                if base_ob is None or base_ob.type != 'MESH':
-                    raise ArticulaInputError(f"{os.path.basename(cache)}: a point cache has no faces; give a "
-                                             f"base mesh file or select the mesh it belongs to")
-                base_polys = (scan_sequence.read_polymesh(base_ob.data), base_ob.name)
-
-            def read(progress):
-                progress(0.1, f"reading {os.path.basename(cache)}")
-                frames = read_point_cache(cache)
-                base, base_name = base_polys or (read_mesh(base_file), os.path.basename(base_file))
-                return sequence_from_cache(frames, base, os.path.basename(cache), base_name)
-        elif kind == 'ALEMBIC':
-            seq = scan_sources.sample_alembic(context, paths[0], required)
-            name = self.name or os.path.splitext(os.path.basename(paths[0]))[0]
-            source = paths[0]
-
-            def read(progress):
-                return seq
-        else:
-            ob = scan_sources.source_mesh_object(self.source_object)
-            mode = self.object_frames
-            if mode == 'AUTO':
-                mode = 'ANIMATION' if scan_sources.object_has_animation(ob) else 'SHAPE_KEYS'
-            if mode == 'SHAPE_KEYS':
-                seq = scan_sources.sample_shape_keys(ob)
-            else:
-                first = self.source_frame_start or context.scene.frame_start
-                last = self.source_frame_end or context.scene.frame_end
-                seq = scan_sources.sample_animation(context, ob, first, last, required)
-            name = self.name or f"{ob.name}_scans"
-            source = f"object {ob.name} ({'shape keys' if mode == 'SHAPE_KEYS' else 'animation'})"
-
-            def read(progress):
-                return seq
-
+        plan = scan_sources.plan_import(
+            context, filepath=self.filepath, directory=self.directory, names=[f.name for f in self.files],
+            source_object=self.source_object, base_mesh=self.base_mesh, name=self.name,
+            require_registered=self.require_registered, object_frames=self.object_frames,
+            source_range=(self.source_frame_start, self.source_frame_end))
+        read, name, source = plan.read, plan.name, plan.source
         # The cache path is chosen here (bpy); the worker (no bpy) writes the file.
         cache_paths = {True: scan_sequence.new_cache_path(name, True),
                        False: scan_sequence.new_cache_path(name, False)}
@@ -183,12 +105,6 @@ class ARTICULA_OT_import_scans(JobOperator, bpy.types.Operator, ImportHelper):
             raise
         note = "registered" if seq.registered else f"unregistered ({seq.why_unregistered})"
         self.report({'INFO'}, f"{ob.name}: {len(seq)} frames of {len(seq.topology.vertices)} vertices, {note}")
-
-
-def _folder_name(paths) -> str:
-    if len(paths) == 1:
-        return os.path.splitext(os.path.basename(paths[0]))[0]
-    return os.path.basename(os.path.dirname(os.path.abspath(paths[0]))) or "scans"
 
 
 def _remove(path):
