@@ -20,6 +20,7 @@ COMMAND_MODULES = (
     ".addon.rig_cli",
     ".addon.scan_cli",
     ".addon.depth_cli",
+    ".addon.learn_cli",
     ".addon.demo",
 )
 

@@ -11,6 +11,7 @@ FEATURES = (
     "export_lbs",
     "import_scans",
     "import_depth",
+    "learn_rig",
 )
 
 classes = tuple(cls for name in FEATURES

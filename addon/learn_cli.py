@@ -1,0 +1,105 @@
+"""Batch command ``learn-rig``: registered scans -> learned model bundle (+ report JSON, + .blend).
+
+    ./run learn-rig --scans scans/ --out model.npz --report report.json
+    ./run learn-rig --scans s1.obj s2.obj s3.obj --parts 8 --alpha 100 --no-symmetry --iterations 20 \\
+        --seed 0 --out model.npz --blend learned.blend
+    blender -b -P batch.py -- learn-rig --scans scans/ --out model.npz
+
+The scans are read with the solver's readers, coordinates as written (no axis conversion) and vertex
+order kept; the bundle holds one pose per scan in scan order (natural file order).  ``--report`` writes
+the solver's report as JSON (see :func:`report_document`).  ``--blend`` saves a scene with the scans as a
+scan-sequence object (frames 1..N) and the learned rig with its poses on the same frames.
+"""
+import json
+import os
+
+import bpy
+import numpy as np
+
+from ..solver.errors import ArticulaInputError
+from . import jobs, learn
+
+
+def report_document(outcome) -> dict:
+    """The report JSON: the solver's report (error statistics in mm, time of each stage, objective log
+    as the solver names them), plus ``error_mm`` {mean, std, median, mad, iqr, max} of the
+    vertex-to-surface distance over all scans, ``vertex_error_mm`` {mean, median, max} of the heat map
+    (per-vertex mean over the scans), ``input`` and ``options``."""
+    doc = learn.report_json(outcome)
+    doc["error_mm"] = learn._jsonable(learn.error_summary(outcome.report))
+    v = outcome.vertex_error_mm
+    doc["vertex_error_mm"] = {"mean": float(np.mean(v)), "median": float(np.median(v)), "max": float(np.max(v))}
+    return doc
+
+
+def _scan_paths(items) -> list:
+    items = [os.path.abspath(p) for p in items]
+    if len(items) == 1 and os.path.isdir(items[0]):
+        return learn.scan_paths(items[0])
+    folders = {os.path.dirname(p) for p in items}
+    if len(folders) > 1:
+        raise ArticulaInputError("give scan files from one folder (or the folder itself)")
+    for p in items:
+        if not os.path.isfile(p):
+            raise ArticulaInputError(f"{p}: file or folder not found")
+    return learn.scan_paths(folders.pop(), [os.path.basename(p) for p in items])
+
+
+def _write_json(path: str, doc: dict) -> None:
+    tmp = path + ".tmp"
+    with open(tmp, "w", encoding="utf-8") as fh:
+        json.dump(doc, fh, indent=1)
+    os.replace(tmp, path)
+
+
+def run(args) -> int:
+    for path in (args.out, args.report, args.blend):
+        learn.check_output_path(path or "")
+    paths = _scan_paths(args.scans)
+    options = learn.LearnOptions(args.parts, args.alpha, not args.no_symmetry, args.iterations, args.seed)
+    progress = jobs.Progress("learn-rig", echo=True)
+    inp = learn.input_from_files(paths, progress)
+    outcome = learn.learn(inp, options, progress)
+    learn.save(args.out, outcome)
+    print(f"wrote {args.out}: {outcome.model.num_vertices} vertices, {outcome.model.skeleton.num_bones} bones, "
+          f"{len(outcome.poses)} poses; {learn.summary_text(outcome)}")
+    if args.report:
+        _write_json(args.report, report_document(outcome))
+        print(f"wrote {args.report}")
+    if args.blend:
+        blend = os.path.abspath(args.blend)
+        bpy.ops.wm.save_as_mainfile(filepath=blend)            # the scans' frame cache goes beside it
+        try:
+            bpy.ops.articula.import_scans(directory=os.path.dirname(paths[0]),
+                                          files=[{"name": os.path.basename(p)} for p in paths],
+                                          require_registered=True, frame_start=1)
+        except RuntimeError as exc:
+            raise ArticulaInputError(str(exc).replace("Error: ", "").strip()) from None
+        outcome.input.frame_start = 1
+        with jobs.scene_guard():
+            rig, _action = learn.build(bpy.context, outcome, f"{inp.name} Rig")
+        prefs = bpy.context.preferences.filepaths
+        versions, prefs.save_version = prefs.save_version, 0
+        try:
+            bpy.ops.wm.save_mainfile()
+        finally:
+            prefs.save_version = versions
+        print(f"saved {args.blend}: scans and rig {rig.armature.name!r}")
+    return 0
+
+
+def add_commands(sub):
+    p = sub.add_parser("learn-rig", help="learn a rig (armature, swing/twist skin, rest mesh) from registered scans")
+    p.add_argument("--scans", nargs="+", required=True, metavar="PATH",
+                   help="a folder of registered OBJ/PLY/STL/OFF scans, or such files (natural order)")
+    p.add_argument("--parts", type=int, default=0, help="number of body parts (default 0: chosen from the motion)")
+    p.add_argument("--alpha", type=float, default=100.0,
+                   help="weight of the local-shape (Laplacian) term, dimensionless (default 100)")
+    p.add_argument("--no-symmetry", action="store_true", help="do not pair and symmetrise left/right parts")
+    p.add_argument("--iterations", type=int, default=0,
+                   help="outer iterations of the optimisation (default 0: the solver's default)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--out", required=True, help="model bundle to write (.npz)")
+    p.add_argument("--report", help="write the error statistics, stage times and objective log as JSON")
+    p.add_argument("--blend", help="also save a .blend with the scans and the learned rig")
+    p.set_defaults(func=run)

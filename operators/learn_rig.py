@@ -1,0 +1,136 @@
+"""``articula.learn_rig``: learn an Articula rig (armature, swing/twist skin, adapted rest mesh) from
+registered scans, bake one pose per scan and show the per-vertex error as a heat map.
+
+Input (first match wins): ``files`` in ``directory`` or the folder ``directory`` (mesh files read with
+the solver's readers, coordinates as written); the scan-sequence object named ``source_object``; the
+active object.  The work is in :mod:`addon.learn`.
+"""
+import os
+
+import bpy
+
+from ..addon import learn
+from ..addon.jobs import JobOperator
+from ..solver.errors import ArticulaInputError
+
+
+class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
+    """Learn a rig from registered scans: armature, swing/twist skin weights and adapted rest mesh, one
+    baked pose per scan and a per-vertex error heat map"""
+    bl_idname = "articula.learn_rig"
+    bl_label = "Learn Rig from Scans"
+    bl_options = {'REGISTER', 'UNDO'}
+    job_label = "Learn rig"
+
+    source_object: bpy.props.StringProperty(
+        name="Scan Sequence", options={'SKIP_SAVE'},
+        description="Registered scan-sequence object to learn from (empty: the active object)")
+    directory: bpy.props.StringProperty(
+        name="Folder", subtype='DIR_PATH', options={'SKIP_SAVE'},
+        description="Folder of registered scans (OBJ/PLY/STL/OFF), used instead of a scan-sequence object")
+    files: bpy.props.CollectionProperty(type=bpy.types.OperatorFileListElement, options={'HIDDEN', 'SKIP_SAVE'})
+    name: bpy.props.StringProperty(name="Name", options={'SKIP_SAVE'},
+                                   description="Name of the new rig (empty: after the scans)")
+    parts: bpy.props.IntProperty(
+        name="Parts", default=0, min=0, max=64,
+        description="Number of body parts (bones); 0 chooses it from the motion in the scans")
+    alpha: bpy.props.FloatProperty(
+        name="Shape Weight (alpha)", default=100.0, min=0.0, soft_max=1000.0,
+        description="Weight of the local-shape (Laplacian) term against the absolute position error; "
+                    "dimensionless. 100 (for metre-scale human scans) makes a 1 mm error of the local shape "
+                    "cost as much as a 10 mm offset: higher keeps surface detail, lower fits positions")
+    symmetry: bpy.props.BoolProperty(
+        name="Symmetry", default=True,
+        description="Find the mirror plane, pair left/right parts (.L/.R names) and keep them symmetric")
+    max_iterations: bpy.props.IntProperty(
+        name="Max Iterations", default=0, min=0, max=1000,
+        description="Outer iterations of the alternating optimisation (0: the solver's default)")
+    seed: bpy.props.IntProperty(name="Seed", default=0, min=0,
+                                description="Random seed of the segmentation (same seed, same result)")
+    initial_armature: bpy.props.StringProperty(
+        name="Initial Armature", options={'SKIP_SAVE'},
+        description="Armature whose bones (world positions) become the initial skeleton instead of the "
+                    "automatic one (empty: automatic)")
+    output_bundle: bpy.props.StringProperty(
+        name="Save Bundle", subtype='FILE_PATH', options={'SKIP_SAVE'},
+        description="Also write the learned model and poses to this bundle (.npz); empty: do not write")
+
+    def invoke(self, context, event):
+        if not self._has_input():
+            self._dialog = True
+            return context.window_manager.invoke_props_dialog(self, width=360)
+        return JobOperator.invoke(self, context, event)
+
+    def execute(self, context):
+        if getattr(self, "_dialog", False) and not bpy.app.background:
+            # Confirmed in the options dialog: run as a modal job (progress + Esc) on the active object.
+            self._dialog = False
+            props = {p.identifier: getattr(self.properties, p.identifier)
+                     for p in self.properties.bl_rna.properties if p.identifier not in ("rna_type", "files")}
+            if context.active_object is not None and not props["source_object"]:
+                props["source_object"] = context.active_object.name
+            bpy.ops.articula.learn_rig('INVOKE_DEFAULT', **props)
+            return {'CANCELLED'}   # the job pushes its own undo step
+        return JobOperator.execute(self, context)
+
+    def draw(self, context):
+        col = self.layout.column()
+        for prop in ("parts", "alpha", "symmetry", "max_iterations", "seed"):
+            col.prop(self, prop)
+        col.prop_search(self, "initial_armature", bpy.data, "objects")
+        col.prop(self, "output_bundle")
+        col.prop(self, "name")
+
+    def _has_input(self):
+        return bool(self.source_object or self.directory or any(f.name for f in self.files))
+
+    # -- job parts -----------------------------------------------------------------------------------
+    def prepare(self, context):
+        options = learn.LearnOptions(self.parts, self.alpha, self.symmetry, self.max_iterations, self.seed)
+        if self.initial_armature:
+            arm = bpy.data.objects.get(self.initial_armature)
+            if arm is None:
+                raise ArticulaInputError(f"initial armature: no object named {self.initial_armature!r}")
+            options.initial_skeleton = learn.skeleton_from_armature(arm)
+        out = bpy.path.abspath(self.output_bundle) if self.output_bundle else ""
+        learn.check_output_path(out)
+        names = [f.name for f in self.files if f.name]
+        if self.directory or names:
+            paths = learn.scan_paths(bpy.path.abspath(self.directory), names)
+
+            def read(progress):
+                return learn.input_from_files(paths)
+        else:
+            if self.source_object:
+                ob = bpy.data.objects.get(self.source_object)
+                if ob is None:
+                    raise ArticulaInputError(f"no object named {self.source_object!r}")
+            else:
+                ob = context.active_object
+            inp = learn.input_from_object(ob)
+
+            def read(progress):
+                return inp
+        if learn.solver_learn() is None:
+            raise ArticulaInputError("rig learning is not available in this build (solver.learn.learn_rig is missing)")
+        self._output = out
+
+        def work(progress):
+            progress(0.0, "reading scans")
+            return learn.learn(read(progress), options, progress)
+        return work
+
+    def finish(self, context, outcome):
+        rig, action = learn.build(context, outcome, self.name)
+        if self._output:
+            learn.save(self._output, outcome)
+        for text in rig.warnings:
+            self.report({'WARNING'}, text)
+        saved = f"; saved {os.path.basename(self._output)}" if self._output else ""
+        self.report({'INFO'}, f"Learned rig {rig.armature.name!r}: {outcome.model.skeleton.num_bones} bones, "
+                              f"{len(outcome.poses)} poses on frames {outcome.input.frame_start}.."
+                              f"{outcome.input.frame_start + len(outcome.poses) - 1}; "
+                              f"{learn.summary_text(outcome)}{saved}")
+
+
+classes = (ARTICULA_OT_learn_rig,)
