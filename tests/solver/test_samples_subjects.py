@@ -138,3 +138,37 @@ def test_shape_strings_and_errors():
         subjects.parse_shape("age=old")
     with pytest.raises(ArticulaInputError, match="unknown rig"):
         subjects.make_subject("biped")
+
+
+def test_twist_ramp_spreads_a_hand_twist_along_the_forearm():
+    """Twisting only the hand by 90 degrees about its own axis: with the ramp, forearm skin turns by
+    an amount that grows from the elbow (none) to the wrist; without it the forearm skin away from the
+    wrist (no LBS weight on the hand) stays put."""
+    from articula.solver.model import Poses
+    from articula.solver.rotations import rotvec_to_quat
+    from articula.solver.skinning import hybrid_skin
+    subject = subjects.make_subject("cmu_mb")
+    sk = subject.skeleton
+    fore, hand = sk.names.index("ForeArm.L"), sk.names.index("Hand.L")
+    rot = np.zeros((1, sk.num_bones, 4))
+    rot[..., 0] = 1
+    rot[0, hand] = rotvec_to_quat([0, np.pi / 2, 0])
+    poses = Poses(rot, np.zeros((1, 3)), np.ones(1))
+    ramped, plain = subject.hybrid_model(), subject.hybrid_model(twist_ramp=False)
+    rows = np.flatnonzero(ramped.anchor == fore)      # a pure twist has no swing: swing weights do nothing
+    axis = sk.tails[fore] - sk.heads[fore]
+    t = (subject.vertices[rows] - sk.heads[fore]) @ axis / (axis @ axis)
+
+    def turn(model):
+        posed = hybrid_skin(model, poses)[0, rows]
+        radial = lambda x: x - sk.heads[fore] - np.outer((x - sk.heads[fore]) @ axis / (axis @ axis), axis)
+        a, b = radial(subject.vertices[rows]), radial(posed)
+        return np.degrees(np.arccos(np.clip(np.sum(a * b, 1) / np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1), -1, 1)))
+
+    unweighted = ramped.swing_weights[rows, hand] == 0
+    assert np.abs(turn(plain)[unweighted]).max() < 1e-4      # degrees (arccos rounding)
+    angle = turn(ramped)
+    assert angle[unweighted].max() > 30                      # ... while the ramp turns them
+    near, mid, far = angle[t < 0.25], angle[(t > 0.45) & (t < 0.7)], angle[t > 0.85]
+    assert len(near) > 10 and len(mid) > 10 and len(far) > 10
+    assert near.max() < 1 and 10 < np.median(mid) < 60 and np.median(far) > np.median(mid) + 15
