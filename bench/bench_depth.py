@@ -45,7 +45,7 @@ def _bench_stages(frames, faces, tmp):
     lo, hi = frames.reshape(-1, 3).min(0), frames.reshape(-1, 3).max(0)
     centre = (lo + hi) / 2
     sv, sf = rec.scenery(centre, lo[2], True, False)
-    c2w = rec.CameraPlacement().cam_to_world(centre)
+    c2w = rec.CameraPlacement().cam_to_world(centre, lo[2])
     verts = camera.world_to_camera(np.concatenate([frames[0], sv]), c2w)
     allf = np.concatenate([faces, sf + len(frames[0])])
     times = {}

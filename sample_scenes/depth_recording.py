@@ -4,7 +4,7 @@ depth camera, written as 16-bit millimetre PNGs plus ``intrinsics.json`` and ``g
 Scene: the subject (world metres, Z up, facing -Y as MakeHuman bodies do), optionally a floor
 grid at the subject's lowest point and a back wall behind it.  The camera sits at ``distance`` from
 the subject's centre in the horizontal direction ``azimuth_deg`` (0 = in front, i.e. on -Y; 90 = on
-+X), at ``height`` metres, looking at the subject's centre.  Conventions of ``solver.camera``.
++X), ``height`` metres above the floor (the subject's lowest point), looking at the subject's centre.  Conventions of ``solver.camera``.
 
 Output folder::
 
@@ -48,12 +48,13 @@ class CameraPlacement:
     height: float = 1.0
     azimuth_deg: float = 0.0
 
-    def cam_to_world(self, centre) -> np.ndarray:
-        """(4, 4) camera-to-world for a subject centred at ``centre`` (3,)."""
+    def cam_to_world(self, centre, floor_z: float = 0.0) -> np.ndarray:
+        """(4, 4) camera-to-world for a subject centred at ``centre`` (3,) standing on ``floor_z``."""
         if not self.distance > 0.3:
             raise ArticulaInputError(f"camera distance must be > 0.3 m, got {self.distance}")
         a = np.radians(self.azimuth_deg)
-        eye = np.array([centre[0] + self.distance * np.sin(a), centre[1] - self.distance * np.cos(a), self.height])
+        eye = np.array([centre[0] + self.distance * np.sin(a), centre[1] - self.distance * np.cos(a),
+                        floor_z + self.height])
         return cam.look_at(eye, centre)
 
 
@@ -138,7 +139,7 @@ def generate_depth(out_dir, frames, faces, gt: dict | None = None, resolution=(3
     lo, hi = frames.reshape(-1, 3).min(0), frames.reshape(-1, 3).max(0)
     centre = (lo + hi) / 2
     scene_v, scene_f = scenery(centre, lo[2], floor, background, azimuth_deg=placement.azimuth_deg)
-    c2w = placement.cam_to_world(centre)
+    c2w = placement.cam_to_world(centre, lo[2])
     vis, clean_all, t0 = [], [], time.perf_counter()
     for k, verts in enumerate(frames):
         noisy, clean, seen = render_frame(verts, faces, scene_v, scene_f, c2w, intr, noise,

@@ -83,3 +83,11 @@ def test_bad_inputs(tmp_path):
     with pytest.raises(ArticulaInputError, match="unknown camera preset"):
         rec.generate_depth(tmp_path, frames, faces, camera="webcam")
 
+
+
+def test_camera_placement_height_above_floor():
+    frames, faces, _ = _moving_sphere(1)
+    floor_z = frames[..., 2].min()
+    c2w = rec.CameraPlacement(distance=2.0, height=1.3, azimuth_deg=90).cam_to_world([0.0, 0.0, 1.0], floor_z)
+    np.testing.assert_allclose(c2w[:3, 3], [2.0, 0.0, floor_z + 1.3], atol=1e-12)
+    np.testing.assert_allclose(c2w[:2, 2] / np.linalg.norm(c2w[:2, 2]), [-1.0, 0.0], atol=1e-12)
