@@ -8,9 +8,9 @@ Storage
 
     * registered sequences: ``<name>-<id>.npy``, one ``(N, V, 3)`` float32 array, memory-mapped, so a
       frame change reads only that frame.  The object's mesh carries the faces (first frame's topology).
-    * unregistered sequences (topology changes between frames): ``<name>-<id>.npz`` with the
-      concatenated positions, faces and per-frame offsets; a frame change rebuilds the mesh geometry
-      from it.  Chosen over one mesh datablock per frame because the .blend stays small, there is one
+    * unregistered sequences (topology changes between frames): a folder ``<name>-<id>.scans/`` of
+      memory-mapped ``.npy`` arrays (concatenated positions, face sizes and corner vertices, and their
+      per-frame offsets); a frame change rebuilds the mesh geometry from one frame's slices.  Chosen over one mesh datablock per frame because the .blend stays small, there is one
       storage path for both kinds, and rebuilding costs well under a frame's time for scan-sized
       meshes (``./run bench import`` prints the measured per-frame cost).
 
@@ -27,6 +27,7 @@ Playback
 from __future__ import annotations
 
 import os
+import shutil
 import uuid
 import warnings
 
@@ -90,7 +91,7 @@ def new_cache_path(name: str, registered: bool) -> str:
     else:
         folder = os.path.join(preferences.cache_dir(), "scan_cache")
     safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name) or "scans"
-    return os.path.join(folder, f"{safe}-{uuid.uuid4().hex[:8]}.{'npy' if registered else 'npz'}")
+    return os.path.join(folder, f"{safe}-{uuid.uuid4().hex[:8]}.{'npy' if registered else 'scans'}")
 
 
 def stored_path(abs_path: str, blend_path: str = None) -> str:
@@ -109,36 +110,47 @@ def stored_path(abs_path: str, blend_path: str = None) -> str:
 
 def write_cache(path: str, seq: ScanSequence) -> None:
     """Write the sequence's frames (no bpy: callable from a worker thread); a clear error when the
-    file cannot be written, and never a half-written cache."""
+    cache cannot be written, and never a half-written one (written under ``.part``, then renamed)."""
     tmp = path + ".part"
     try:
         os.makedirs(os.path.dirname(path), exist_ok=True)
-        _write_cache(tmp, seq)
+        if seq.registered:
+            with open(tmp, "wb") as fh:
+                np.save(fh, np.ascontiguousarray(seq.frames, np.float32))
+        else:
+            os.makedirs(tmp)
+            for key, array in _unregistered_arrays(seq.meshes).items():
+                np.save(os.path.join(tmp, key + ".npy"), array)
         os.replace(tmp, path)
     except OSError as exc:
-        try:
-            os.remove(tmp)
-        except OSError:
-            pass
+        remove_cache(tmp)
         raise ArticulaInputError(f"cannot write the frame cache {path}: {exc.strerror or exc}") from None
 
 
-def _write_cache(tmp: str, seq: ScanSequence) -> None:
-    with open(tmp, "wb") as fh:
-        if seq.registered:
-            np.save(fh, np.ascontiguousarray(seq.frames, np.float32))
-        else:
-            ms = seq.meshes
-            np.savez(fh,
-                     positions=np.concatenate([m.vertices for m in ms]).astype(np.float32),
-                     vertex_offsets=np.cumsum([0] + [len(m.vertices) for m in ms]),
-                     face_sizes=np.concatenate([m.face_sizes for m in ms]).astype(np.int32),
-                     face_offsets=np.cumsum([0] + [len(m.face_sizes) for m in ms]),
-                     corner_verts=np.concatenate([m.corner_verts for m in ms]).astype(np.int32),
-                     corner_offsets=np.cumsum([0] + [len(m.corner_verts) for m in ms]))
+def remove_cache(path: str) -> None:
+    """Delete a cache (file or folder) that no object uses, e.g. after a failed import."""
+    _loaded.pop(path, None)
+    if os.path.isdir(path):
+        shutil.rmtree(path, ignore_errors=True)
+        return
+    try:
+        os.remove(path)
+    except OSError:
+        pass
 
 
-_loaded = {}   # absolute path -> (mtime, data): np.memmap (.npy) or dict of arrays (.npz)
+def _unregistered_arrays(meshes) -> dict:
+    def offsets(sizes):
+        return np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    return {"positions": np.concatenate([m.vertices for m in meshes]).astype(np.float32),
+            "vertex_offsets": offsets([len(m.vertices) for m in meshes]),
+            "face_sizes": np.concatenate([m.face_sizes for m in meshes]).astype(np.int32),
+            "face_offsets": offsets([len(m.face_sizes) for m in meshes]),
+            "corner_verts": np.concatenate([m.corner_verts for m in meshes]).astype(np.int32),
+            "corner_offsets": offsets([len(m.corner_verts) for m in meshes])}
+
+
+_loaded = {}   # absolute path -> (mtime, data): np.memmap (.npy) or dict of memmaps (.scans folder)
 
 
 def _load(path: str):
@@ -150,9 +162,10 @@ def _load(path: str):
     if hit and hit[0] == mtime:
         return hit[1]
     try:
-        if path.endswith(".npz"):
-            with np.load(path) as z:
-                data = {k: z[k] for k in z.files}
+        if os.path.isdir(path):
+            data = {k: np.load(os.path.join(path, k + ".npy"), mmap_mode="r")
+                    for k in ("positions", "vertex_offsets", "face_sizes", "face_offsets", "corner_verts",
+                              "corner_offsets")}
         else:
             data = np.load(path, mmap_mode="r")
     except (OSError, ValueError):
@@ -275,7 +288,8 @@ def scan_frame_meshes(ob: bpy.types.Object) -> list:
     if ob.articula.registered:
         topo = read_polymesh(ob.data)
         return [PolyMesh(np.array(f, np.float64), topo.face_sizes, topo.corner_verts) for f in data]
-    return [_frame_mesh(data, k) for k in range(len(data["vertex_offsets"]) - 1)]
+    return [PolyMesh(*(np.array(a) for a in (m.vertices, m.face_sizes, m.corner_verts)))
+            for m in (_frame_mesh(data, k) for k in range(len(data["vertex_offsets"]) - 1))]
 
 
 # -- handlers -----------------------------------------------------------------------------------------

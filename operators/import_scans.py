@@ -8,8 +8,6 @@ Sources (first match wins):
 * ``source_object`` alone: a mesh object's shape keys (one frame per key, basis first) or its
   animation over ``source_frame_start..source_frame_end`` (0, 0: the scene's range).
 """
-import os
-
 import bpy
 from bpy_extras.io_utils import ImportHelper
 
@@ -101,17 +99,10 @@ class ARTICULA_OT_import_scans(JobOperator, bpy.types.Operator, ImportHelper):
         try:
             ob = scan_sequence.create_object(context, name, seq, path, self.frame_start, source)
         except BaseException:
-            _remove(path)
+            scan_sequence.remove_cache(path)
             raise
         note = "registered" if seq.registered else f"unregistered ({seq.why_unregistered})"
         self.report({'INFO'}, f"{ob.name}: {len(seq)} frames of {len(seq.topology.vertices)} vertices, {note}")
-
-
-def _remove(path):
-    try:
-        os.remove(path)
-    except OSError:
-        pass
 
 
 classes = (ARTICULA_OT_import_scans,)

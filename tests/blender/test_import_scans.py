@@ -124,6 +124,7 @@ def test_unregistered_sequence_rebuilds_topology(tmp_path, pkg):
     assert bpy.ops.articula.import_scans(directory=folder) == {'FINISHED'}
     ob = bpy.context.active_object
     assert not ob.articula.registered and ob.articula.frame_count == 3
+    assert ob.articula.cache_file.endswith(".scans") and os.path.isdir(ob.articula.cache_file)
     bpy.context.scene.frame_set(2)
     assert np.array_equal(evaluated(ob), frames[1][:6])
     assert [list(p.vertices) for p in ob.data.polygons] == [[0, 1, 2, 3], [2, 3, 4, 5]]
