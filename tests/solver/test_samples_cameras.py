@@ -1,13 +1,25 @@
-"""``samples depth`` / ``samples unregistered`` batch commands on the MakeHuman subject."""
-import numpy as np
+"""``samples depth`` / ``samples unregistered`` batch commands on the MakeHuman subject (parsed by
+the ``samples`` command itself, without the bpy-dependent command modules of ``addon/cli.py``)."""
+import argparse
 
-from articula.addon import cli
+import numpy as np
+import pytest
+
+from articula.sample_scenes import cli as samples_cli
 from articula.solver import camera, meshfiles, png16
+from articula.solver.errors import ArticulaInputError
+
+
+def run(argv) -> int:
+    parser = argparse.ArgumentParser()
+    samples_cli.add_commands(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(argv)
+    return args.func(args)
 
 
 def test_samples_depth_command(tmp_path, capsys):
     out = tmp_path / "depth"
-    assert cli.main(["samples", "depth", "--poses", "2", "--resolution", "80x60", "--seed", "1",
+    assert run(["samples", "depth", "--poses", "2", "--resolution", "80x60", "--seed", "1",
                      "--background", "--out", str(out)]) == 0
     assert "2 depth PNGs 80x60" in capsys.readouterr().out
     g = np.load(out / "ground_truth.npz")
@@ -26,7 +38,7 @@ def test_samples_depth_command(tmp_path, capsys):
 
 def test_samples_unregistered_command(tmp_path, capsys):
     out = tmp_path / "scans"
-    assert cli.main(["samples", "unregistered", "--poses", "2", "--cameras", "3", "--resolution", "96x72",
+    assert run(["samples", "unregistered", "--poses", "2", "--cameras", "3", "--resolution", "96x72",
                      "--format", "obj", "--out", str(out)]) == 0
     g = np.load(out / "ground_truth.npz")
     counts = [len(meshfiles.read_obj(str(out / f"scan_{k:04d}.obj")).vertices) for k in range(2)]
@@ -34,6 +46,6 @@ def test_samples_unregistered_command(tmp_path, capsys):
     assert g["cam_to_world"].shape == (2, 3, 4, 4)
 
 
-def test_bad_resolution_is_an_input_error(tmp_path, capsys):
-    assert cli.main(["samples", "depth", "--resolution", "big", "--out", str(tmp_path)]) == 2
-    assert "WIDTHxHEIGHT" in capsys.readouterr().err
+def test_bad_resolution_is_an_input_error(tmp_path):
+    with pytest.raises(ArticulaInputError, match="WIDTHxHEIGHT"):
+        run(["samples", "depth", "--resolution", "big", "--out", str(tmp_path)])
