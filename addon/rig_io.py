@@ -6,13 +6,11 @@ and raises :class:`ArticulaInputError` with a message naming the file, object or
 import os
 
 import bpy
-import numpy as np
 
 from ..solver.bundle import load_bundle, save_bundle
 from ..solver.errors import ArticulaInputError
 from ..solver.model import Poses
 from . import actions, rig_builder, rig_reader
-from .dqs_alignment import blender_twist_flips
 
 
 def rig_name_for(path: str) -> str:
@@ -39,12 +37,6 @@ def build_bundle(context, bundle, name: str, bake: bool = True, frame_start: int
     if bake and bundle.poses is not None and len(bundle.poses):
         action = actions.write_action(rig.armature, bundle.model.skeleton.names, bundle.poses,
                                       name=f"{name} poses", frame_start=frame_start, scene=context.scene)
-        flips = blender_twist_flips(bundle.model, bundle.poses)
-        if flips.any():
-            frames = np.flatnonzero(flips.any(axis=1)) + frame_start
-            rig.warnings += (f"at {len(frames)} frames (first {frames[0]}) {int(flips.sum())} vertex-frames blend "
-                             "twists of several joints adding up to more than 180 degrees; there Blender's "
-                             "Preserve Volume aligns them differently from the exact skin",)
     return rig, action
 
 

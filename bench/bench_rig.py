@@ -64,10 +64,10 @@ def exactness(bpy, pkg, n=100):
         bpy.context.scene.frame_set(f + 1)
         worst = max(worst, float(np.linalg.norm(evaluated(rig.mesh) - ref[f], axis=1).max()))
     diag = float(np.linalg.norm(np.ptp(model.rest_vertices, axis=0)))
-    flips = int(_mod(pkg, "addon.dqs_alignment").blender_twist_flips(model, poses).sum())
+    flips = int(_mod(pkg, "solver.skinning").twist_flips(model, poses).sum())
     _common.report("exactness worst error / bbox diagonal", worst / diag, "",
                    f"{n} poses, {model.num_vertices} vertices, {model.skeleton.num_bones} bones, "
-                   f"predicted DQS alignment differences {flips}")
+                   f"vertex-frames with a flipped twist hemisphere {flips}")
 
 
 def _plain_rig(bpy, pkg, model, preserve_volume, w):
@@ -152,9 +152,9 @@ def makehuman(bpy, pkg, repeats, n=100):
         bpy.context.scene.frame_set(f + 1)
         worst = max(worst, float(np.linalg.norm(evaluated(mesh) - ref[f], axis=1).max()))
     diag = float(np.linalg.norm(np.ptp(model.rest_vertices, axis=0)))
-    flips = int(_mod(pkg, "addon.dqs_alignment").blender_twist_flips(model, poses).sum())
+    flips = int(_mod(pkg, "solver.skinning").twist_flips(model, poses).sum())
     _common.report("MakeHuman exactness worst error / bbox diagonal", worst / diag, "",
-                   f"{n} range-of-motion poses; worst {1000 * worst:.4f} mm; predicted DQS alignment differences {flips}")
+                   f"{n} range-of-motion poses; worst {1000 * worst:.4f} mm; vertex-frames with a flipped twist hemisphere {flips}")
 
 
 def chain_model(pkg, bones=60):

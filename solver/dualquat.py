@@ -70,17 +70,33 @@ def align_hemisphere(dq, pivot):
     return np.where(dots[..., None] < 0, -dq, dq)
 
 
+def _align_running(w, dq):
+    """The sequential hemisphere rule of :func:`dlb` ("running"): weights (..., K), dq (..., K, 8)."""
+    out = dq.copy()
+    total = np.zeros(dq.shape[:-2] + (4,))
+    total[..., 0] = 1.0 - w.sum(axis=-1)
+    for k in range(dq.shape[-2]):
+        flip = (np.einsum("...i,...i->...", out[..., k, :4], total) < 0) & (w[..., k] > 0)
+        out[..., k, :] = np.where(flip[..., None], -out[..., k, :], out[..., k, :])
+        total += w[..., k, None] * out[..., k, :4]
+    return out
+
+
 def dlb(weights, dq, pivot="identity"):
     """Dual-quaternion linear blend with a neutral (identity) remainder.
 
     weights ``(..., K)`` each in [0, 1] with sum <= 1; dq ``(..., K, 8)``.  The remainder
-    ``1 − Σ w`` goes to the identity.  Inputs are first aligned to the pivot's hemisphere:
-    ``"identity"`` (the neutral transform; the spec's choice) or ``"max"`` (the input with the largest
-    weight, as Blender's Preserve Volume effectively does).  Either choice makes the result invariant to
-    negating any input.  Returns the blended, *un-normalised* dual quaternions ``(..., 8)``; apply them
+    ``1 − Σ w`` goes to the identity.  Inputs are first aligned to a hemisphere:
+    ``"identity"`` (the neutral transform's), ``"max"`` (the input with the largest weight's) or
+    ``"running"`` (Blender's Preserve Volume rule, used by the hybrid skin: the neutral first, then the
+    inputs in order, each flipped when its real part points away from the weighted sum so far).  Every
+    choice makes the result invariant to negating any input.  Returns the blended, *un-normalised* dual quaternions ``(..., 8)``; apply them
     with :func:`dq_apply` (which normalises)."""
     w = np.asarray(weights, dtype=np.float64)
     dq = np.asarray(dq, dtype=np.float64)
+    if pivot == "running":
+        dq = _align_running(w, dq)
+        return np.einsum("...k,...ki->...i", w, dq) + (1.0 - w.sum(axis=-1))[..., None] * IDENTITY
     if pivot == "identity":
         piv = np.broadcast_to(IDENTITY[:4], dq.shape[:-2] + (4,))
     elif pivot == "max":

@@ -32,7 +32,7 @@ from .errors import ArticulaInputError
 from .model import Poses
 from .rotations import (quat_canonical, quat_conj, quat_mul, quat_normalize, quat_to_matrix, rotvec_to_quat,
                         swing_twist_y)
-from .skinning import blend_group, bone_terms, check_pose_shapes, _groups_for
+from .skinning import blend_group, bone_terms, check_pose_shapes, twist_signs, _groups_for
 
 _TWIST_EPS = 1e-12
 
@@ -210,19 +210,29 @@ def pose_jacobian(model, poses, groups=None):
         if not len(kids):
             continue
         L3Jdq = L3 @ _dq_apply_jacobian(bq, x)                       # (N, V_a, 3, 8)
+        swt = signed_twist_weights(bt, kids, wt)
         for k, c in enumerate(kids):
-            Jg[..., 4 + 3 * c:7 + 3 * c] = _child_block(bt, sk, a, c, wt[:, k], ws[:, k], L3Jdq, vt, s,
+            Jg[..., 4 + 3 * c:7 + 3 * c] = _child_block(bt, sk, a, c, swt[..., k], ws[:, k], L3Jdq, vt, s,
                                                         bt["T"][:, c], bt["G"][:, c])
     inv = groups.inverse
     return posed[:, inv], J[:, inv]
 
 
+def signed_twist_weights(bt, kids, wt):
+    """Twist weights ``(N, V_a, K)`` times the hemisphere signs of skinning.twist_signs (the signs are
+    piecewise constant, so they pass through the derivative unchanged)."""
+    N = bt["Rm"].shape[0]
+    signs = twist_signs(bt, 0, N, kids, wt)
+    return np.broadcast_to(wt[None], (N,) + wt.shape) if signs is None else signs * wt[None]
+
+
 def _child_block(bt, sk, a, c, wt_k, ws_k, L3Jdq, vt, s, T, G):
     """Block ``(N, V_a, 3, m)`` of a blended child c for parameters that move its world twist dual
     quaternion by ``T (N, 8, m)`` and its world swing by ``∂R_sw = R_sw [G ·]×`` with ``G (N, 3, m)``.
+    ``wt_k (N, V_a)``: the child's signed twist weight (:func:`signed_twist_weights`).
     Twist: ``w_t L3 (∂f/∂b) T``.  Swing: ``w_s Rm_a R_sw [G·]× (v_t − h_c)`` =
     ``−w_s [RR (v_t − h_c)]× (RR G / s)`` with RR = Rm_a R_sw = s·rotation."""
-    twist = wt_k[None, :, None, None] * _per_frame_matmul(L3Jdq, T)
+    twist = wt_k[..., None, None] * _per_frame_matmul(L3Jdq, T)
     RR = bt["Rm"][:, a] @ bt["R_sw"][:, c]
     lever = np.einsum("nij,nvj->nvi", RR, vt - sk.heads[c])
     swing = -ws_k[None, :, None, None] * _skew_times(lever, ((RR @ G) / s)[:, None])
@@ -256,8 +266,9 @@ def joint_jacobian(model, poses, groups=None):
         if not len(kids):
             continue
         L3Jd = L3 @ _dq_apply_jacobian(bq, x)[..., 5:8]              # through the dual vector part
+        swt = signed_twist_weights(bt, kids, wt)
         for k, c in enumerate(kids):
-            twist = wt[None, :, k, None, None] * _per_frame_matmul(L3Jd, minus_skew_u[:, c])
+            twist = swt[..., k, None, None] * _per_frame_matmul(L3Jd, minus_skew_u[:, c])
             swing = ws[None, :, k, None, None] * (Rm[:, a] @ (eye - bt["R_sw"][:, c]))[:, None]
             Jg[..., 3 * c:3 * c + 3] = twist + swing
     inv = groups.inverse
@@ -337,8 +348,9 @@ def frame_jacobian(model, poses, groups=None):
         if not len(kids):
             continue
         L3Jdq = L3 @ _dq_apply_jacobian(bq, x)
+        swt = signed_twist_weights(bt, kids, wt)
         for k, c in enumerate(kids):
-            J[:, start:stop, :, 3 * c:3 * c + 3] = _child_block(bt, sk, a, c, wt[:, k], ws[:, k], L3Jdq, vt, s,
+            J[:, start:stop, :, 3 * c:3 * c + 3] = _child_block(bt, sk, a, c, swt[..., k], ws[:, k], L3Jdq, vt, s,
                                                                 T[:, c], G[:, c])
     inv = groups.inverse
     return posed[:, inv], J[:, inv]

@@ -11,8 +11,13 @@ Hybrid skin of rest vertex v with anchor a and blend set C(a) = children of a, f
 Implementation: every vertex touches only the ≤ K children of its anchor, so vertices are grouped by
 anchor; per (frame, bone) we precompute the world twist dual quaternion and the composite affine map
 ``M_parent(c) ∘ Swing_c``; per group two small matrix products blend them (weights compact ``(V_a, K_a)``).
-Twist quaternions have w >= 0 after canonicalisation, so all lie in the identity's hemisphere and DLB
-needs no flipping (this equals aligning to the neutral pivot).
+Hemisphere rule of the twist DLB (the spec leaves the pivot open, §1.4): the neutral comes first, then
+the children of the anchor in ascending bone order, and each child's twist dual quaternion is flipped
+when its real part points away from the weighted sum accumulated so far.  This is exactly what
+Blender's "Preserve Volume" does with the rig's vertex groups (NEUTRAL written first, then ``TW-*`` in
+bone order), so the native rig reproduces the solver everywhere, including large opposing twists at
+forks.  Twist quaternions have w >= 0 after canonicalisation, so flips only happen when two twisting
+children of one vertex turn by more than 180° together; the rule is antipodally invariant.
 """
 import numpy as np
 
@@ -222,6 +227,25 @@ def _groups_for(model, groups):
     return groups
 
 
+def twist_signs(terms, n0, n1, kids, wt):
+    """Signs ``(n, V_a, K)`` (±1.0) of the children's twist dual quaternions under the running-sum
+    hemisphere rule (module docstring) for frames n0:n1, or None when nothing is flipped (the usual
+    case).  kids (K,) ascending bone indices; wt (V_a, K) twist weights."""
+    Q = terms["twist_dq"][n0:n1][:, kids, :4]                            # (n, K, 4)
+    if len(kids) < 2:
+        return None
+    n, Va, K = len(Q), len(wt), len(kids)
+    total = np.zeros((n, Va, 4))
+    total[..., 0] = 1.0 - wt.sum(axis=1)
+    signs = np.ones((n, Va, K))
+    for k in range(K):
+        q = Q[:, None, k]                                                # (n, 1, 4)
+        flip = (np.einsum("nvi,nvi->nv", np.broadcast_to(q, total.shape), total) < 0) & (wt[None, :, k] > 0)
+        signs[..., k] = np.where(flip, -1.0, 1.0)
+        total += (signs[..., k] * wt[None, :, k])[..., None] * q
+    return signs if (signs < 0).any() else None
+
+
 def blend_group(terms, n0, n1, a, kids, wt, ws):
     """Blended twist dual quaternions ``(8, n, V_a)`` (un-normalised) and swing∘chain affine maps
     ``(12, n, V_a)`` (row-major 3x4) of one anchor group over frames n0:n1, component-major so each
@@ -232,8 +256,14 @@ def blend_group(terms, n0, n1, a, kids, wt, ws):
     if len(kids) == 0:
         tw = np.broadcast_to(DQ_IDENTITY[:, None, None], (8, n, Va))
         return tw, np.broadcast_to(chain_a, (12, n, Va))
+    signs = twist_signs(terms, n0, n1, kids, wt)
     dt = (terms["twist_dq"][n0:n1][:, kids] - DQ_IDENTITY).transpose(2, 0, 1)       # (8, n, K)
-    tw = (dt.reshape(8 * n, len(kids)) @ wt.T).reshape(8, n, Va) + DQ_IDENTITY[:, None, None]
+    if signs is None:
+        tw = (dt.reshape(8 * n, len(kids)) @ wt.T).reshape(8, n, Va) + DQ_IDENTITY[:, None, None]
+    else:   # some twists flipped: e (1 − Σ w) + Σ s w Q = e + Σ s w (Q − s e)
+        Q = terms["twist_dq"][n0:n1][:, kids].transpose(2, 0, 1)                     # (8, n, K)
+        sw_ = signs * wt[None]                                                       # (n, V_a, K)
+        tw = np.einsum("ink,nvk->inv", Q, sw_) + DQ_IDENTITY[:, None, None] * (1.0 - wt.sum(axis=1))
     ds = terms["swing_chain"][n0:n1][:, kids] - terms["chain"][n0:n1, a][:, None]   # (n, K, 12)
     sw = (ds.transpose(2, 0, 1).reshape(12 * n, len(kids)) @ ws.T).reshape(12, n, Va) + chain_a
     return tw, sw
@@ -281,6 +311,20 @@ def hybrid_skin(model, poses, groups=None):
             chunk[:, :, start:stop] = _apply_affine_components(sw, vt)
         out[n0:n1] = chunk[:, :, groups.inverse].transpose(1, 2, 0)
     return out
+
+
+def twist_flips(model, poses, groups=None):
+    """``(N, V)`` bool: where the running-sum hemisphere rule flips one of a vertex's twists (module
+    docstring).  Informational: Blender's rig applies the same rule, so results stay exact there."""
+    check_pose_shapes(model, poses)
+    groups = _groups_for(model, groups)
+    terms = bone_terms(model.skeleton, poses)
+    out = np.zeros((len(poses), model.num_vertices), dtype=bool)
+    for a, kids, start, stop, wt, ws in groups.groups:
+        signs = twist_signs(terms, 0, len(poses), kids, wt)
+        if signs is not None:
+            out[:, start:stop] = (signs < 0).any(axis=2)
+    return out[:, groups.inverse]
 
 
 def _dq_components_to_rigid(tw):

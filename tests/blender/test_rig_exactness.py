@@ -24,7 +24,6 @@ def test_hundred_random_poses_match_the_solver(pkg):
     twist_deg = np.degrees(2 * np.arctan2(np.abs(p.rotations[..., 2]), np.abs(p.rotations[..., 0])))
     assert twist_deg.max() > 160                       # the poses do contain near-180° twists
     rig = _build_and_bake(pkg, model, p)
-    assert not pkg("addon.dqs_alignment").blender_twist_flips(model, p).any()
     got = evaluate_frames(pkg, rig.mesh, range(1, 101))
     ref = pkg("solver.skinning").hybrid_skin(model, p)
     moved = np.linalg.norm(ref - model.rest_vertices, axis=2).max()
@@ -33,26 +32,25 @@ def test_hundred_random_poses_match_the_solver(pkg):
     assert err < TOL, f"worst relative error {err:.3g}"
 
 
-def test_fork_twist_blends_match_where_blender_aligns_like_the_solver(pkg):
-    """With twist weights shared by several children at forks, Blender's running-sum alignment differs
-    from the solver's neutral alignment exactly at the vertices dqs_alignment predicts, nowhere else."""
+def test_large_opposing_fork_twists_match_the_solver(pkg):
+    """Twist weights shared by several children at forks, with twists adding up to more than 180°:
+    the solver's running-sum hemisphere rule is Blender's, so even the flipped blends are exact."""
     model = subject(pkg, fork_twist="all")
     p = poses(pkg, model.skeleton.num_bones, 20, seed=1)
     rig = _build_and_bake(pkg, model, p)
-    flips = pkg("addon.dqs_alignment").blender_twist_flips(model, p)
-    assert flips.any() and not flips.all()
+    flips = pkg("solver.skinning").twist_flips(model, p)
+    assert flips.any() and not flips.all()            # the case really occurs
     got = evaluate_frames(pkg, rig.mesh, range(1, 21))
     ref = pkg("solver.skinning").hybrid_skin(model, p)
     err = np.linalg.norm(got - ref, axis=2) / bbox_diagonal(model.rest_vertices)
-    assert err[~flips].max() < TOL
-    assert np.array_equal(err > TOL, flips)
+    assert err.max() < TOL, f"worst relative error {err.max():.3g} (at flipped vertices: {err[flips].max():.3g})"
 
 
 def test_fork_twists_within_human_range_are_exact(pkg):
     model = subject(pkg, fork_twist="all")
     p = poses(pkg, model.skeleton.num_bones, 20, seed=2, max_twist_deg=89.0)
     rig = _build_and_bake(pkg, model, p)
-    assert not pkg("addon.dqs_alignment").blender_twist_flips(model, p).any()
+    assert not pkg("solver.skinning").twist_flips(model, p).any()
     got = evaluate_frames(pkg, rig.mesh, range(1, 21))
     ref = pkg("solver.skinning").hybrid_skin(model, p)
     assert np.linalg.norm(got - ref, axis=2).max() / bbox_diagonal(model.rest_vertices) < TOL

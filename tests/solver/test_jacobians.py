@@ -187,3 +187,41 @@ def test_frame_increment_keeps_world_rotations(case):
     orig = Model(model.rest_vertices, model.faces, model.skeleton, model.anchor, rigid.twist_weights,
                  rigid.swing_weights)
     np.testing.assert_allclose(skinning.hybrid_skin(rigid, p), skinning.hybrid_skin(orig, poses), atol=1e-12)
+
+
+def test_jacobians_carry_the_flipped_twist_hemisphere():
+    """At a pose where the running-sum rule flips a twist (two opposite collarbones twisted 170°),
+    the pose and joint Jacobians still match central differences (the signs are locally constant)."""
+    sk = synthetic.human_skeleton()
+    model = synthetic.random_model(80, seed=9)
+    fork, kids = min(((a, (c, d)) for a in range(sk.num_bones) for c in sk.children(a)
+                      for d in sk.children(a) if c < d),
+                     key=lambda ap: sk.frames[ap[1][0], :, 1] @ sk.frames[ap[1][1], :, 1])
+    wt = np.zeros_like(model.twist_weights)
+    sel = np.flatnonzero(model.anchor == fork)
+    wt[sel, kids[0]] = wt[sel, kids[1]] = 0.35
+    model = Model(model.rest_vertices, model.faces, sk, model.anchor, wt, model.swing_weights)
+    poses = synthetic.random_poses(1, 19, seed=3, max_angle=0.3)
+    r = np.zeros((1, 19, 3))
+    r[0, list(kids), 1] = np.radians(170.0)
+    from articula.solver import rotations as rot
+    poses.rotations[0, list(kids)] = rot.rotvec_to_quat(r[0, list(kids)])
+    assert skinning.twist_flips(model, poses)[0, sel].any()
+    _, J = jacobians.pose_jacobian(model, poses)
+    cols = [c for b in kids for c in range(*jacobians.pose_layout(19)["rotation"](b).indices(J.shape[-1]))]
+    assert rel_err(J[..., cols], fd_pose(model, poses, cols)) < 1e-6
+    _, Jh = jacobians.joint_jacobian(model, poses)
+    for b in kids:
+        fd = []
+        for i in range(3):
+            heads = sk.heads.copy()
+            heads[b, i] += H
+            plus = skinning.hybrid_skin(Model(model.rest_vertices, model.faces, Skeleton(
+                sk.names, sk.parents, heads, sk.tails + (heads - sk.heads), sk.frames), model.anchor, wt,
+                model.swing_weights), poses)
+            heads[b, i] -= 2 * H
+            minus = skinning.hybrid_skin(Model(model.rest_vertices, model.faces, Skeleton(
+                sk.names, sk.parents, heads, sk.tails + (heads - sk.heads), sk.frames), model.anchor, wt,
+                model.swing_weights), poses)
+            fd.append((plus - minus) / (2 * H))
+        assert rel_err(Jh[..., 3 * b:3 * b + 3], np.stack(fd, -1)) < 1e-6

@@ -41,7 +41,7 @@ def literal_hybrid(model, poses):
             x = model.rest_vertices[v]
             if kids:
                 wt = model.twist_weights[v, kids].astype(float)
-                blended = dq.dlb(wt, np.array([tw_dq[c] for c in kids]), pivot="identity")
+                blended = dq.dlb(wt, np.array([tw_dq[c] for c in kids]), pivot="running")
                 x = dq.dq_apply(blended, x)
                 ws = model.swing_weights[v, kids].astype(float)
                 x = (1 - ws.sum()) * x + sum(w * (sw_world[c] @ (x - sk.heads[c]) + sk.heads[c])
@@ -58,6 +58,41 @@ def human():
 def test_hybrid_matches_literal_reference(human):
     model, poses = human
     np.testing.assert_allclose(skinning.hybrid_skin(model, poses), literal_hybrid(model, poses), atol=1e-12)
+
+
+def test_opposing_fork_twists_use_the_running_hemisphere_rule():
+    """Two children of one anchor (the collarbones, pointing in opposite directions) twisted by 170°
+    in their local axes turn in opposite world senses: their twist quaternions point into opposite
+    hemispheres of the running sum, the rule flips one, and hybrid_skin still equals the literal
+    reference (neutral first, children in bone order) and its affine form."""
+    sk = synthetic.human_skeleton()
+    model = synthetic.random_model(200, seed=4)
+    fork, kids = min(((a, pair) for a in range(sk.num_bones) for pair in
+                      [(c, d) for c in sk.children(a) for d in sk.children(a) if c < d]),
+                     key=lambda ap: sk.frames[ap[1][0], :, 1] @ sk.frames[ap[1][1], :, 1])
+    assert sk.frames[kids[0], :, 1] @ sk.frames[kids[1], :, 1] < -0.9
+    r = np.zeros((2, sk.num_bones, 3))
+    r[:, kids, 1] = np.radians(170.0)
+    r[1, kids[1], 1] = np.radians(-120.0)          # frame 1: same world sense, nothing flips there
+    poses = Poses(rot.rotvec_to_quat(r), np.zeros((2, 3)), np.ones(2))
+    wt = np.zeros_like(model.twist_weights)
+    sel = np.flatnonzero(model.anchor == fork)
+    wt[sel, kids[0]] = 0.4
+    wt[sel, kids[1]] = 0.4
+    kids = list(kids)
+    model = Model(model.rest_vertices, model.faces, model.skeleton, model.anchor, wt, model.swing_weights)
+    flips = skinning.twist_flips(model, poses)
+    assert flips[0, sel].all() and not flips[1].any() and not np.delete(flips[0], sel).any()
+    got = skinning.hybrid_skin(model, poses)
+    np.testing.assert_allclose(got, literal_hybrid(model, poses), atol=1e-12)
+    A, b = skinning.affine_form(model, poses)
+    np.testing.assert_allclose(np.einsum("nvij,vj->nvi", A, model.rest_vertices) + b, got, atol=1e-12)
+    # aligning to the identity instead gives a visibly different (wrong-for-Blender) blend
+    ident = dq.dlb(np.array([0.4, 0.4]), np.stack([dq.dq_rotation_about(rot.rotvec_to_quat(
+        sk.frames[c] @ r[0, c]), sk.heads[c]) for c in kids]), pivot="identity")
+    run = dq.dlb(np.array([0.4, 0.4]), np.stack([dq.dq_rotation_about(rot.rotvec_to_quat(
+        sk.frames[c] @ r[0, c]), sk.heads[c]) for c in kids]), pivot="running")
+    assert np.abs(dq.dq_apply(ident, sk.heads[fork] + 0.1) - dq.dq_apply(run, sk.heads[fork] + 0.1)).max() > 1e-3
 
 
 def test_hybrid_chunks_frames_consistently(human, monkeypatch):
