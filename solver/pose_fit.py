@@ -1,0 +1,258 @@
+"""Per-frame poses of a FIXED model fitted to registered target vertices (held-out evaluation of a
+learned rig; the per-frame core of tracking).
+
+For every frame n it minimises ``E_n(p) = Σ_v w_v ‖hybrid_skin(model, p)_v − y_n,v‖²`` (m²) over the pose
+parameters of :func:`solver.jacobians.pose_layout` — root translation t, optionally the subject scale s,
+and a bone-local rotation increment δ_b for every bone (``q_b ← q_b · exp(δ_b)``) — by Levenberg–Marquardt
+with the analytic Jacobian :func:`solver.jacobians.pose_jacobian`:
+
+    (JᵀWJ + μ (diag(JᵀWJ) + ε·mean diag)) δ = −JᵀW r,   accept if E decreases (μ ← μ/3), else μ ← 4μ.
+
+Frames are independent problems; they are solved together, a block of frames per Jacobian call (batched
+normal equations, one ``np.linalg.solve`` for the block).  Rotations are updated multiplicatively on the
+quaternion, so there is no singularity at 180° (no Euler angles, no rotation-vector wrap-around), and the
+result is the same for q and −q (the skin canonicalises the sign).
+
+Initialisation (``init``):
+
+* ``"procrustes"`` (default): per-part rigid fits (:func:`solver.procrustes.fit_rigid_soft`) of the vertices
+  that move rigidly with their anchor part (weight 1 − their blended weight), converted to joint-local
+  rotations by :func:`solver.pose_init.poses_from_part_fits`.  Each frame is initialised on its own, so a
+  wrong frame never propagates.  A part with fewer than ``MIN_SUPPORT`` rigid vertices keeps its parent's
+  rotation (local identity).
+* ``"previous"``: frames are solved in order; each starts from the better (lower E) of the previous frame's
+  solution and its own Procrustes initialisation, so a sudden jump or a 180° flip between frames costs one
+  restart rather than a wrong fit.
+* a :class:`Poses` with N frames: start from those poses (e.g. a tracker's prediction).
+
+This is the pose-only fit; the rig learner's ``joint_pose_gn`` optimises joints *and* poses together
+(with the Laplacian term and finite-difference Jacobians), which is a different problem.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import ArticulaInputError
+from .jacobians import apply_pose_increment, pose_jacobian
+from .model import Poses
+from .pose_init import poses_from_part_fits
+from .procrustes import fit_rigid_soft
+from .rotations import quat_canonical, quat_normalize
+from .skinning import AnchorGroups, check_pose_shapes, hybrid_skin
+
+MIN_SUPPORT = 4.0              # rigid-vertex weight a part needs for its own Procrustes fit
+JACOBIAN_BYTES = 160e6         # memory budget of one block of frame Jacobians
+MU0, MU_MIN, MU_MAX = 1e-3, 1e-12, 1e12
+DAMP_FLOOR = 1e-9              # ε: damping floor relative to the mean of diag(JᵀWJ)
+
+
+@dataclass
+class PoseFit:
+    """Result of :func:`fit_poses` (N frames, V vertices).
+
+    poses: fitted :class:`Poses` (quaternions with w >= 0); rms (N,): weighted RMS vertex distance after
+    the fit, metres; vertex_errors (N, V) float32: ‖posed − target‖ per vertex, metres; energy (N,): E_n
+    (m²); iterations (N,): LM iterations used; converged (N,) bool: the relative decrease or the step fell
+    below the tolerance (False: the iteration limit was hit)."""
+    poses: Poses
+    rms: np.ndarray
+    vertex_errors: np.ndarray
+    energy: np.ndarray
+    iterations: np.ndarray
+    converged: np.ndarray
+
+
+def _check_targets(model, targets, vertex_weights):
+    y = np.asarray(targets, dtype=np.float64)
+    V = model.num_vertices
+    if y.ndim != 3 or y.shape[1:] != (V, 3):
+        raise ArticulaInputError(f"targets: expected shape (N, {V}, 3) for this model, got {y.shape}")
+    if len(y) == 0:
+        raise ArticulaInputError("targets: no frames to fit")
+    bad = np.argwhere(~np.isfinite(y))
+    if len(bad):
+        raise ArticulaInputError(f"targets: frame {bad[0][0]}, vertex {bad[0][1]} is not finite")
+    if vertex_weights is None:
+        return y, None
+    w = np.asarray(vertex_weights, dtype=np.float64)
+    if w.shape != (V,):
+        raise ArticulaInputError(f"vertex_weights: expected shape ({V},), got {w.shape}")
+    if not np.all(np.isfinite(w)) or np.any(w < 0):
+        raise ArticulaInputError("vertex_weights: must be finite and >= 0")
+    if not np.any(w > 0):
+        raise ArticulaInputError("vertex_weights: all weights are zero")
+    return y, w
+
+
+def _take(poses, idx):
+    return Poses(poses.rotations[idx], poses.translations[idx], poses.scales[idx])
+
+
+def _put(dst, idx, src):
+    dst.rotations[idx], dst.translations[idx], dst.scales[idx] = src.rotations, src.translations, src.scales
+
+
+def procrustes_init(model, targets):
+    """Initial poses ``(N frames)`` from per-part rigid fits (module docstring).  targets ``(N, V, 3)``."""
+    sk = model.skeleton
+    B, V = sk.num_bones, model.num_vertices
+    load = np.maximum(model.twist_weights.sum(axis=1), model.swing_weights.sum(axis=1)).astype(np.float64)
+    W = np.zeros((V, B))
+    W[np.arange(V), model.anchor] = np.clip(1.0 - load, 0.0, 1.0)
+    R, t = fit_rigid_soft(model.rest_vertices, np.asarray(targets, dtype=np.float64), W)
+    weak = W.sum(axis=0) < MIN_SUPPORT
+    for b in range(B):                                   # parents first: inherit the (final) parent map
+        if weak[b] and b > 0:
+            p = sk.parents[b]
+            R[:, b], t[:, b] = R[:, p], t[:, p]          # local identity: M_b = M_parent
+    if weak[0]:
+        raise ArticulaInputError(f"model: the root part has only {W[:, 0].sum():.3g} rigidly attached "
+                                 f"vertices; give an initial pose (init=Poses) instead of 'procrustes'")
+    return poses_from_part_fits(sk, R, t)
+
+
+class _Problem:
+    """The weighted least-squares problem of one block of frames."""
+
+    def __init__(self, model, groups, targets, weights, free):
+        self.model, self.groups, self.y, self.free = model, groups, targets, free
+        self.sw = None if weights is None else np.sqrt(weights)[None, :, None]
+
+    def residual(self, posed, idx):
+        r = posed - self.y[idx]
+        return r if self.sw is None else r * self.sw
+
+    def energy(self, poses, idx):
+        r = self.residual(hybrid_skin(self.model, poses, self.groups), idx)
+        return np.einsum("nvi,nvi->n", r, r)
+
+    def system(self, poses, idx):
+        """``H (n, P_free, P_free)``, ``g (n, P_free)``, ``E (n,)`` at ``poses`` (frames ``idx``)."""
+        posed, J = pose_jacobian(self.model, poses, self.groups)
+        r = self.residual(posed, idx)
+        J = J[..., self.free]
+        if self.sw is not None:
+            J = J * self.sw[..., None]
+        n, V, _, P = J.shape
+        Jf = J.reshape(n, 3 * V, P)
+        H = np.matmul(np.swapaxes(Jf, 1, 2), Jf)
+        g = np.einsum("nrp,nr->np", Jf, r.reshape(n, 3 * V))
+        return H, g, np.einsum("nvi,nvi->n", r, r)
+
+
+def gauss_newton_system(model, poses, targets, vertex_weights=None, fit_scale=False):
+    """Normal equations of the pose fit at ``poses``: ``H = JᵀWJ (N, P, P)``, gradient ``g = JᵀW r (N, P)``
+    (half the gradient of E) and ``E (N,)``, in the parameter order of :func:`jacobians.pose_layout`
+    without the scale column unless ``fit_scale``.  For tests and diagnostics."""
+    y, w = _check_targets(model, targets, vertex_weights)
+    check_pose_shapes(model, poses)
+    prob = _Problem(model, AnchorGroups(model), y, w, _free_columns(model.skeleton.num_bones, fit_scale))
+    return prob.system(poses, np.arange(len(y)))
+
+
+def _free_columns(B, fit_scale):
+    free = np.ones(4 + 3 * B, dtype=bool)
+    free[3] = bool(fit_scale)
+    return free
+
+
+def _lm_block(prob, poses, idx, max_iterations, tol):
+    """Levenberg–Marquardt on the frames ``idx`` (all together).  Returns (poses, E, iterations, converged)."""
+    n = len(idx)
+    free = prob.free
+    P = len(free)
+    H, g, E = prob.system(poses, idx)
+    mu = np.full(n, MU0)
+    iters = np.zeros(n, dtype=np.int64)
+    done = E <= 0.0
+    converged = done.copy()
+    for _ in range(max_iterations):
+        act = np.flatnonzero(~done)
+        if not len(act):
+            break
+        d = np.diagonal(H[act], axis1=1, axis2=2)
+        D = d + DAMP_FLOOR * np.maximum(d.mean(axis=1, keepdims=True), 1e-300)
+        A = H[act] + (mu[act, None] * D)[:, :, None] * np.eye(d.shape[1])
+        step = np.linalg.solve(A, -g[act][..., None])[..., 0]
+        delta = np.zeros((len(act), P))
+        delta[:, free] = step
+        trial = apply_pose_increment(_take(poses, act), delta)
+        E_new = prob.energy(trial, idx[act])
+        iters[act] += 1
+        ok = E_new < E[act]
+        acc = act[ok]
+        decrease = E[acc] - E_new[ok]
+        small = (decrease <= tol * E[acc]) | (np.linalg.norm(step[ok], axis=1) <= tol)
+        _put(poses, acc, _take(trial, np.flatnonzero(ok)))
+        E[acc] = E_new[ok]
+        mu[acc] = np.maximum(mu[acc] / 3.0, MU_MIN)
+        rej = act[~ok]
+        mu[rej] *= 4.0
+        stuck = rej[mu[rej] > MU_MAX]                    # no decrease even for tiny steps: a minimum
+        converged[acc[small]] = True
+        converged[stuck] = True
+        done[acc[small]] = True
+        done[stuck] = True
+        refresh = acc[~small]
+        if len(refresh):
+            H[refresh], g[refresh], E[refresh] = prob.system(_take(poses, refresh), idx[refresh])
+    return poses, E, iters, converged
+
+
+def _block_size(V, P):
+    return max(1, int(JACOBIAN_BYTES // (V * 3 * P * 8)))
+
+
+def fit_poses(model, targets, init="procrustes", fit_scale=False, vertex_weights=None,
+              max_iterations=50, tol=1e-12, groups=None, progress=None):
+    """Fit one pose per frame of ``targets (N, V, 3)`` (metres; registered to the model's vertices) with
+    the model fixed.
+
+    init: ``"procrustes"``, ``"previous"`` or a :class:`Poses` of N frames (module docstring);
+    fit_scale: also fit the uniform subject scale (else it stays at the initial value, 1 for Procrustes);
+    vertex_weights: optional ``(V,)`` non-negative per-vertex weights (0 ignores a vertex);
+    max_iterations: LM iterations per frame; tol: stop when the relative decrease of E or the step norm
+    falls below it; groups: an :class:`AnchorGroups` of the model to reuse;
+    progress: optional ``progress(fraction, text)`` (may raise ``Cancelled``).
+    Returns :class:`PoseFit`."""
+    y, w = _check_targets(model, targets, vertex_weights)
+    N, V = y.shape[:2]
+    B = model.skeleton.num_bones
+    if groups is None:
+        groups = AnchorGroups(model)
+    prob = _Problem(model, groups, y, w, _free_columns(B, fit_scale))
+    if isinstance(init, Poses):
+        check_pose_shapes(model, init)
+        if len(init) != N:
+            raise ArticulaInputError(f"init: {len(init)} poses for {N} target frames")
+        start = Poses(init.rotations.copy(), init.translations.copy(), init.scales.copy())
+        start.validate(B)
+    elif init in ("procrustes", "previous"):
+        start = procrustes_init(model, y)
+    else:
+        raise ArticulaInputError(f"init: expected 'procrustes', 'previous' or Poses, got {init!r}")
+    poses = Poses(start.rotations.copy(), start.translations.copy(), start.scales.copy())
+    E = np.zeros(N)
+    iters = np.zeros(N, dtype=np.int64)
+    conv = np.zeros(N, dtype=bool)
+    if init == "previous":
+        blocks = [np.array([n]) for n in range(N)]
+    else:
+        size = _block_size(V, 4 + 3 * B)
+        blocks = [np.arange(s, min(N, s + size)) for s in range(0, N, size)]
+    for k, idx in enumerate(blocks):
+        block = _take(poses, idx)
+        if init == "previous" and idx[0] > 0:
+            prev = _take(poses, idx - 1)
+            if prob.energy(prev, idx)[0] < prob.energy(block, idx)[0]:
+                block = prev
+        block, E[idx], iters[idx], conv[idx] = _lm_block(prob, block, idx, max_iterations, tol)
+        _put(poses, idx, block)
+        if progress is not None:
+            progress((k + 1) / len(blocks), f"fitting poses: frame {idx[-1] + 1} of {N}")
+    poses.rotations = quat_canonical(quat_normalize(poses.rotations))
+    posed = hybrid_skin(model, poses, groups)
+    err = np.linalg.norm(posed - y, axis=2)
+    wsum = float(V) if w is None else w.sum()
+    e2 = err ** 2 if w is None else err ** 2 * w
+    return PoseFit(poses, np.sqrt(e2.sum(axis=1) / wsum), err.astype(np.float32), E, iters, conv)
