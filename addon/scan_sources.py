@@ -216,7 +216,11 @@ def plan_import(context, filepath="", directory="", names=(), source_object="", 
                 require_registered=False, object_frames='AUTO', source_range=(0, 0)) -> ImportPlan:
     """Validate the inputs (see ``operators/import_scans.py``) and prepare the reading.  Blender data
     (Alembic, objects) is sampled here; files are read later by ``plan.read`` in the worker."""
-    kind, paths = resolve_files(filepath, directory, names)
+    picked_file = any(names) or (filepath and not os.path.isdir(bpy.path.abspath(filepath)))
+    if source_object and not picked_file:   # e.g. confirmed in the file browser without picking a file
+        kind, paths = None, []
+    else:
+        kind, paths = resolve_files(filepath, directory, names)
     if kind is None and not source_object:
         raise ArticulaInputError("nothing to import: give files, a folder, or a source object")
     if kind == 'MESHES':

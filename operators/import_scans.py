@@ -24,6 +24,9 @@ class ARTICULA_OT_import_scans(JobOperator, bpy.types.Operator, ImportHelper):
     job_label = "Import scans"
 
     filename_ext = ""
+    # SKIP_SAVE (unlike ImportHelper's): a remembered path would make the next button press re-import
+    # it without opening the file browser.
+    filepath: bpy.props.StringProperty(subtype='FILE_PATH', options={'HIDDEN', 'SKIP_SAVE'})
     filter_glob: bpy.props.StringProperty(default="*.obj;*.ply;*.stl;*.off;*.abc;*.mdd;*.pc2",
                                           options={'HIDDEN'})
     directory: bpy.props.StringProperty(subtype='DIR_PATH', options={'HIDDEN', 'SKIP_SAVE'})

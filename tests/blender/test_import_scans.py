@@ -237,7 +237,7 @@ def test_point_cache_with_base_file_or_selected_object(tmp_path, ext, pkg):
     assert counts() == before
 
 
-def test_shape_keys_and_animation_of_an_object(pkg):
+def test_shape_keys_and_animation_of_an_object(pkg, tmp_path):
     me = bpy.data.meshes.new("m")
     me.from_pydata(CUBE_VERTS.tolist(), [], CUBE_FACES)
     ob = bpy.data.objects.new("Src", me)
@@ -249,7 +249,9 @@ def test_shape_keys_and_animation_of_an_object(pkg):
         kb = ob.shape_key_add(name=f"k{k}")
         kb.data.foreach_set("co", frames[k].ravel())
     sq = pkg("addon.scan_sequence")
-    assert bpy.ops.articula.import_scans(source_object="Src") == {'FINISHED'}
+    # as the file browser sends it when confirmed with no file picked: the object is the source
+    assert bpy.ops.articula.import_scans(source_object="Src", directory=str(tmp_path),
+                                         filepath=str(tmp_path) + os.sep, files=[{"name": ""}]) == {'FINISHED'}
     got, _ = sq.scan_frames(bpy.context.active_object)
     assert got.shape == (3, 8, 3)
     assert np.allclose(got[0], CUBE_VERTS + [1, 2, 3], atol=1e-6)
