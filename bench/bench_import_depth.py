@@ -6,8 +6,9 @@ box walking across, plus 1 mm Gaussian depth noise, written as 16-bit millimetre
 (Up filter).  Import settings: background subtraction (median of the first 10 frames), floor removal,
 normals, voxel 0.01 m (``--voxel``).
 
-Printed: the whole operator run (wall clock, synchronous as in scripts) and its split, measured inside
-the operator: PNG decode, per-frame processing, set-up, cache write, Blender objects; then the cost of one frame change (frame_change_pre handler, points written to
+Printed: the whole operator run (wall clock and CPU time of the process, synchronous as in scripts) and
+its split, measured inside the operator: set-up, the frame loop (decode + processing, in worker
+threads; the per-stage figures are summed over the threads), cache write, Blender objects; then the cost of one frame change (frame_change_pre handler, points written to
 the mesh) and the cache size.
 
 Usage: ./run bench import_depth [--frames 300] [--voxel 0.01] [--keep DIR]
@@ -88,14 +89,19 @@ def main(argv=None) -> int:
         n = args.frames
         _common.report("import_depth operator, total", total, "s", f"{n} frames 640x480, target < 10 s; "
                        f"CPU time {cpu:.2f} s (wall time grows when other processes share the cores)")
-        _common.report("  decode (PNG)", tm["decode"], "s", f"{1000 * tm['decode'] / n:.1f} ms/frame")
-        _common.report("  processing (solver, per frame)", tm["processing"], "s",
-                       f"{1000 * tm['processing'] / n:.1f} ms/frame; background, floor, normals, voxel {args.voxel} m")
-        _common.report("  set-up (background median, floor fit) + concatenation",
-                       tm["solver"] - tm["decode"] - tm["processing"], "s")
+        w = tm["workers"]
+        _common.report("  set-up: background median, floor fit (wall)", tm["setup"], "s")
+        _common.report("  frames: decode + processing (wall)", tm["frames"], "s",
+                       f"{1000 * tm['frames'] / n:.1f} ms/frame, {w} worker thread(s)")
+        _common.report("    decode (PNG)", tm["decode"], "s", f"summed over the threads; {1000 * tm['decode'] / n:.1f} ms/frame")
+        _common.report("    processing", tm["processing"], "s",
+                       f"summed over the threads; {1000 * tm['processing'] / n:.1f} ms/frame; "
+                       f"range clip, background, floor, normals, voxel {args.voxel} m")
+        _common.report("  concatenate", tm["concatenate"], "s")
         _common.report("  cache write", tm["cache"], "s", f"{os.path.getsize(cache) / 1e6:.1f} MB, {len(seq.points)} points")
         _common.report("  Blender objects + first frame", tm["blender"], "s")
-        _common.report("  rest (prepare: listing, intrinsics)", total - tm["solver"] - tm["cache"] - tm["blender"], "s")
+        _common.report("  rest (prepare: listing, intrinsics; operator overhead)",
+                       total - tm["solver"] - tm["cache"] - tm["blender"], "s")
         _common.report("points per frame", f"{sizes.min()}-{sizes.max()}", "", "; ".join(seq.notes))
         scene = bpy.context.scene
         t = time.perf_counter()

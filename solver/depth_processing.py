@@ -48,6 +48,7 @@ class DepthOptions:
     voxel_size: float = 0.0             # 0 = keep every point
     estimate_normals: bool = True
     seed: int = 0
+    workers: int = 0                    # threads for decoding/processing frames (0 = min(4, CPU count))
 
     def validate(self) -> None:
         if not (self.depth_scale > 0 and math.isfinite(self.depth_scale)):
@@ -225,16 +226,22 @@ def grid_normals(grid: np.ndarray, rows=None, cols=None, jump: float = 0.01, mas
     as invalid neighbours.  float32.
     """
     g = grid.astype(np.float32, copy=False)
+    h, w = g.shape[:2]
     full = rows is None
     if full:
-        rows, cols = np.nonzero(np.ones(g.shape[:2], bool))
-    h, w = g.shape[:2]
-    padded = np.full((h + 2, w + 2, 3), np.nan, np.float32)
+        rows, cols = np.nonzero(np.ones((h, w), bool))
+    rows, cols = np.asarray(rows), np.asarray(cols)
+    if len(rows) == 0:
+        return np.zeros((h, w, 3) if full else (0, 3), np.float32)
+    # work on the bounding box of the requested pixels (plus their neighbours), padded with NaN
+    r0, r1 = max(int(rows.min()) - 1, 0), min(int(rows.max()) + 2, h)
+    c0, c1 = max(int(cols.min()) - 1, 0), min(int(cols.max()) + 2, w)
+    padded = np.full((r1 - r0 + 2, c1 - c0 + 2, 3), np.nan, np.float32)
     if mask is None:
-        padded[1:-1, 1:-1] = g
+        padded[1:-1, 1:-1] = g[r0:r1, c0:c1]
     else:
-        np.copyto(padded[1:-1, 1:-1], g, where=mask[..., None])
-    r, c = np.asarray(rows) + 1, np.asarray(cols) + 1
+        np.copyto(padded[1:-1, 1:-1], g[r0:r1, c0:c1], where=mask[r0:r1, c0:c1, None])
+    r, c = rows - r0 + 1, cols - c0 + 1
     p = padded[r, c]
 
     def tangent(dr, dc):

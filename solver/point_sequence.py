@@ -38,6 +38,7 @@ FORMAT = "articula-points/1"
 DEPTH_EXTENSIONS = (".png", ".exr")
 CLOUD_EXTENSIONS = (".ply", ".xyz", ".npy", ".txt")
 COLOR_EXTENSIONS = (".png", ".jpg", ".jpeg")
+_CHUNK = 8  # consecutive depth frames decoded and processed together by one pool thread
 
 
 # ----------------------------------------------------------------------------------------- files
@@ -219,8 +220,8 @@ class _Prefetch:
     """Raw frames decoded ahead, consecutive PNG frames in batches (``png16.read_png16_many``
     unfilters a batch of equal-size frames together, faster on Paeth/Average-filtered files)."""
 
-    def __init__(self, frames, batch: int = 8):
-        self.frames, self.batch, self.ready, self.last = frames, batch, {}, -2
+    def __init__(self, frames, batch: int = 8, start: int = -1):
+        self.frames, self.batch, self.ready, self.last = frames, batch, {}, start - 1
 
     def raw(self, k: int) -> np.ndarray:
         sequential, self.last = k == self.last + 1, k
@@ -279,6 +280,7 @@ def import_depth(frames: list, intr, opts: dp.DepthOptions, progress=_no_progres
     median of ``opts.background_frames`` frames spread evenly over the recording is used (right
     wherever the subject covers a pixel in fewer than half of those frames, i.e. when it moves).
     ``colors``: optional list (one per frame) of callables returning (H, W, 3) float images.
+    Frames are decoded and processed in chunks of 8 by ``opts.workers`` threads (0 = up to 4).
     The floor plane is fitted once, on points pooled from up to 8 frames spread over the recording
     (after the range clip, before background subtraction: the floor is part of the static scene), and
     points on or below it are removed from every frame.
@@ -291,7 +293,7 @@ def import_depth(frames: list, intr, opts: dp.DepthOptions, progress=_no_progres
                                  "the counts must match")
     t_decode = 0.0
     t0 = time.perf_counter()
-    prefetch = _Prefetch(frames)
+    prefetch = _Prefetch(frames)  # for the set-up frames (background, floor), read out of order
     first_raw = prefetch.raw(0)
     prefetch.ready[0] = first_raw
     t_decode += time.perf_counter() - t0
@@ -346,25 +348,57 @@ def import_depth(frames: list, intr, opts: dp.DepthOptions, progress=_no_progres
         else:
             notes.append("no floor found (no plane within "
                          f"{opts.floor_max_tilt:g} deg of level holding {100 * opts.floor_min_fraction:g}% of the points)")
+    def run_chunk(ks):
+        """Decode and process consecutive frames ks (runs in a pool thread; no shared state written)."""
+        pref = _Prefetch(frames, start=ks[0])
+        done, t_dec, t_pro = [], 0.0, 0.0
+        for k in ks:
+            t = time.perf_counter()
+            z = decoded[k] if k in decoded else _frame_metres(frames[k], opts, shape, frames[0].name, pref.raw(k))
+            col = colors[k]() if colors is not None else None
+            t1 = time.perf_counter()
+            done.append(dp.process_depth(z, rays, opts, bg, floor, col))
+            t_dec, t_pro = t_dec + t1 - t, t_pro + time.perf_counter() - t1
+        return done, t_dec, t_pro
+
+    n = len(frames)
+    t_setup = time.perf_counter() - t0
+    t_frames = time.perf_counter()
+    chunks = [list(range(i, min(i + _CHUNK, n))) for i in range(0, n, _CHUNK)]
+    workers = opts.workers or min(4, os.cpu_count() or 1)
     out = []
     t_proc = 0.0
-    for k in range(len(frames)):
-        progress(0.05 + 0.95 * k / len(frames), f"frame {k + 1}/{len(frames)}")
-        z = metres(k)
-        decoded.pop(k, None)
-        col = None
-        if colors is not None:
-            t = time.perf_counter()
-            col = colors[k]()
-            t_decode += time.perf_counter() - t
-        t = time.perf_counter()
-        out.append(dp.process_depth(z, rays, opts, bg, floor, col))
-        t_proc += time.perf_counter() - t
+
+    def collect(result, ks):
+        nonlocal t_decode, t_proc
+        done, t_dec, t_pro = result
+        out.extend(done)
+        t_decode, t_proc = t_decode + t_dec, t_proc + t_pro
+        progress(0.05 + 0.95 * (ks[-1] + 1) / n, f"frame {ks[-1] + 1}/{n}")
+
+    if workers <= 1 or len(chunks) == 1:
+        for ks in chunks:
+            collect(run_chunk(ks), ks)
+    else:  # numpy and zlib release the GIL: frames are decoded and processed in parallel, kept in order
+        from concurrent.futures import ThreadPoolExecutor
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            futures = [pool.submit(run_chunk, ks) for ks in chunks]
+            try:
+                for fut, ks in zip(futures, chunks):
+                    collect(fut.result(), ks)
+            except BaseException:
+                for fut in futures:
+                    fut.cancel()
+                raise
     progress(1.0, "done")
+    t_frames = time.perf_counter() - t_frames
+    t = time.perf_counter()
     seq = PointSequence.from_frames(out, world_from_sensor=dp.world_from_sensor(floor), floor=floor,
                                     intrinsics=(intr.width, intr.height, intr.fx, intr.fy, intr.cx, intr.cy),
                                     frame_names=[f.name for f in frames], notes=notes)
-    seq.timings = {"decode": t_decode, "processing": t_proc}
+    # setup/frames/concatenate: wall seconds; decode/processing: seconds summed over the worker threads
+    seq.timings = {"setup": t_setup, "frames": t_frames, "concatenate": time.perf_counter() - t,
+                   "decode": t_decode, "processing": t_proc, "workers": min(workers, len(chunks))}
     return seq
 
 

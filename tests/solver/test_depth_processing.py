@@ -266,3 +266,18 @@ def test_point_cloud_files(tmp_path):
     seq = ps.import_clouds([str(tmp_path / "f_0.npy")] * 2, opts(voxel_size=0.2, estimate_normals=True))
     assert seq.frame_count == 2 and seq.normals.shape == seq.points.shape
     assert len(seq.points[seq.frame(0)]) < 500
+
+
+def test_threaded_import_equals_sequential_and_reports_the_first_bad_frame(tmp_path):
+    write_recording(tmp_path / "rec", n=19)
+    paths = ps.list_frames(str(tmp_path / "rec"), ps.DEPTH_EXTENSIONS)
+    o = dict(remove_floor=True, estimate_normals=True, voxel_size=0.02, subtract_background=True)
+    one = ps.import_depth(ps.png_frames(paths), INTR, opts(workers=1, **o))
+    three = ps.import_depth(ps.png_frames(paths), INTR, opts(workers=3, **o))
+    np.testing.assert_array_equal(one.offsets, three.offsets)
+    np.testing.assert_array_equal(one.points, three.points)
+    np.testing.assert_array_equal(one.normals, three.normals)
+    write_png16(paths[17], np.zeros((120, 160), np.uint8))
+    write_png16(paths[11], np.zeros((60, 80), np.uint16))   # frame 11 is in the second chunk of 8
+    with pytest.raises(ArticulaInputError, match=r"depth_11.png: 80x60 pixels"):
+        ps.import_depth(ps.png_frames(paths), INTR, opts(workers=3))
