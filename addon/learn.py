@@ -37,7 +37,7 @@ from ..solver.model import Skeleton
 from ..solver.scan_sequence import list_scan_files, natural_sorted, read_scan_files
 from ..solver.skinning import hybrid_skin
 from ..solver.surface_distance import per_vertex_scan_distances
-from . import rig_io, scan_sequence
+from . import rig_builder, rig_io, scan_sequence
 
 MIN_SCANS = 3
 ERROR_ATTRIBUTE = "articula_error_mm"
@@ -317,7 +317,7 @@ def build(context, outcome: LearnOutcome, name: str = ""):
     Returns ``(rig, action)``.  Call inside ``scene_guard``."""
     inp = outcome.input
     bundle = Bundle(outcome.model, outcome.poses, {"source": "learn_rig", "scans": inp.source})
-    rig_io.rig_builder.check_model(bundle.model, bundle.poses)
+    rig_builder.check_model(bundle.model, bundle.poses)
     rig, action = rig_io.build_bundle(context, bundle, name or f"{inp.name} Rig", True, inp.frame_start)
     add_heat_map(rig.mesh.data, outcome.vertex_error_mm)
     rig.armature[REPORT_PROPERTY] = json.dumps(report_json(outcome))

@@ -52,6 +52,36 @@ def _write_json(path: str, doc: dict) -> None:
     os.replace(tmp, path)
 
 
+def _save_blend(blend: str, paths, outcome) -> None:
+    """Save a .blend with the scans (scan-sequence object, frames 1..N, cache beside the file) and the
+    learned rig; a .blend this command created is removed again if a step fails."""
+    existed = os.path.exists(blend)
+    bpy.ops.wm.save_as_mainfile(filepath=blend)            # the scans' frame cache goes beside it
+    try:
+        try:
+            bpy.ops.articula.import_scans(directory=os.path.dirname(paths[0]),
+                                          files=[{"name": os.path.basename(p)} for p in paths],
+                                          require_registered=True, frame_start=1)
+        except RuntimeError as exc:
+            raise ArticulaInputError(str(exc).replace("Error: ", "").strip()) from None
+        outcome.input.frame_start = 1
+        with jobs.scene_guard():
+            learn.build(bpy.context, outcome, f"{outcome.input.name} Rig")
+        prefs = bpy.context.preferences.filepaths
+        versions, prefs.save_version = prefs.save_version, 0   # no .blend1 of the file saved just before
+        try:
+            bpy.ops.wm.save_mainfile()
+        finally:
+            prefs.save_version = versions
+    except BaseException:
+        if not existed:
+            try:
+                os.remove(blend)
+            except OSError:
+                pass
+        raise
+
+
 def run(args) -> int:
     for path in (args.out, args.report, args.blend):
         learn.check_output_path(path or "")
@@ -67,24 +97,8 @@ def run(args) -> int:
         _write_json(args.report, report_document(outcome))
         print(f"wrote {args.report}")
     if args.blend:
-        blend = os.path.abspath(args.blend)
-        bpy.ops.wm.save_as_mainfile(filepath=blend)            # the scans' frame cache goes beside it
-        try:
-            bpy.ops.articula.import_scans(directory=os.path.dirname(paths[0]),
-                                          files=[{"name": os.path.basename(p)} for p in paths],
-                                          require_registered=True, frame_start=1)
-        except RuntimeError as exc:
-            raise ArticulaInputError(str(exc).replace("Error: ", "").strip()) from None
-        outcome.input.frame_start = 1
-        with jobs.scene_guard():
-            rig, _action = learn.build(bpy.context, outcome, f"{inp.name} Rig")
-        prefs = bpy.context.preferences.filepaths
-        versions, prefs.save_version = prefs.save_version, 0
-        try:
-            bpy.ops.wm.save_mainfile()
-        finally:
-            prefs.save_version = versions
-        print(f"saved {args.blend}: scans and rig {rig.armature.name!r}")
+        _save_blend(os.path.abspath(args.blend), paths, outcome)
+        print(f"saved {args.blend}: the scans and the learned rig on frames 1..{len(paths)}")
     return 0
 
 

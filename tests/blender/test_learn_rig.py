@@ -274,6 +274,18 @@ def test_learn_matches_a_direct_solver_run(pkg, tmp_path, truth, needs_learn):
     assert key_frames(pkg, arm) == {tuple(range(1, M_SCANS + 1))}
 
 
+def test_learn_from_object_for_scripts(pkg, tmp_path, truth, needs_learn):
+    """The synchronous entry point the demo uses: same rig layout, poses on the scan frames."""
+    learn = pkg("addon.learn")
+    model, poses, scans = truth
+    ob = import_sequence(pkg, tmp_path, scans, model.faces)
+    rig, action, outcome = learn.learn_from_object(bpy.context, ob, learn.LearnOptions(seed=0), name="Script")
+    assert rig.armature.name == "Script" and rig.mesh.data.attributes.get(learn.ERROR_ATTRIBUTE) is not None
+    assert tuple(action.frame_range) == (FRAME_START, FRAME_START + M_SCANS - 1)
+    assert len(outcome.poses) == M_SCANS and outcome.vertex_error_mm.shape == (scans.shape[1],)
+    assert "mean" in learn.error_summary(outcome.report)
+
+
 def test_cancel_leaves_scene_unchanged(pkg, tmp_path, truth, needs_learn, monkeypatch):
     """Esc during the solver run (the job's Progress cancelled half-way) creates nothing."""
     jobs = pkg("addon.jobs")
