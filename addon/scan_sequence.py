@@ -295,18 +295,30 @@ def scan_frame_meshes(ob: bpy.types.Object) -> list:
 # -- handlers -----------------------------------------------------------------------------------------
 
 
+_failed = set()   # objects whose playback failed once (reported once, not every frame)
+
+
 @bpy.app.handlers.persistent
 def on_frame_change(scene, depsgraph=None):
     frame = scene.frame_current
     for ob in scene.objects:
         if ob.type == 'MESH' and ob.articula.kind == 'SCAN_SEQUENCE' and ob.mode != 'EDIT' \
                 and ob.articula.cache_file:
-            show_frame(ob, frame)
+            try:
+                ok = show_frame(ob, frame)
+            except Exception as exc:   # never let one object break playback of the others
+                ok, why = False, f"{type(exc).__name__}: {exc}"
+            else:
+                why = f"frame cache {ob.articula.cache_file} missing or not matching the mesh"
+            if not ok and ob.name not in _failed:
+                _failed.add(ob.name)
+                print(f"Articula: {ob.name}: cannot show scan frame {frame} ({why})")
 
 
 @bpy.app.handlers.persistent
 def on_load_post(*_args):
     _loaded.clear()
+    _failed.clear()
 
 
 @bpy.app.handlers.persistent

@@ -400,3 +400,16 @@ def test_alembic_with_changing_topology_is_unregistered(tmp_path, pkg):
     assert sizes == sorted(sizes) and sizes[0] < sizes[-1]
     bpy.context.scene.frame_set(5)
     assert len(seq_ob.data.polygons) == sizes[-1]
+
+
+def test_missing_cache_does_not_break_playback(tmp_path, capsys):
+    frames = make_frames(3, seed=11)
+    bpy.ops.articula.import_scans(directory=write_folder(str(tmp_path / "a"), frames), name="A")
+    bpy.ops.articula.import_scans(directory=write_folder(str(tmp_path / "b"), frames[::-1]), name="B")
+    a, b = bpy.data.objects["A"], bpy.data.objects["B"]
+    os.remove(bpy.path.abspath(a.articula.cache_file))
+    a.articula.cache_file = str(tmp_path / "gone.npy")   # a path never loaded before
+    bpy.context.scene.frame_set(2)
+    bpy.context.scene.frame_set(3)
+    assert np.array_equal(evaluated(b), frames[::-1][2])      # the other object still plays
+    assert capsys.readouterr().out.count("A: cannot show scan frame") == 1
