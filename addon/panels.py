@@ -51,6 +51,10 @@ class ARTICULA_PT_rig(_ArticulaPanel, bpy.types.Panel):
     def draw(self, context):
         col = self.layout.column(align=True)
         _button(col, "articula.learn_rig", "Learn Rig from Scans", 'ARMATURE_DATA')
+        ob = context.active_object
+        if ob is not None and ob.type == 'MESH' and "articula_error_scale_mm" in ob.data:
+            col.label(text=f"Error heat map: blue 0 mm to red {ob.data['articula_error_scale_mm']:.1f} mm",
+                      icon='COLOR')
         _button(col, "articula.build_rig", "Build Rig from Bundle…", 'OUTLINER_OB_ARMATURE')
         _button(col, "articula.export_bundle", "Save Rig as Bundle…", 'EXPORT')
         _button(col, "articula.export_lbs", "Convert to Linear-Blend Rig", 'MOD_ARMATURE')
