@@ -1,0 +1,88 @@
+"""Evaluation metrics of learned rigs: reconstruction error, its statistics in millimetres, joint-centre
+error against a reference rig, and Dem Bones' RMSE.
+
+* :func:`scan_to_model_distances` — the thesis' reconstruction metric (spec §4.1, §6.1): for every vertex
+  of every target scan, the Euclidean distance to the closest point of the posed model's *surface*
+  (triangles, not vertices), one direction (scan → model).  Exact, by
+  :func:`solver.surface_distance.distance_to_surface`.
+* :func:`statistics_mm` — mean, std, median, MAD, IQR, max of metre values, in mm
+  (:func:`solver.surface_distance.error_statistics`: MAD = median |x − median|; Q1/Q3 = medians of the lower
+  and upper halves, the middle element excluded for odd n).
+* :func:`match_joints` — a learned skeleton has its own joint order and count; each learned joint centre
+  is assigned to a distinct reference joint minimising the summed distance (Hungarian algorithm,
+  ``scipy.optimize.linear_sum_assignment``).
+* :func:`dem_bones_rmse` — the RMSE Dem Bones prints and publishes: ``sqrt(Σ_frames Σ_vertices ‖x̂ − x‖² /
+  (N·V))``, i.e. the root mean square of per-vertex Euclidean distances (not divided by 3 coordinates), in
+  the units of the data.
+
+Inputs in metres unless stated.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import ArticulaInputError
+from .surface_distance import distance_to_surface, error_statistics
+
+
+def _points(name, x, ndim):
+    a = np.asarray(x, dtype=np.float64)
+    if a.ndim != ndim or a.shape[-1] != 3:
+        want = "(V, 3)" if ndim == 2 else "(N, V, 3)"
+        raise ArticulaInputError(f"{name}: expected shape {want}, got {a.shape}")
+    bad = np.argwhere(~np.isfinite(a))
+    if len(bad):
+        raise ArticulaInputError(f"{name}: non-finite value at index {tuple(int(i) for i in bad[0])}")
+    return a
+
+
+def scan_to_model_distances(scans, posed, faces):
+    """``(N, V_scan)`` distances (m) of every scan vertex to the posed model surface of the same frame.
+
+    scans ``(N, V_scan, 3)`` target vertices (registered or not); posed ``(N, V, 3)`` the model posed per
+    frame; faces ``(F, 3)`` the model's triangles."""
+    scans, posed = _points("scans", scans, 3), _points("posed", posed, 3)
+    if len(scans) != len(posed):
+        raise ArticulaInputError(f"posed: {len(posed)} frames for {len(scans)} scans")
+    faces = np.asarray(faces)
+    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+        raise ArticulaInputError(f"faces: expected shape (F, 3) with F > 0, got {faces.shape}")
+    if faces.min() < 0 or faces.max() >= posed.shape[1]:
+        raise ArticulaInputError(f"faces: indices must lie in 0..{posed.shape[1] - 1}")
+    return np.stack([distance_to_surface(s, p, faces) for s, p in zip(scans, posed)])
+
+
+def statistics_mm(values_m) -> dict:
+    """Statistics (``mean std median mad iqr max`` in mm, and ``count``) of distances given in metres."""
+    stats = error_statistics(values_m)
+    return {k: (v if k == "count" else 1000.0 * v) for k, v in stats.items()}
+
+
+@dataclass
+class JointMatch:
+    """learned (K,), reference (K,): indices of the matched joints (K = min of the two counts);
+    distances (K,): their distances in metres, in the order of ``learned``."""
+    learned: np.ndarray
+    reference: np.ndarray
+    distances: np.ndarray
+
+
+def match_joints(learned, reference) -> JointMatch:
+    """Assign every learned joint centre ``(J1, 3)`` to a distinct reference joint ``(J2, 3)`` (or the other
+    way round when J1 > J2) so that the summed distance is minimal."""
+    from scipy.optimize import linear_sum_assignment
+    a, b = _points("learned", learned, 2), _points("reference", reference, 2)
+    if not len(a) or not len(b):
+        raise ArticulaInputError(f"match_joints: need joints on both sides, got {len(a)} and {len(b)}")
+    cost = np.linalg.norm(a[:, None] - b[None], axis=2)
+    i, j = linear_sum_assignment(cost)
+    return JointMatch(i, j, cost[i, j])
+
+
+def dem_bones_rmse(reconstructed, targets) -> float:
+    """Dem Bones' RMSE (module docstring) of ``reconstructed`` against ``targets``, both ``(N, V, 3)``."""
+    x, y = _points("reconstructed", reconstructed, 3), _points("targets", targets, 3)
+    if x.shape != y.shape:
+        raise ArticulaInputError(f"reconstructed: shape {x.shape} differs from targets {y.shape}")
+    d = x - y
+    return float(np.sqrt(np.einsum("nvi,nvi->", d, d) / (x.shape[0] * x.shape[1])))
