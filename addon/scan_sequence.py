@@ -10,9 +10,9 @@ Storage
       frame change reads only that frame.  The object's mesh carries the faces (first frame's topology).
     * unregistered sequences (topology changes between frames): a folder ``<name>-<id>.scans/`` of
       memory-mapped ``.npy`` arrays (concatenated positions, face sizes and corner vertices, and their
-      per-frame offsets); a frame change rebuilds the mesh geometry from one frame's slices.  Chosen over one mesh datablock per frame because the .blend stays small, there is one
-      storage path for both kinds, and rebuilding costs well under a frame's time for scan-sized
-      meshes (``./run bench import`` prints the measured per-frame cost).
+      per-frame offsets); a frame change rebuilds the mesh geometry from one frame's slices.  Chosen over one mesh datablock per frame
+      (swapped into the object: ~0.1 ms) because the .blend stays small and both kinds share one
+      storage path; the price is 25-60 ms per frame change at 50k vertices (``./run bench import``).
 
 Playback
     A persistent ``frame_change_post`` handler writes the current frame into every scan-sequence
