@@ -10,9 +10,10 @@ Storage
       frame change reads only that frame.  The object's mesh carries the faces (first frame's topology).
     * unregistered sequences (topology changes between frames): a folder ``<name>-<id>.scans/`` of
       memory-mapped ``.npy`` arrays (concatenated positions, face sizes and corner vertices, and their
-      per-frame offsets); a frame change rebuilds the mesh geometry from one frame's slices.  Chosen over one mesh datablock per frame
-      (swapped into the object: ~0.1 ms) because the .blend stays small and both kinds share one
-      storage path; the price is 25-60 ms per frame change at 50k vertices (``./run bench import``).
+      per-frame offsets); a frame change rebuilds the mesh geometry from one frame's slices.
+      Chosen over one mesh datablock per frame (swapped into the object: ~0.1 ms) because the .blend
+      stays small and both kinds share one storage path; the price is 25-60 ms per frame change at
+      50k vertices (``./run bench import``).
 
 Playback
     A persistent ``frame_change_post`` handler writes the current frame into every scan-sequence
