@@ -44,7 +44,9 @@ class DepthOptions:
     floor_min_fraction: float = 0.05    # the floor must hold at least this share of the pooled points
     subtract_background: bool = False
     background_frames: int = 10         # frames (spread over the recording) for the median background
-    background_tolerance: float = 0.05  # pixels not at least this much in front of the background are removed
+    background_tolerance: float = 0.05  # pixels not at least tolerance + noise * z^2 in front of the
+    background_noise: float = 0.01      # background are removed (1/m; depth noise of structured-light and
+                                        # ToF sensors grows ~z^2: +1 cm at 1 m, +16 cm at 4 m)
     voxel_size: float = 0.0             # 0 = keep every point
     estimate_normals: bool = True
     seed: int = 0
@@ -57,7 +59,7 @@ class DepthOptions:
             raise ArticulaInputError(f"depth range [{self.depth_min}, {self.depth_max}] m is empty or negative")
         if self.voxel_size < 0:
             raise ArticulaInputError(f"voxel size must be >= 0, got {self.voxel_size}")
-        if self.floor_tolerance <= 0 or self.background_tolerance <= 0:
+        if self.floor_tolerance <= 0 or self.background_tolerance <= 0 or self.background_noise < 0:
             raise ArticulaInputError("floor and background tolerances must be positive")
         if self.background_frames < 1:
             raise ArticulaInputError("background needs at least one frame")
@@ -106,14 +108,17 @@ def median_background(depths_m) -> np.ndarray:
     return med
 
 
-def foreground_mask(depth_m: np.ndarray, background_m: np.ndarray, tolerance: float) -> np.ndarray:
-    """True where a pixel is valid and at least ``tolerance`` in front of the background.
+def foreground_mask(depth_m: np.ndarray, background_m: np.ndarray, tolerance: float,
+                    noise: float = 0.0) -> np.ndarray:
+    """True where a pixel is valid and at least ``tolerance + noise * b^2`` in front of the
+    background depth ``b`` (the sensor's depth noise grows with the square of the distance).
 
     Pixels whose background is unknown (NaN) count as foreground when valid.
     """
     valid = np.isfinite(depth_m)
     with np.errstate(invalid="ignore"):
-        in_front = depth_m < background_m - tolerance
+        margin = tolerance + noise * background_m * background_m if noise else tolerance
+        in_front = depth_m < background_m - margin
     return valid & (in_front | ~np.isfinite(background_m))
 
 
@@ -350,7 +355,7 @@ def frame_mask(depth_m: np.ndarray, grid: np.ndarray, opts: DepthOptions, backgr
     """Which pixels survive range clip (NaN already), background subtraction and floor removal."""
     keep = np.isfinite(depth_m)
     if background is not None:
-        keep &= foreground_mask(depth_m, background, opts.background_tolerance)
+        keep &= foreground_mask(depth_m, background, opts.background_tolerance, opts.background_noise)
     if floor is not None:
         with np.errstate(invalid="ignore"):
             keep &= plane_distance(grid, floor) >= opts.floor_tolerance

@@ -397,3 +397,39 @@ def test_failure_while_building_restores_scene_settings(tmp_path, monkeypatch):
     assert (scene.frame_start, scene.frame_end, scene.render.resolution_x, scene.render.resolution_y) == (10, 20, 1000, 500)
     assert scene.camera is None
     assert not (tmp_path / "c.npz").exists()
+
+
+def _box_mesh(lo, hi):
+    c = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])], float)
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    return c, np.array([t for a, b, cc, d in quads for t in ((a, b, cc), (a, cc, d))], np.int64)
+
+
+def test_sample_recording_with_kinect_noise(tmp_path):
+    """A recording from sample_scenes.depth_recording (z-buffer rasteriser, Kinect v1 noise model,
+    floor and back wall, ground-truth camera): the fitted floor gives the true camera height and tilt,
+    and after floor and background removal the points lie on the moving subject."""
+    from articula.sample_scenes.depth_recording import generate_depth
+    boxes = []
+    for k in range(6):
+        x = -0.5 + 0.2 * k
+        boxes.append(((x - 0.2, -0.15, 0.0), (x + 0.2, 0.15, 1.7)))
+    meshes = [_box_mesh(*b) for b in boxes]
+    frames = np.stack([m[0] for m in meshes])
+    info = generate_depth(str(tmp_path / "sample"), frames, meshes[0][1], resolution=(320, 240),
+                          floor=True, background=True, seed=1)
+    gt = np.load(info["ground_truth"])
+    c2w = gt["cam_to_world"][0]
+    assert bpy.ops.articula.import_depth(directory=str(tmp_path / "sample"), subtract_background=True,
+                                         background_frames=6, cache_file=str(tmp_path / "c.npz")) == {'FINISHED'}
+    seq = pkg_pcs().load_sequence(str(tmp_path / "c.npz"))
+    mine = np.asarray(seq.world_from_sensor)
+    assert abs(mine[2, 3] - c2w[2, 3]) < 0.01                        # camera height above the floor (z = 0)
+    tilt = lambda m: np.degrees(np.arcsin(-m[2, 2]))                  # optical axis below the horizon
+    assert abs(tilt(mine) - tilt(c2w)) < 0.3
+    for k, (lo, hi) in enumerate(boxes):
+        world = seq.points[seq.frame(k)] @ c2w[:3, :3].T + c2w[:3, 3]     # with the TRUE camera pose
+        assert len(world) > 500
+        inside = np.all((world > np.array(lo) - 0.03) & (world < np.array(hi) + 0.03), axis=1)
+        assert inside.mean() > 0.99, (k, inside.mean())
+        assert (world[:, 2] > 0.0).all()                                # nothing of the floor is left
