@@ -26,7 +26,7 @@ def run(args) -> int:
                  remove_floor=not args.keep_floor, floor_tolerance=args.floor_tolerance,
                  subtract_background=args.subtract_background or bool(args.background),
                  background_frames=args.background_frames, background_tolerance=args.background_tolerance,
-                 background_noise=args.background_noise,
+                 depth_noise=args.depth_noise,
                  voxel_size=args.voxel, estimate_normals=not args.no_normals, frame_start=args.frame_start,
                  point_radius=args.radius)
     if args.intrinsics:
@@ -74,8 +74,9 @@ def add_commands(sub):
     p.add_argument("--background", metavar="FILE", help="depth frame of the empty scene")
     p.add_argument("--background-frames", type=int, default=10)
     p.add_argument("--background-tolerance", type=float, default=0.05, help="metres (default 0.05)")
-    p.add_argument("--background-noise", type=float, default=0.01,
-                   help="extra tolerance per squared metre of background depth, 1/m (default 0.01)")
+    p.add_argument("--depth-noise", type=float, default=0.01,
+                   help="floor/background tolerances grow by this times depth^2 along the ray, 1/m "
+                        "(default 0.01; 0 = fixed tolerances)")
     p.add_argument("--voxel", type=float, default=0.0, help="voxel size in metres (0 = keep all points)")
     p.add_argument("--no-normals", action="store_true", help="do not store per-point normals")
     p.add_argument("--color", metavar="FOLDER", help="colour frames (PNG/JPG) registered to the depth frames")

@@ -77,10 +77,10 @@ class ARTICULA_OT_import_depth(JobOperator, bpy.types.Operator):
     background_tolerance: bpy.props.FloatProperty(
         name="Background Tolerance", default=0.05, min=0.001, unit='LENGTH',
         description="Pixels must be this much (plus the noise term) in front of the background to be kept")
-    background_noise: bpy.props.FloatProperty(
-        name="Background Noise", default=0.01, min=0.0, precision=4,
-        description="Extra tolerance per squared metre of background depth (1/m): sensor noise grows with "
-                    "the square of the distance")
+    depth_noise: bpy.props.FloatProperty(
+        name="Depth Noise", default=0.01, min=0.0, precision=4,
+        description="Floor and background tolerances grow by this times depth squared along the ray (1/m): "
+                    "sensor noise grows with the square of the distance; 0 = fixed tolerances")
     voxel_size: bpy.props.FloatProperty(
         name="Voxel Size", default=0.0, min=0.0, precision=4, unit='LENGTH',
         description="Average the points in cubes of this size (0 = keep every point)")
@@ -150,7 +150,7 @@ class ARTICULA_OT_import_depth(JobOperator, bpy.types.Operator):
             depth_scale=scale, depth_min=self.depth_min, depth_max=self.depth_max,
             remove_floor=self.remove_floor, floor_tolerance=self.floor_tolerance,
             subtract_background=self.subtract_background, background_frames=self.background_frames,
-            background_tolerance=self.background_tolerance, background_noise=self.background_noise,
+            background_tolerance=self.background_tolerance, depth_noise=self.depth_noise,
             voxel_size=self.voxel_size,
             estimate_normals=self.estimate_normals)
         opts.validate()

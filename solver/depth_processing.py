@@ -38,15 +38,17 @@ class DepthOptions:
     depth_min: float = 0.3
     depth_max: float = 5.0
     remove_floor: bool = True
-    floor_tolerance: float = 0.02       # points closer than this to the floor (or below it) are removed
+    floor_tolerance: float = 0.02       # points closer than this (+ the noise term) to the floor, or below it,
+                                        # are removed
     floor_max_tilt: float = 60.0        # degrees between the floor normal and the sensor's up axis
     floor_iterations: int = 256         # RANSAC hypotheses
     floor_min_fraction: float = 0.05    # the floor must hold at least this share of the pooled points
     subtract_background: bool = False
     background_frames: int = 10         # frames (spread over the recording) for the median background
-    background_tolerance: float = 0.05  # pixels not at least tolerance + noise * z^2 in front of the
-    background_noise: float = 0.01      # background are removed (1/m; depth noise of structured-light and
-                                        # ToF sensors grows ~z^2: +1 cm at 1 m, +16 cm at 4 m)
+    background_tolerance: float = 0.05  # pixels not at least this (+ the noise term) in front of the background
+                                        # are removed
+    depth_noise: float = 0.01           # 1/m: depth noise grows ~ z^2 (structured light, ToF); tolerances grow by
+                                        # depth_noise * z^2 along the ray (+1 cm at 1 m, +16 cm at 4 m)
     voxel_size: float = 0.0             # 0 = keep every point
     estimate_normals: bool = True
     seed: int = 0
@@ -59,7 +61,7 @@ class DepthOptions:
             raise ArticulaInputError(f"depth range [{self.depth_min}, {self.depth_max}] m is empty or negative")
         if self.voxel_size < 0:
             raise ArticulaInputError(f"voxel size must be >= 0, got {self.voxel_size}")
-        if self.floor_tolerance <= 0 or self.background_tolerance <= 0 or self.background_noise < 0:
+        if self.floor_tolerance <= 0 or self.background_tolerance <= 0 or self.depth_noise < 0:
             raise ArticulaInputError("floor and background tolerances must be positive")
         if self.background_frames < 1:
             raise ArticulaInputError("background needs at least one frame")
@@ -190,6 +192,17 @@ def ransac_plane(points: np.ndarray, tolerance: float, iterations: int = 256, se
     finite = np.isfinite(np.asarray(points)).all(axis=1)
     mask[np.flatnonzero(finite)[inliers]] = True
     return plane, mask
+
+
+def above_floor(points: np.ndarray, floor, tolerance: float, noise: float = 0.0) -> np.ndarray:
+    """True for (..., 3) sensor-frame points more than ``tolerance`` above the floor plane, the
+    tolerance growing with the depth noise: a depth error ``noise z^2`` along the ray moves a point by
+    ``noise z |n . p|`` off the plane (small at grazing angles, where floors are usually seen)."""
+    n = np.asarray(floor[0], dtype=points.dtype)
+    along = points @ n
+    with np.errstate(invalid="ignore"):
+        margin = tolerance + noise * points[..., 2] * np.abs(along) if noise else tolerance
+        return along + points.dtype.type(floor[1]) >= margin
 
 
 def world_from_sensor(floor=None) -> np.ndarray:
@@ -355,10 +368,9 @@ def frame_mask(depth_m: np.ndarray, grid: np.ndarray, opts: DepthOptions, backgr
     """Which pixels survive range clip (NaN already), background subtraction and floor removal."""
     keep = np.isfinite(depth_m)
     if background is not None:
-        keep &= foreground_mask(depth_m, background, opts.background_tolerance, opts.background_noise)
+        keep &= foreground_mask(depth_m, background, opts.background_tolerance, opts.depth_noise)
     if floor is not None:
-        with np.errstate(invalid="ignore"):
-            keep &= plane_distance(grid, floor) >= opts.floor_tolerance
+        keep &= above_floor(grid, floor, opts.floor_tolerance, opts.depth_noise)
     return keep
 
 
@@ -397,7 +409,7 @@ def process_cloud(points: np.ndarray, opts: DepthOptions, floor=None, colors=Non
     p = np.asarray(points, dtype=np.float32)
     keep = (p[:, 2] >= opts.depth_min) & (p[:, 2] <= opts.depth_max)
     if floor is not None:
-        keep &= plane_distance(p, floor) >= opts.floor_tolerance
+        keep &= above_floor(p, floor, opts.floor_tolerance, opts.depth_noise)
     p = p[keep]
     c = None if colors is None else np.asarray(colors, np.float32)[keep]
     if opts.voxel_size > 0:

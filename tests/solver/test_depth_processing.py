@@ -42,7 +42,7 @@ def test_floor_ransac_recovers_plane_and_keeps_the_box():
     assert math.degrees(math.acos(min(1, plane[0] @ n_true))) < 0.05
     assert abs(plane[1] - d_true) < 1e-3
     # the floor is removed, exactly the box pixels above the tolerance remain
-    fp = dp.process_depth(z, rays, opts(), floor=plane)
+    fp = dp.process_depth(z, rays, opts(depth_noise=0.0), floor=plane)
     world = fp.points @ c2w[:3, :3].T + c2w[:3, 3]
     assert len(fp.points) > 300
     assert (world[:, 2] >= 0.02 - 1e-3).all()
@@ -51,6 +51,23 @@ def test_floor_ransac_recovers_plane_and_keeps_the_box():
     assert (label[v, u] == 2).all()
     expected = ((label == 2) & (np.einsum("hwi,i->hw", grid, plane[0]) + plane[1] >= 0.02)).sum()
     assert len(fp.points) == expected
+
+
+def test_floor_tolerance_follows_depth_noise():
+    """Kinect-like depth noise sigma = 0.002 z^2 along the rays: a fixed 2 cm tolerance leaves far floor
+    points, the noise term (0.01 z^2 = 5 sigma along the ray, projected on the floor normal) removes
+    all but a few tail samples."""
+    depth, c2w, label = floor_box_scene(INTR, box=None)
+    rng = np.random.default_rng(5)
+    z = np.where((depth > 0) & (depth < 6.0), depth, np.nan)     # a sensor's range
+    z = (z + rng.normal(size=z.shape) * 0.002 * z ** 2).astype(np.float32)
+    grid = dp.backproject_grid(z, dp.pixel_rays(INTR))
+    floor = (c2w[:3, :3].T @ np.array([0, 0, 1.0]), c2w[2, 3])
+    fixed = dp.frame_mask(z, grid, opts(depth_noise=0.0), floor=floor)
+    scaled = dp.frame_mask(z, grid, opts(), floor=floor)
+    n = np.isfinite(z).sum()
+    assert fixed.sum() > 0.01 * n          # 2 cm alone leaves the far floor
+    assert scaled.sum() <= 0.0005 * n
 
 
 def test_floor_tilt_constraint_ignores_a_wall():
@@ -141,7 +158,7 @@ def test_background_subtraction_keeps_only_the_new_object():
     u, v = fp.pixels.T.astype(int)
     assert (label[v, u] == 2).all()
     # the box's pixels that are more than the tolerance in front of the background are all kept
-    margin = o.background_tolerance + o.background_noise * zb ** 2
+    margin = o.background_tolerance + o.depth_noise * zb ** 2
     assert len(fp.points) == ((label == 2) & (zf < zb - margin)).sum()
     # a median over frames in which the box moves recovers the empty scene
     frames = [floor_box_scene(INTR, box=((x - .2, 2.2, 0), (x + .2, 2.6, .8)), wall_y=3.5)[0] for x in (-1.2, 0.0, 1.2)]
