@@ -19,7 +19,8 @@ Initialisation (``init``):
   that move rigidly with their anchor part (weight 1 − their blended weight), converted to joint-local
   rotations by :func:`solver.pose_init.poses_from_part_fits`.  Each frame is initialised on its own, so a
   wrong frame never propagates.  A part with fewer than ``MIN_SUPPORT`` rigid vertices keeps its parent's
-  rotation (local identity).
+  rotation (local identity); such a root (e.g. a floor-level root bone) takes the map of the best-supported
+  part.
 * ``"previous"``: frames are solved in order; each starts from the better (lower E) of the previous frame's
   solution and its own Procrustes initialisation, so a sudden jump or a 180° flip between frames costs one
   restart rather than a wrong fit.
@@ -100,14 +101,18 @@ def procrustes_init(model, targets):
     W = np.zeros((V, B))
     W[np.arange(V), model.anchor] = np.clip(1.0 - load, 0.0, 1.0)
     R, t = fit_rigid_soft(model.rest_vertices, np.asarray(targets, dtype=np.float64), W)
-    weak = W.sum(axis=0) < MIN_SUPPORT
-    for b in range(B):                                   # parents first: inherit the (final) parent map
-        if weak[b] and b > 0:
+    support = W.sum(axis=0)
+    weak = support < MIN_SUPPORT
+    if weak.all():
+        raise ArticulaInputError("model: no part has rigidly attached vertices; give an initial pose "
+                                 "(init=Poses) instead of 'procrustes'")
+    if weak[0]:                      # e.g. a floor-level root bone without vertices: take the best part
+        best = int(np.argmax(support))
+        R[:, 0], t[:, 0] = R[:, best], t[:, best]
+    for b in range(1, B):                                # parents first: inherit the (final) parent map
+        if weak[b]:
             p = sk.parents[b]
             R[:, b], t[:, b] = R[:, p], t[:, p]          # local identity: M_b = M_parent
-    if weak[0]:
-        raise ArticulaInputError(f"model: the root part has only {W[:, 0].sum():.3g} rigidly attached "
-                                 f"vertices; give an initial pose (init=Poses) instead of 'procrustes'")
     return poses_from_part_fits(sk, R, t)
 
 

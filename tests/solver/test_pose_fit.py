@@ -152,3 +152,15 @@ def test_bad_input(model):
         pose_fit.fit_poses(model, targets, init=Poses.identity(1, 19))
     with pytest.raises(ArticulaInputError, match="vertex_weights"):
         pose_fit.fit_poses(model, targets, vertex_weights=np.zeros(600))
+
+
+def test_procrustes_start_without_root_vertices(model):
+    """A root part with no vertex (as MakeHuman's floor-level ``Root`` bone): the root starts from the
+    best-supported part and the fit still recovers the pose."""
+    from articula.solver.model import Model
+    keep = model.anchor != 0
+    rootless = Model(model.rest_vertices[keep], model.faces, model.skeleton, model.anchor[keep],
+                     model.twist_weights[keep], model.swing_weights[keep])
+    truth = synthetic.random_poses(2, 19, seed=18, scale_range=(1.0, 1.0))
+    fit = pose_fit.fit_poses(rootless, skinning.hybrid_skin(rootless, truth))
+    assert angle_errors(fit.poses.rotations, truth.rotations).max() < 1e-6
