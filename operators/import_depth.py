@@ -113,6 +113,41 @@ class ARTICULA_OT_import_depth(JobOperator, bpy.types.Operator):
             return JobOperator.invoke(self, context, None)
         return JobOperator.execute(self, context)
 
+    def draw(self, context):
+        """Options beside the file browser, grouped."""
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        col = layout.column(heading="Camera")
+        col.prop(self, "preset")
+        col.prop(self, "intrinsics")
+        col.prop(self, "depth_scale")
+        col = layout.column(heading="Depth Range")
+        col.prop(self, "depth_min")
+        col.prop(self, "depth_max")
+        col.prop(self, "depth_noise")
+        col = layout.column(heading="Floor")
+        col.prop(self, "remove_floor", text="Remove")
+        sub = col.column()
+        sub.active = self.remove_floor
+        sub.prop(self, "floor_tolerance", text="Tolerance")
+        col = layout.column(heading="Background")
+        col.prop(self, "subtract_background", text="Subtract")
+        sub = col.column()
+        sub.active = self.subtract_background
+        sub.prop(self, "background", text="Frame")
+        sub.prop(self, "background_frames", text="Median of")
+        sub.prop(self, "background_tolerance", text="Tolerance")
+        col = layout.column(heading="Points")
+        col.prop(self, "voxel_size")
+        col.prop(self, "estimate_normals")
+        col.prop(self, "point_radius")
+        col.prop(self, "color_directory")
+        col = layout.column()
+        col.prop(self, "frame_start")
+        col.prop(self, "collection_name")
+        col.prop(self, "cache_file")
+
     # -- job ------------------------------------------------------------------------------------
     def _intrinsics(self, directory, needed):
         if self.intrinsics:

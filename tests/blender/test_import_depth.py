@@ -433,3 +433,32 @@ def test_sample_recording_with_kinect_noise(tmp_path):
         inside = np.all((world > np.array(lo) - 0.03) & (world < np.array(hi) + 0.03), axis=1)
         assert inside.mean() > 0.99, (k, inside.mean())
         assert (world[:, 2] > 0.0).all()                                # nothing of the floor is left
+
+
+def test_file_browser_options_name_real_properties():
+    """The draw() beside the file browser only references properties the operator has (a UI layout
+    is unavailable in background mode, so a recorder stands in for it)."""
+    cls = bpy.types.ARTICULA_OT_import_depth
+    rna = bpy.ops.articula.import_depth.get_rna_type()
+    names = {p.identifier for p in rna.properties}
+    drawn = []
+
+    class Recorder:
+        use_property_split = use_property_decorate = active = False
+
+        def column(self, **kw):
+            return self
+
+        def prop(self, data, name, **kw):
+            drawn.append(name)
+
+    class Op:
+        layout = Recorder()
+
+        def __getattr__(self, name):
+            return rna.properties[name].default
+
+    cls.draw(Op(), bpy.context)
+    assert drawn and set(drawn) <= names
+    hidden = {"rna_type", "directory", "filter_folder", "run_modal"}
+    assert names - hidden - set(drawn) == set()          # every option is offered
