@@ -108,9 +108,14 @@ class ARTICULA_OT_import_depth(JobOperator, bpy.types.Operator):
         return JobOperator.invoke(self, context, event)
 
     def execute(self, context):
-        if self.run_modal and not bpy.app.background:  # confirmed in the file browser: run with progress
-            self.run_modal = False
-            return JobOperator.invoke(self, context, None)
+        if self.run_modal and not bpy.app.background:
+            # Confirmed in the file browser (which calls execute): start the same import again through
+            # invoke, the modal path with progress bar and Esc, with the chosen options.
+            props = {p.identifier: getattr(self, p.identifier) for p in self.properties.bl_rna.properties
+                     if not p.is_readonly and p.identifier not in ("rna_type", "run_modal")
+                     and self.properties.is_property_set(p.identifier)}  # unset stay unset (depth_scale)
+            bpy.ops.articula.import_depth('INVOKE_DEFAULT', **props)
+            return {'CANCELLED'}  # this call itself changed nothing (no extra undo step)
         return JobOperator.execute(self, context)
 
     def draw(self, context):
