@@ -1,5 +1,6 @@
 """``bench NAME [args]``: run ``bench/bench_NAME.py`` of a source checkout (benchmarks are not
 shipped in the extension zip).  ``bench list`` lists them."""
+import argparse
 import importlib.util
 import os
 import sys
@@ -35,5 +36,5 @@ def run(args) -> int:
 def add_commands(sub):
     p = sub.add_parser("bench", help="run a benchmark (bench list: the available ones)")
     p.add_argument("name")
-    p.add_argument("rest", nargs="*", help="arguments for the benchmark")
+    p.add_argument("rest", nargs=argparse.REMAINDER, help="arguments for the benchmark (options included)")
     p.set_defaults(func=run)
