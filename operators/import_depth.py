@@ -48,7 +48,7 @@ class ARTICULA_OT_import_depth(JobOperator, bpy.types.Operator):
     job_label = "Import depth"
 
     directory: bpy.props.StringProperty(
-        name="Folder", subtype='DIR_PATH',
+        name="Folder", subtype='DIR_PATH', options={'SKIP_SAVE'},  # not remembered: the button always browses
         description="Folder of depth frames (16-bit PNG in depth units, or EXR in metres) or of point-cloud "
                     "frames (PLY, XYZ, NPY), in natural name order")
     filter_folder: bpy.props.BoolProperty(default=True, options={'HIDDEN', 'SKIP_SAVE'})
