@@ -118,10 +118,13 @@ def write_frame(mesh, seq: PointSequence, k: int) -> None:
             attr.data.foreach_set("vector", np.ascontiguousarray(seq.normals[sl], np.float32).ravel())
     if seq.colors is not None:
         attr = mesh.attributes.get("color") or mesh.attributes.new("color", 'FLOAT_COLOR', 'POINT')
-        rgba = np.ones((len(pts), 4), np.float32)
-        rgba[:, :3] = _srgb_to_linear(np.clip(seq.colors[sl], 0, 1))
+        rgba = getattr(seq, "_linear_rgba", None)
+        if rgba is None:  # converted once per sequence: cached sRGB values -> linear RGBA
+            rgba = np.ones((len(seq.colors), 4), np.float32)
+            rgba[:, :3] = _srgb_to_linear(np.clip(seq.colors, 0, 1))
+            seq._linear_rgba = rgba
         if len(pts):
-            attr.data.foreach_set("color", rgba.ravel())
+            attr.data.foreach_set("color", np.ascontiguousarray(rgba[sl]).ravel())
         if hasattr(mesh, "color_attributes"):
             mesh.color_attributes.active_color = attr
     mesh.update()
@@ -134,7 +137,7 @@ def frame_index(ob, scene, count: int) -> int:
 def sequence_objects(scene):
     return [ob for ob in scene.objects
             if ob.type == 'MESH' and ob.articula.kind == 'POINT_CLOUD_SEQUENCE' and ob.articula.cache_file
-            and ob.data.library is None]  # linked meshes cannot be rewritten
+            and ob.data.library is None and ob.mode != 'EDIT']  # linked / edited meshes are left alone
 
 
 def update_scene(scene, force: bool = False) -> None:
