@@ -29,6 +29,9 @@ from .laplacian import adjacency
 from .procrustes import fit_parts
 
 
+MIN_PART_VERTICES = 4       # a rigid part needs a few non-collinear points to have a defined motion
+
+
 def rigid_fit_errors(rest, scans, R, t):
     """Squared error ``(V,k)``: ``Σ_m ‖R[m,c] rest[v] + t[m,c] − scans[m,v]‖²`` for every vertex and part,
     computed by expanding the square (no (M,k,V,3) temporary)."""
@@ -120,7 +123,7 @@ def make_parts_connected(labels, A, err):
 
 
 def segment(rest, scans, faces, k, seed=0, restarts=4, iterations=50):
-    """Segment into exactly ``k`` connected rigid parts.
+    """Segment into exactly ``k`` connected rigid parts (each with at least MIN_PART_VERTICES vertices).
 
     rest (V,3), scans (M,V,3) metres, faces (F,3).  Returns ``(labels (V,) int64 in [0,k), rms)`` where
     rms is the RMS distance (metres) of the scans from the per-part rigid fits.  Raises
@@ -140,8 +143,11 @@ def segment(rest, scans, faces, k, seed=0, restarts=4, iterations=50):
     R, t = fit_parts(rest, scans, labels, k)
     err = rigid_fit_errors(rest, scans, R, t)
     labels = make_parts_connected(labels, adjacency(faces, V), err)
-    if np.bincount(labels, minlength=k).min() == 0:
-        raise ArticulaInputError(f"parts: the motion cannot be split into {k} connected parts; use fewer parts")
+    counts = np.bincount(labels, minlength=k)
+    if counts.min() < MIN_PART_VERTICES:
+        raise ArticulaInputError(
+            f"parts: the motion cannot be split into {k} connected rigid parts (one part would have only "
+            f"{counts.min()} vertices); use fewer parts")
     R, t = fit_parts(rest, scans, labels, k)
     rms = np.sqrt(rigid_fit_errors(rest, scans, R, t)[np.arange(V), labels].sum() / (V * len(scans)))
     return labels, float(rms)
@@ -166,9 +172,14 @@ def choose_num_parts(rest, scans, faces, k_max=20, seed=0, progress=None):
     k_max = int(min(k_max, len(rest)))
     errors = []
     for k in range(1, k_max + 1):
-        errors.append(segment(rest, scans, faces, k, seed=seed, restarts=2)[1])
+        try:
+            errors.append(segment(rest, scans, faces, k, seed=seed, restarts=2)[1])
+        except ArticulaInputError:              # k exceeds what the motion can separate: stop the curve
+            break
         if progress is not None:
             progress(k / k_max, f"choosing the number of parts (k={k})", None)
     errors = np.array(errors)
+    if len(errors) < k_max:
+        errors = np.concatenate([errors, np.full(k_max - len(errors), errors[-1])])
     size = np.linalg.norm(np.ptp(np.asarray(rest, dtype=np.float64), axis=0))
     return knee(np.log(np.maximum(errors, 1e-6 * size))) + 1, errors

@@ -164,11 +164,15 @@ def _main_child(b, kids, heads, parents, paired, subtree_size):
     return max(cands, key=lambda c: subtree_size[c])
 
 
-def build_skeleton(rest, labels, faces, k, part_R=None, part_t=None, symmetry=True):
+def build_skeleton(rest, labels, faces, k, part_R=None, part_t=None, symmetry=True, symmetry_scans=None,
+                   max_symmetry_scans=12):
     """Skeleton from a segmentation.
 
     rest (V,3), labels (V,) parts in [0,k), faces (F,3); part_R (M,k,3,3), part_t (M,k,3) the per-scan
     rigid maps of the parts (for the rotation-centre refinement; None keeps the boundary centroids).
+    symmetry_scans: optional (M,V,3) scans in which to look for the mirror plane as well (a posed rest
+    scan is rarely symmetric; the pairing of parts holds in every scan); up to max_symmetry_scans of them,
+    evenly spaced, are tried and the one pairing most parts wins.
     Returns ``(skeleton, part_of_bone (B,), bone_of_part (k,), bone_pairs [(l, r)])``."""
     rest = np.asarray(rest, dtype=np.float64)
     sizes = np.bincount(labels, minlength=k)
@@ -187,10 +191,15 @@ def build_skeleton(rest, labels, faces, k, part_R=None, part_t=None, symmetry=Tr
     pairs = []
     if symmetry and k > 1:
         # the plane that pairs the most parts (a tube body is also front/back symmetric)
-        for plane in symmetry_planes(rest):
-            found = mirror_pairs(rest, labels, k, plane)
-            if len(found) > len(pairs):
-                pairs = found
+        shapes = [rest]
+        if symmetry_scans is not None:
+            step = max(1, int(np.ceil(len(symmetry_scans) / max_symmetry_scans)))
+            shapes += list(np.asarray(symmetry_scans)[::step])
+        for pts in shapes:
+            for plane in symmetry_planes(pts):
+                found = mirror_pairs(pts, labels, k, plane)
+                if len(found) > len(pairs):
+                    pairs = found
         pairs = [(int(bone_of_part[a]), int(bone_of_part[b])) for a, b in pairs]
     tails = _tails(rest, labels, order, parents, heads, {x for pr in pairs for x in pr})
     names = _names(k, pairs)

@@ -1,0 +1,279 @@
+"""Learn a rig from registered scans (spec §3; issue 4): the orchestration of the rig-learning steps.
+
+``learn_rig(scans, faces)`` →  :class:`LearnResult` ``(model, poses, report)``:
+
+1. input checks (shapes, finite values, ≥ 3 scans, one connected mesh, some non-rigid motion, memory);
+2. rest mesh = one scan chosen by the seed; segmentation into k rigid parts by motion
+   (:mod:`solver.segmentation`; k chosen from the motion unless given);
+3. skeleton (:mod:`solver.skeleton_init`): tree, joints (LS rotation centres), frames, mirror pairs;
+   every joint must move (else the motion cannot separate that many parts);
+4. per-scan poses from per-part Procrustes (:mod:`solver.pose_init`); binary (rigid) skin;
+5. alternating optimisation of ``E = Q + λ Q_sym`` until its relative decrease over one round is below
+   ``tol``: (a) joints + poses by Levenberg–Marquardt (:mod:`solver.joint_pose_gn`), (b) weights by BCD
+   (:mod:`solver.weights_bcd`), (c) rest vertices by sparse least squares (:mod:`solver.rest_shape`),
+   each step accepted only if E does not increase.
+
+Output conventions: the model and poses are in the input coordinates and vertex order; poses are in
+scan order (one per scan), scale 1.  The report holds the vertex-to-surface error of every scan vertex
+to the posed model surface in mm (mean, std, median, MAD, IQR, max), the vertex-to-vertex RMS, the
+objective log, time per stage (s), the chosen rest scan, k and its selection curve, mirror pairs.
+"""
+import copy
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import ArticulaInputError, Cancelled  # noqa: F401
+from .joint_pose_gn import JointPoseProblem, optimise_joints_and_poses, sizes, symmetry_residuals
+from .laplacian import components, uniform_laplacian
+from .model import Model, Poses, Skeleton
+from .pose_init import poses_from_part_fits
+from .procrustes import fit_parts
+from .rest_shape import solve_rest_vertices
+from .rig_objective import RigObjective
+from .rotations import quat_to_rotvec
+from .segmentation import choose_num_parts, segment
+from .skeleton_init import build_skeleton
+from .skinning import hybrid_skin
+from .surface_distance import distance_to_surface, error_statistics
+from .weights_bcd import optimise_weights
+
+MAX_WORK_BYTES = 4e9            # refuse inputs whose Jacobian blocks would need more memory than this
+MIN_JOINT_MOTION_DEG = 1.0      # a joint must rotate at least this much in some scan
+
+
+@dataclass
+class LearnResult:
+    model: Model
+    poses: Poses
+    report: dict = field(default_factory=dict)
+
+
+# ----------------------------------------------------------------------------- input checks
+
+def working_memory_bytes(num_scans, num_vertices, num_parts):
+    """Estimated peak memory (bytes) of the joint/pose step: the posed-vertex Jacobians and their
+    Laplacians, ``2 · 8 · M · 3V · (5(B−1) + 3B + 3)``."""
+    n_s, n_o = sizes(num_parts)
+    return 2 * 8 * num_scans * 3 * num_vertices * (n_s + n_o)
+
+
+def check_input(scans, faces, parts, k_max):
+    """Validate and convert; raises :class:`ArticulaInputError` naming the problem."""
+    scans = np.asarray(scans, dtype=np.float64)
+    faces = np.asarray(faces)
+    if scans.ndim != 3 or scans.shape[2] != 3:
+        raise ArticulaInputError(f"scans: expected shape (M, V, 3) (registered scans sharing one topology), got {scans.shape}")
+    M, V = scans.shape[:2]
+    if M < 3:
+        raise ArticulaInputError(f"scans: {M} scan(s) given; learning a rig needs at least 3 registered scans")
+    bad = np.argwhere(~np.isfinite(scans))
+    if len(bad):
+        m, v, _ = bad[0]
+        raise ArticulaInputError(f"scans: scan {m}, vertex {v} has a non-finite coordinate ({scans[m, v]})")
+    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+        raise ArticulaInputError(f"faces: expected triangles of shape (F, 3), got {faces.shape}")
+    if not np.issubdtype(faces.dtype, np.integer):
+        raise ArticulaInputError(f"faces: expected integer vertex indices, got {faces.dtype}")
+    if faces.min() < 0 or faces.max() >= V:
+        raise ArticulaInputError(f"faces: vertex index {faces.max() if faces.max() >= V else faces.min()} "
+                                 f"outside 0..{V - 1}: the scans do not share the faces' topology")
+    unused = np.setdiff1d(np.arange(V), faces)
+    if len(unused):
+        raise ArticulaInputError(f"faces: vertex {unused[0]} (and {len(unused) - 1} more) is in no triangle")
+    k_est = parts if parts is not None else k_max
+    need = working_memory_bytes(M, V, k_est)
+    if need > MAX_WORK_BYTES:
+        raise ArticulaInputError(
+            f"scans: {M} scans x {V} vertices with {k_est} parts needs about {need / 1e9:.1f} GB of working memory "
+            f"(limit {MAX_WORK_BYTES / 1e9:.0f} GB); decimate the meshes or use fewer scans")
+    n, lab = components(faces, V)
+    if n > 1:
+        sizes_ = np.sort(np.bincount(lab))[::-1]
+        raise ArticulaInputError(f"mesh: {n} disconnected islands (vertex counts {sizes_[:5].tolist()}...); "
+                                 f"rig learning needs one connected mesh: remove or join the islands")
+    return scans, faces.astype(np.int32)
+
+
+def check_motion(rest, scans, faces):
+    """Refuse sequences whose scans are (almost) rigid copies of each other."""
+    _, rms1 = segment(rest, scans, faces, 1)
+    size = np.linalg.norm(np.ptp(rest, axis=0))
+    if rms1 < 1e-4 * size:
+        raise ArticulaInputError(f"scans: the scans differ only by a rigid motion (non-rigid RMS {rms1 * 1e3:.3g} mm "
+                                 f"for a {size:.3g} m object); there is no articulation to learn")
+
+
+def check_joint_motion(skeleton, poses):
+    """Every joint must rotate in some scan, else two parts move as one."""
+    ang = np.degrees(np.linalg.norm(quat_to_rotvec(poses.rotations[:, 1:]), axis=2)).max(axis=0)
+    still = np.flatnonzero(ang < MIN_JOINT_MOTION_DEG)
+    if len(still):
+        b = int(still[0]) + 1
+        raise ArticulaInputError(
+            f"parts: joint {skeleton.names[b]!r} rotates at most {ang[b - 1]:.2g} degrees over all scans: the motion "
+            f"cannot separate {skeleton.num_bones} parts; use fewer parts")
+
+
+# ----------------------------------------------------------------------------- steps
+
+def _sym_pairs(skeleton, pairs):
+    """(l, suc_l, r, suc_r) for mirror pairs whose bones continue into a mirrored child."""
+    out = []
+    for l, r in pairs:
+        sl = [c for c in skeleton.children(l) if np.linalg.norm(skeleton.heads[c] - skeleton.tails[l]) < 1e-9]
+        sr = [c for c in skeleton.children(r) if np.linalg.norm(skeleton.heads[c] - skeleton.tails[r]) < 1e-9]
+        if sl and sr:
+            out.append((l, sl[0], r, sr[0]))
+    return out
+
+
+def _labels_from_skeleton(rest, skeleton):
+    """Parts of a given skeleton: every vertex to its nearest bone segment (head→tail)."""
+    h, t = skeleton.heads, skeleton.tails
+    d = t - h
+    s = np.clip(np.einsum("vbi,bi->vb", rest[:, None] - h, d) / np.einsum("bi,bi->b", d, d), 0, 1)
+    dist = np.linalg.norm(rest[:, None] - (h + s[..., None] * d), axis=2)
+    return np.argmin(dist, axis=1)
+
+
+def initialise(scans, faces, parts, seed, symmetry, initial_skeleton, k_max, progress):
+    """Steps 2-4.  Returns (model, poses, info dict)."""
+    M = len(scans)
+    rng = np.random.default_rng(seed)
+    rest_index = int(rng.integers(M))
+    rest = scans[rest_index].copy()
+    check_motion(rest, scans, faces)
+    info = dict(rest_scan=rest_index)
+    if initial_skeleton is not None:
+        initial_skeleton.validate()
+        bone_labels = _labels_from_skeleton(rest, initial_skeleton)
+        B = initial_skeleton.num_bones
+        W, tau = fit_parts(rest, scans, bone_labels, B)
+        skeleton, pairs = copy.deepcopy(initial_skeleton), []
+        info.update(parts=B, k_curve_mm=None)
+    else:
+        if parts is None:
+            k, curve = choose_num_parts(rest, scans, faces, k_max=k_max, seed=seed, progress=progress)
+            info["k_curve_mm"] = (curve * 1e3).tolist()
+        else:
+            k = int(parts)
+            info["k_curve_mm"] = None
+        labels, rms = segment(rest, scans, faces, k, seed=seed)
+        info.update(parts=k, segmentation_rms_mm=rms * 1e3)
+        R, t = fit_parts(rest, scans, labels, k)
+        skeleton, order, bone_of_part, pairs = build_skeleton(rest, labels, faces, k, R, t, symmetry=symmetry,
+                                                              symmetry_scans=scans)
+        bone_labels = bone_of_part[labels]
+        W, tau = R[:, order], t[:, order]
+    poses = poses_from_part_fits(skeleton, W, tau)
+    check_joint_motion(skeleton, poses)
+    V, B = len(rest), skeleton.num_bones
+    model = Model(rest, faces, skeleton, bone_labels.astype(np.int32),
+                  np.zeros((V, B), np.float32), np.zeros((V, B), np.float32))
+    info["mirror_pairs"] = [(skeleton.names[l], skeleton.names[r]) for l, r in pairs]
+    return model, poses, info, pairs
+
+
+def _sub_progress(progress, lo, hi, offset=0.0):
+    """Map a step's progress (fraction in [0,1], its own objective) into [lo, hi] of the whole run, adding
+    a constant to the objective (the symmetry term that the weight/rest steps do not change)."""
+    if progress is None:
+        return None
+    return lambda f, stage, obj: progress(lo + (hi - lo) * f, stage, None if obj is None else obj + offset)
+
+
+def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iterations=10, seed=0,
+              initial_skeleton=None, progress=None, lam=1e10, gn_iterations=5, bcd_sweeps=5, tol=1e-4,
+              k_max=20):
+    """Learn a hybrid-skinned rig from registered scans.
+
+    scans ``(M,V,3)`` metres (M ≥ 3, one topology), faces ``(F,3)`` int.  parts: number of parts k (= bones;
+    None = chosen from the motion, up to k_max).  alpha: shape-conformance weight of the Laplacian term
+    (dimensionless, see :mod:`solver.rig_objective`).  symmetry: detect mirror pairs and equalise their
+    bone lengths with weight lam (m⁻²).  max_iterations: outer rounds of (a)-(c).  seed: rest-scan choice
+    and segmentation seeding.  initial_skeleton: a :class:`Skeleton` to start from instead of segmenting.
+    progress(fraction, stage, objective): called throughout; may raise :class:`Cancelled`; the objective
+    passed never increases.  Returns :class:`LearnResult`."""
+    t_all = time.perf_counter()
+    timings = {}
+    scans, faces = check_input(scans, faces, parts, k_max)
+
+    t0 = time.perf_counter()
+    init_progress = _sub_progress(progress, 0.0, 0.1)
+    model, poses, info, pairs = initialise(scans, faces, parts, seed, symmetry, initial_skeleton, k_max,
+                                           init_progress)
+    timings["initialisation"] = time.perf_counter() - t0
+
+    L = uniform_laplacian(faces, len(scans[0]))
+    objective = RigObjective(scans, L, alpha)
+    sym = _sym_pairs(model.skeleton, pairs) if symmetry else []
+    problem = JointPoseProblem(objective, sym, lam if sym else 0.0)
+    E = problem.value(model, poses)
+    log = [("initial", float(E))]
+    if progress is not None:
+        progress(0.1, "initialised", E)
+    for key in ("joints_and_poses", "weights", "rest_vertices"):
+        timings[key] = 0.0
+    converged = False
+    for it in range(max_iterations):
+        E_round = E
+        lo = 0.1 + 0.9 * it / max_iterations
+        step = 0.9 / max_iterations / 3
+        # (a) joints + poses
+        t0 = time.perf_counter()
+        model, poses, gn_log = optimise_joints_and_poses(model, poses, problem, iterations=gn_iterations,
+                                                         progress=_sub_progress(progress, lo, lo + step))
+        timings["joints_and_poses"] += time.perf_counter() - t0
+        if gn_log:
+            E = gn_log[-1]
+        log.append(("joints_and_poses", float(E)))
+        sym_term = E - objective.value(hybrid_skin(model, poses))
+        # (b) weights
+        t0 = time.perf_counter()
+        model, w_log = optimise_weights(model, poses, objective, max_sweeps=bcd_sweeps,
+                                        progress=_sub_progress(progress, lo + step, lo + 2 * step, sym_term))
+        timings["weights"] += time.perf_counter() - t0
+        if w_log:
+            E = min(E, w_log[-1] + sym_term)
+        log.append(("weights", float(E)))
+        # (c) rest vertices (accepted only if E does not increase)
+        t0 = time.perf_counter()
+        trial = copy.copy(model)
+        trial.rest_vertices = solve_rest_vertices(model, poses, scans, L, alpha)
+        E_trial = objective.value(hybrid_skin(trial, poses)) + sym_term
+        if E_trial <= E:
+            model, E = trial, E_trial
+        timings["rest_vertices"] += time.perf_counter() - t0
+        log.append(("rest_vertices", float(E)))
+        if progress is not None:
+            progress(lo + 3 * step, f"round {it + 1} of {max_iterations}", E)
+        if E_round - E <= tol * E_round:
+            converged = True
+            break
+
+    t0 = time.perf_counter()
+    report = make_report(model, poses, scans, objective, sym, problem.lam)
+    timings["report"] = time.perf_counter() - t0
+    timings["total"] = time.perf_counter() - t_all
+    report.update(info)
+    report.update(objective_log=log, iterations=it + 1 if max_iterations else 0, converged=converged,
+                  timings_s=timings, alpha=alpha, symmetry_lambda=problem.lam)
+    model.validate()
+    poses.validate(model.skeleton.num_bones)
+    return LearnResult(model, poses, report)
+
+
+def make_report(model, poses, scans, objective, sym, lam):
+    """Error statistics in mm: every scan vertex to the posed model surface (exact point-to-triangle)."""
+    posed = hybrid_skin(model, poses)
+    d = np.concatenate([distance_to_surface(scans[m], posed[m], model.faces) for m in range(len(scans))])
+    stats = {k: (v if k == "count" else v * 1e3) for k, v in error_statistics(d).items()}
+    report = dict(surface_error_mm=stats,
+                  vertex_rms_mm=float(np.sqrt(np.mean(np.sum((posed - scans) ** 2, axis=2))) * 1e3),
+                  objective_Q=objective.value(posed))
+    if sym:
+        r, _ = symmetry_residuals(model.skeleton, sym)
+        report["symmetry_length_difference_mm"] = (np.abs(r) * 1e3).tolist()
+    return report
