@@ -148,6 +148,19 @@ def test_save_and_reload_keep_playback(tmp_path):
         np.testing.assert_array_equal(co.reshape(-1, 3), expect[frame - 1])
         world, _ = evaluated_points(ob)
         assert len(world) == len(expect[frame - 1])
+    # the project folder moved elsewhere (the .blend with its cache): still plays
+    import shutil
+    moved = tmp_path / "moved"
+    moved.mkdir()
+    for name in ("scene.blend", "rec.points.npz"):
+        shutil.move(str(tmp_path / name), str(moved / name))
+    pkg_pcs().forget_cache()
+    bpy.ops.wm.open_mainfile(filepath=str(moved / "scene.blend"))
+    bpy.context.scene.frame_set(3)   # the file was saved showing frame 2
+    ob = bpy.data.objects["rec Points"]
+    co = np.empty(len(ob.data.vertices) * 3, np.float32)
+    ob.data.attributes["position"].data.foreach_get("vector", co)
+    np.testing.assert_array_equal(co.reshape(-1, 3), expect[2])
 
 
 def test_point_cloud_files_with_colours(tmp_path):
