@@ -475,3 +475,18 @@ def test_file_browser_options_name_real_properties():
     assert drawn and set(drawn) <= names
     hidden = {"rna_type", "directory", "filter_folder", "run_modal"}
     assert names - hidden - set(drawn) == set()          # every option is offered
+
+
+def test_an_empty_frame_shows_no_points(tmp_path):
+    folder, _ = make_recording(tmp_path / "rec", n=3)
+    write_png16(os.path.join(folder, "depth_0001.png"), np.zeros((INTR.height, INTR.width), np.uint16))
+    assert bpy.ops.articula.import_depth(directory=folder) == {'FINISHED'}
+    ob = bpy.data.objects["rec Points"]
+    counts_per_frame = []
+    for frame in (1, 2, 3, 2):
+        bpy.context.scene.frame_set(frame)
+        counts_per_frame.append(len(ob.data.vertices))
+        world, _ = evaluated_points(ob) if len(ob.data.vertices) else (np.zeros((0, 3)), None)
+        assert len(world) == len(ob.data.vertices)
+    assert counts_per_frame[1] == counts_per_frame[3] == 0
+    assert counts_per_frame[0] > 0 and counts_per_frame[2] > 0
