@@ -19,10 +19,9 @@ Damping: Levenberg–Marquardt ``μ (diag H_data + ε)`` (the diagonal of the da
 weight λ ≈ 1e10 would otherwise freeze the joints it couples); a step is accepted only if the objective
 decreases.
 
-Jacobian of the posed vertices: central finite differences through :func:`apply_increment` and
-``hybrid_skin`` (step 1e-6).  A per-scan column of all scans is obtained from one skinning call (the
-increment of bone b in scan m affects only scan m), so the cost is 2·(5(B−1) + 3B + 3) skinning calls of
-all scans per iteration.  (To be replaced by the analytic ``solver.jacobians`` when it is available.)
+Jacobian of the posed vertices: analytic, from :mod:`solver.jacobians` (:func:`posed_jacobians`);
+:func:`posed_jacobians_fd` computes the same by central differences through :func:`apply_increment`
+(the tests compare them).
 """
 import copy
 
@@ -31,7 +30,8 @@ import numpy as np
 from .errors import Cancelled  # noqa: F401  (raised by progress callbacks)
 from .model import Poses, Skeleton
 from .rotations import matrix_to_quat, quat_conj, quat_mul, quat_normalize, rotvec_to_matrix, rotvec_to_quat
-from .skinning import hybrid_skin
+from .jacobians import frame_jacobian, joint_jacobian, pose_jacobian
+from .skinning import AnchorGroups, hybrid_skin
 
 FD_STEP = 1e-6
 
@@ -67,9 +67,25 @@ def _with(model, skeleton):
     return m
 
 
-def posed_jacobians(model, poses, step=FD_STEP):
-    """Jacobians of the posed vertices: ``(J_shared (M,3V,n_s), J_own (M,3V,n_o))`` by central
-    differences (see module doc)."""
+def posed_jacobians(model, poses):
+    """Analytic Jacobians of the posed vertices ``(J_shared (M,3V,n_s), J_own (M,3V,n_o))`` in this
+    module's layout, from :mod:`solver.jacobians` (pose, joint-centre and frame Jacobians; the frame
+    columns are its world-ω columns projected on the frame's X and Z axes)."""
+    sk, M, V, B = model.skeleton, len(poses), model.num_vertices, model.skeleton.num_bones
+    groups = AnchorGroups(model)
+    _, Jp = pose_jacobian(model, poses, groups)                          # (M,V,3,4+3B): t, s, δ_b
+    _, Jh = joint_jacobian(model, poses, groups)                         # (M,V,3,3B)
+    _, Jf = frame_jacobian(model, poses, groups)                         # (M,V,3,3B) world ω_b
+    Jo = np.concatenate([Jp[..., 4:], Jp[..., :3]], axis=3).reshape(M, 3 * V, 3 * B + 3)
+    Jf = Jf.reshape(M, V, 3, B, 3)
+    Jx = np.einsum("mvibk,bk->mvib", Jf, sk.frames[:, :, 0])
+    Jz = np.einsum("mvibk,bk->mvib", Jf, sk.frames[:, :, 2])
+    Js = np.concatenate([Jh.reshape(M, V, 3, B, 3), Jx[..., None], Jz[..., None]], axis=4)[:, :, :, 1:]
+    return Js.reshape(M, 3 * V, 5 * (B - 1)), Jo
+
+
+def posed_jacobians_fd(model, poses, step=FD_STEP):
+    """The same Jacobians by central differences through :func:`apply_increment` (reference for tests)."""
     sk, M, V = model.skeleton, len(poses), model.num_vertices
     n_s, n_o = sizes(sk.num_bones)
     Js = np.empty((M, 3 * V, n_s))
