@@ -37,7 +37,7 @@ def make_data(data_dir: str, n_scans: int, n_depth: int, seed: int = 0) -> dict:
     depth = os.path.join(data_dir, "depth")
     generate_registered(scans, rig="cmu_mb", shape="female", n_poses=n_scans, motion="rom",
                         skin="hybrid", fmt="obj", seed=seed)
-    frames, faces, gt = posed_sequence(rig="cmu_mb", shape="male", n_poses=n_depth, motion="rom",
+    frames, faces, gt = posed_sequence(rig="cmu_mb", shape="male", n_poses=n_depth, motion="walk",
                                        skin="hybrid", seed=seed)
     generate_depth(depth, frames, faces, gt, resolution=(320, 240), seed=seed)
     return {"scans": scans, "depth": depth, "bundle": os.path.join(scans, "ground_truth_model.npz")}
