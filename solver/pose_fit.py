@@ -42,7 +42,7 @@ from .rotations import quat_canonical, quat_normalize
 from .skinning import AnchorGroups, check_pose_shapes, hybrid_skin
 
 MIN_SUPPORT = 4.0              # rigid-vertex weight a part needs for its own Procrustes fit
-JACOBIAN_BYTES = 160e6         # memory budget of one block of frame Jacobians
+JACOBIAN_BYTES = 40e6          # memory budget of one block of frame Jacobians (several copies exist)
 MU0, MU_MIN, MU_MAX = 1e-3, 1e-12, 1e12
 DAMP_FLOOR = 1e-9              # ε: damping floor relative to the mean of diag(JᵀWJ)
 
@@ -135,13 +135,12 @@ class _Problem:
         """``H (n, P_free, P_free)``, ``g (n, P_free)``, ``E (n,)`` at ``poses`` (frames ``idx``)."""
         posed, J = pose_jacobian(self.model, poses, self.groups)
         r = self.residual(posed, idx)
-        J = J[..., self.free]
         if self.sw is not None:
-            J = J * self.sw[..., None]
+            J *= self.sw[..., None]
         n, V, _, P = J.shape
         Jf = J.reshape(n, 3 * V, P)
-        H = np.matmul(np.swapaxes(Jf, 1, 2), Jf)
-        g = np.einsum("nrp,nr->np", Jf, r.reshape(n, 3 * V))
+        H = np.matmul(np.swapaxes(Jf, 1, 2), Jf)[:, self.free][:, :, self.free]    # no copy of J
+        g = np.einsum("nrp,nr->np", Jf, r.reshape(n, 3 * V))[:, self.free]
         return H, g, np.einsum("nvi,nvi->n", r, r)
 
 
