@@ -176,11 +176,12 @@ class JointPoseProblem:
         return q
 
 
-def optimise_joints_and_poses(model, poses, problem, iterations=10, mu=1e-3, step_tol=1e-9, progress=None):
+def optimise_joints_and_poses(model, poses, problem, iterations=10, mu=1e-3, step_tol=1e-9, progress=None,
+                              fix_joints=False):
     """Levenberg–Marquardt on joints (centres + twist axes) and all per-scan poses.
 
     model: current :class:`Model` (its skin and rest mesh are held fixed); poses: current poses;
-    problem: :class:`JointPoseProblem`.  Returns ``(model, poses, log)`` with log the objective after every
+    problem: :class:`JointPoseProblem`.  fix_joints: keep joint centres and axes (poses only).  Returns ``(model, poses, log)`` with log the objective after every
     accepted step (never increasing).  ``progress(fraction, stage, objective)`` after each iteration."""
     obj = problem.objective
     E = problem.value(model, poses)
@@ -202,8 +203,11 @@ def optimise_joints_and_poses(model, poses, problem, iterations=10, mu=1e-3, ste
         for _ in range(12):
             Ds = mu * (diag_s + 1e-6 * scale_s)
             Do = mu * (np.diagonal(H_oo, axis1=1, axis2=2) + 1e-6 * scale_o)
-            x_s, x_o = schur_solve(H_ss + np.diag(Ds), H_so, H_oo + Do[:, :, None] * np.eye(H_oo.shape[1]),
-                                   -g_s, -g_o)
+            H_oo_d = H_oo + Do[:, :, None] * np.eye(H_oo.shape[1])
+            if fix_joints:
+                x_s, x_o = np.zeros_like(g_s), np.linalg.solve(H_oo_d, -g_o[..., None])[..., 0]
+            else:
+                x_s, x_o = schur_solve(H_ss + np.diag(Ds), H_so, H_oo_d, -g_s, -g_o)
             sk_new, poses_new = apply_increment(model.skeleton, poses, x_s, x_o)
             model_new = _with(model, sk_new)
             E_new = problem.value(model_new, poses_new)

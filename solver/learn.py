@@ -186,7 +186,7 @@ def _sub_progress(progress, lo, hi, offset=0.0):
 
 def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iterations=10, seed=0,
               initial_skeleton=None, progress=None, lam=1e10, gn_iterations=5, bcd_sweeps=5, tol=1e-4,
-              k_max=20):
+              k_max=20, joint_warmup_rounds=1, bcd_steps=(0.2, 0.1, 0.05, 0.02)):
     """Learn a hybrid-skinned rig from registered scans.
 
     scans ``(M,V,3)`` metres (M ≥ 3, one topology), faces ``(F,3)`` int.  parts: number of parts k (= bones;
@@ -195,7 +195,11 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
     bone lengths with weight lam (m⁻²).  max_iterations: outer rounds of (a)-(c).  seed: rest-scan choice
     and segmentation seeding.  initial_skeleton: a :class:`Skeleton` to start from instead of segmenting.
     progress(fraction, stage, objective): called throughout; may raise :class:`Cancelled`; the objective
-    passed never increases.  Returns :class:`LearnResult`."""
+    passed never increases.  joint_warmup_rounds: in the first rounds step (a) updates poses only, with the
+    joints held at their initial (rotation-centre) estimates: with binary initial weights and α = 100 the
+    Laplacian term at the parts' seams otherwise pulls joints away from the true centres (measured on
+    the tube body: up to 36 mm, vs ≤ 5 mm with α = 1).  bcd_steps: the BCD's weight steps δ.
+    Returns :class:`LearnResult`."""
     t_all = time.perf_counter()
     timings = {}
     scans, faces = check_input(scans, faces, parts, k_max)
@@ -224,7 +228,8 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
         # (a) joints + poses
         t0 = time.perf_counter()
         model, poses, gn_log = optimise_joints_and_poses(model, poses, problem, iterations=gn_iterations,
-                                                         progress=_sub_progress(progress, lo, lo + step))
+                                                         progress=_sub_progress(progress, lo, lo + step),
+                                                         fix_joints=it < joint_warmup_rounds)
         timings["joints_and_poses"] += time.perf_counter() - t0
         if gn_log:
             E = gn_log[-1]
@@ -232,7 +237,7 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
         sym_term = E - objective.value(hybrid_skin(model, poses))
         # (b) weights
         t0 = time.perf_counter()
-        model, w_log = optimise_weights(model, poses, objective, max_sweeps=bcd_sweeps,
+        model, w_log = optimise_weights(model, poses, objective, max_sweeps=bcd_sweeps, steps=bcd_steps,
                                         progress=_sub_progress(progress, lo + step, lo + 2 * step, sym_term))
         timings["weights"] += time.perf_counter() - t0
         if w_log:
@@ -249,7 +254,7 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
         log.append(("rest_vertices", float(E)))
         if progress is not None:
             progress(lo + 3 * step, f"round {it + 1} of {max_iterations}", E)
-        if E_round - E <= tol * E_round:
+        if it >= joint_warmup_rounds and E_round - E <= tol * E_round:
             converged = True
             break
 

@@ -15,7 +15,7 @@ def learned():
     model, poses, scans = hybrid_truth(6, seed=1)
     calls = []
     res = learn_rig(scans, model.faces, parts=8, max_iterations=2, bcd_sweeps=2, gn_iterations=3,
-                    progress=lambda f, s, o: calls.append((f, s, o)))
+                    bcd_steps=(0.2, 0.05), progress=lambda f, s, o: calls.append((f, s, o)))
     return model, scans, res, calls, poses
 
 
@@ -66,15 +66,16 @@ def test_initial_joints_within_5_percent_on_hybrid_data():
 
 
 def test_learned_joints_stay_close_to_truth(learned):
-    """After the alternation joints may drift while the weights are still nearly binary (see report)."""
+    """With the joint warm-up round the joints stay near the true centres (without it: up to 7.5 %)."""
     truth, scans, res, _, poses = learned
-    assert _joint_errors(truth, poses, res).max() < 0.10
+    assert _joint_errors(truth, poses, res).max() < 0.05
 
 
 def test_deterministic_under_seed():
     model, poses, scans = hybrid_truth(4, seed=2)
-    a = learn_rig(scans, model.faces, parts=8, max_iterations=1, bcd_sweeps=1, gn_iterations=1, seed=3)
-    b = learn_rig(scans, model.faces, parts=8, max_iterations=1, bcd_sweeps=1, gn_iterations=1, seed=3)
+    kw = dict(parts=8, max_iterations=1, bcd_sweeps=1, gn_iterations=1, bcd_steps=(0.2,), seed=3)
+    a = learn_rig(scans, model.faces, **kw)
+    b = learn_rig(scans, model.faces, **kw)
     assert a.report["rest_scan"] == b.report["rest_scan"]
     assert np.array_equal(a.model.rest_vertices, b.model.rest_vertices)
     assert np.array_equal(a.poses.rotations, b.poses.rotations)
