@@ -138,11 +138,13 @@ def _labels_from_skeleton(rest, skeleton):
     return np.argmin(dist, axis=1)
 
 
-def initialise(scans, faces, parts, seed, symmetry, initial_skeleton, k_max, progress):
+def initialise(scans, faces, parts, seed, symmetry, initial_skeleton, k_max, progress, rest_scan=None):
     """Steps 2-4.  Returns (model, poses, info dict)."""
     M = len(scans)
     rng = np.random.default_rng(seed)
-    rest_index = int(rng.integers(M))
+    rest_index = int(rng.integers(M)) if rest_scan is None else int(rest_scan)
+    if not 0 <= rest_index < M:
+        raise ArticulaInputError(f"rest_scan: {rest_index} is not a scan index (0..{M - 1})")
     rest = scans[rest_index].copy()
     check_motion(rest, scans, faces)
     info = dict(rest_scan=rest_index)
@@ -186,14 +188,16 @@ def _sub_progress(progress, lo, hi, offset=0.0):
 
 def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iterations=10, seed=0,
               initial_skeleton=None, progress=None, lam=1e10, gn_iterations=5, bcd_sweeps=5, tol=1e-4,
-              k_max=20, joint_warmup_rounds=1, bcd_steps=(0.2, 0.1, 0.05, 0.02)):
+              k_max=20, joint_warmup_rounds=1, bcd_steps=(0.2, 0.1, 0.05, 0.02), rest_scan=None):
     """Learn a hybrid-skinned rig from registered scans.
 
     scans ``(M,V,3)`` metres (M ≥ 3, one topology), faces ``(F,3)`` int.  parts: number of parts k (= bones;
     None = chosen from the motion, up to k_max).  alpha: shape-conformance weight of the Laplacian term
     (dimensionless, see :mod:`solver.rig_objective`).  symmetry: detect mirror pairs and equalise their
     bone lengths with weight lam (m⁻²).  max_iterations: outer rounds of (a)-(c).  seed: rest-scan choice
-    and segmentation seeding.  initial_skeleton: a :class:`Skeleton` to start from instead of segmenting.
+    and segmentation seeding.  rest_scan: index of the scan used as initial rest mesh (default: chosen by
+    the seed).  initial_skeleton: a :class:`Skeleton` in the coordinates of the rest scan to start from
+    instead of segmenting (parts = nearest bone segment).
     progress(fraction, stage, objective): called throughout; may raise :class:`Cancelled`; the objective
     passed never increases.  joint_warmup_rounds: in the first rounds step (a) updates poses only, with the
     joints held at their initial (rotation-centre) estimates: with binary initial weights and α = 100 the
@@ -207,7 +211,7 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
     t0 = time.perf_counter()
     init_progress = _sub_progress(progress, 0.0, 0.1)
     model, poses, info, pairs = initialise(scans, faces, parts, seed, symmetry, initial_skeleton, k_max,
-                                           init_progress)
+                                           init_progress, rest_scan)
     timings["initialisation"] = time.perf_counter() - t0
 
     L = uniform_laplacian(faces, len(scans[0]))

@@ -135,3 +135,18 @@ def test_huge_input_refused_up_front_with_memory_estimate():
     scans = np.broadcast_to(verts, (10, n * n, 3))
     with pytest.raises(ArticulaInputError, match="GB"):
         learn_rig(scans, faces, parts=19)
+
+
+def test_initial_skeleton_is_used_as_given():
+    from .learn_data import truth_skeleton
+    scans, faces, labels, rest, _, _ = rigid_scans(5)
+    sk = truth_skeleton()
+    res = learn_rig(scans, faces, initial_skeleton=sk, max_iterations=0, rest_scan=0)   # scan 0 = rest pose
+    assert res.model.skeleton.names == sk.names and res.report["rest_scan"] == 0
+    assert np.array_equal(res.model.skeleton.heads, sk.heads)
+    res.model.validate()
+    assert res.report["parts"] == 8
+    # rigid data, true joints, nearest-bone parts (wrong near the seams, which biases the part fits)
+    err = np.linalg.norm(hybrid_skin(res.model, res.poses) - scans, axis=2)
+    assert err[0].max() < 1e-9                                     # the rest scan itself: identity poses
+    assert np.median(err) < 0.01
