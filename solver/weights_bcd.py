@@ -240,7 +240,9 @@ class CandidateSkin:
 
 def evaluate(model, skin, state, idx, steps=STEPS):
     """Best candidate of each vertex in idx: ``(gain (n,), anchor (n,), twist (n,B) f32, swing (n,B) f32,
-    posed (M,n,3))``; gain 0 and the current state where nothing improves.  skin: :class:`CandidateSkin`."""
+    posed (M,n,3))``; gain 0 and the current state where nothing improves.  skin: :class:`CandidateSkin`.
+    All candidates of all vertices are evaluated in one batch (one skinning evaluation, one QP call per
+    number of swing variables)."""
     sk = model.skeleton
     kids = _children_table(sk.parents)
     B = sk.num_bones
@@ -251,33 +253,36 @@ def evaluate(model, skin, state, idx, steps=STEPS):
     f_cur = kap * np.sum((p_cur - g) ** 2, axis=(0, 2))
     best = (np.zeros(n), model.anchor[idx].copy(), model.twist_weights[idx].copy(),
             model.swing_weights[idx].copy(), p_cur.copy())
-    x_all = model.rest_vertices[idx]
+    cv, ca, ct = [], [], []
     for anchor, tw, valid in candidates(model.anchor[idx], model.twist_weights[idx].astype(np.float64),
                                         sk.parents, steps):
-        if not valid.any():
-            continue
         sel = np.flatnonzero(valid)
-        a, tw32 = anchor[sel], tw[sel].astype(np.float32)
-        ck = kids[a]
-        base, G = skin.base_and_columns(x_all[sel], a, tw32.astype(np.float64), ck)
-        gs = g[:, sel]
-        H = np.einsum("mvik,mvil->vkl", G, G)
-        bvec = np.einsum("mvik,mvi->vk", G, gs - base)
-        w = box_simplex_qp(H, bvec, (ck >= 0).sum(axis=1)).astype(np.float32)
-        p_new = base + np.einsum("mvik,vk->mvi", G, w.astype(np.float64))
-        gain = f_cur[sel] - kap[sel] * np.sum((p_new - gs) ** 2, axis=(0, 2))
-        better = gain > best[0][sel]
-        if not better.any():
-            continue
-        s = sel[better]
-        best[0][s] = gain[better]
-        best[1][s] = a[better]
-        best[2][s] = tw32[better]
-        sw = np.zeros((len(sel), B), np.float32)
-        r_idx, c_idx = np.nonzero(ck >= 0)
-        sw[r_idx, ck[r_idx, c_idx]] = w[r_idx, c_idx]
-        best[3][s] = sw[better]
-        best[4][:, s] = p_new[:, better]
+        cv.append(sel)
+        ca.append(anchor[sel])
+        ct.append(tw[sel])
+    v, a = np.concatenate(cv), np.concatenate(ca)
+    tw32 = np.concatenate(ct).astype(np.float32)
+    ck = kids[a]
+    base, G = skin.base_and_columns(model.rest_vertices[idx][v], a, tw32.astype(np.float64), ck)
+    gs = g[:, v]
+    H = np.einsum("mvik,mvil->vkl", G, G)
+    bvec = np.einsum("mvik,mvi->vk", G, gs - base)
+    w = box_simplex_qp(H, bvec, (ck >= 0).sum(axis=1)).astype(np.float32)
+    p_new = base + np.einsum("mvik,vk->mvi", G, w.astype(np.float64))
+    gain = f_cur[v] - kap[v] * np.sum((p_new - gs) ** 2, axis=(0, 2))
+    order = np.lexsort((-gain, v))                    # per vertex, the largest gain first
+    first = order[np.r_[True, v[order][1:] != v[order][:-1]]]
+    first = first[gain[first] > 0]
+    tv = v[first]
+    best[0][tv] = gain[first]
+    best[1][tv] = a[first]
+    best[2][tv] = tw32[first]
+    sw = np.zeros((len(first), B), np.float32)
+    ckf, wf = ck[first], w[first]
+    r_idx, c_idx = np.nonzero(ckf >= 0)
+    sw[r_idx, ckf[r_idx, c_idx]] = wf[r_idx, c_idx]
+    best[3][tv] = sw
+    best[4][:, tv] = p_new[:, first]
     return best
 
 
