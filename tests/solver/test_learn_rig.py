@@ -150,3 +150,11 @@ def test_initial_skeleton_is_used_as_given():
     err = np.linalg.norm(hybrid_skin(res.model, res.poses) - scans, axis=2)
     assert err[0].max() < 1e-9                                     # the rest scan itself: identity poses
     assert np.median(err) < 0.01
+
+
+def test_number_of_parts_chosen_automatically():
+    scans, faces, labels, rest, _, _ = rigid_scans(6, seed=2)
+    res = learn_rig(scans, faces, max_iterations=0, k_max=10)
+    assert res.report["parts"] == 8 and res.model.skeleton.num_bones == 8
+    assert len(res.report["k_curve_mm"]) == 10
+    assert len(res.report["mirror_pairs"]) == 3
