@@ -160,6 +160,26 @@ def schur_solve(H_ss, H_so, H_oo, g_s, g_o):
     return x_s, x_o
 
 
+SCAN_CHUNK = 2      # scans whose Jacobians are held in memory at once
+
+
+def gauss_newton_blocks(model, poses, objective, chunk=SCAN_CHUNK):
+    """:func:`normal_blocks` accumulated over chunks of scans, so that only ``chunk`` scans' Jacobians
+    are in memory at once.  Returns ``H_ss, H_so (M,..), H_oo (M,..), g_s, g_o (M,..)``."""
+    M = len(poses)
+    rd, rl = objective.residuals(hybrid_skin(model, poses))
+    parts = []
+    for m0 in range(0, M, chunk):
+        sl = slice(m0, min(M, m0 + chunk))
+        sub = Poses(poses.rotations[sl], poses.translations[sl], poses.scales[sl])
+        Js, Jo = posed_jacobians(model, sub)
+        parts.append(normal_blocks(Js, Jo, rd[sl], rl[sl], objective.L, objective.alpha))
+    H_ss = sum(p[0] for p in parts)
+    g_s = sum(p[3] for p in parts)
+    return (H_ss, np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts]), g_s,
+            np.concatenate([p[4] for p in parts]))
+
+
 class JointPoseProblem:
     """Objective ``Q + λ Q_sym`` as a function of (skeleton, poses) for a fixed model skin and rest mesh."""
 
@@ -187,10 +207,7 @@ def optimise_joints_and_poses(model, poses, problem, iterations=10, mu=1e-3, ste
     E = problem.value(model, poses)
     log = []
     for it in range(iterations):
-        posed = hybrid_skin(model, poses)
-        rd, rl = obj.residuals(posed)
-        Js, Jo = posed_jacobians(model, poses)
-        H_ss, H_so, H_oo, g_s, g_o = normal_blocks(Js, Jo, rd, rl, obj.L, obj.alpha)
+        H_ss, H_so, H_oo, g_s, g_o = gauss_newton_blocks(model, poses, obj)
         # damping from the data part only: the huge symmetry weight must not freeze the joints it couples
         diag_s = np.diag(H_ss).copy()
         if problem.sym_pairs and problem.lam > 0:

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ArticulaInputError, Cancelled  # noqa: F401
-from .joint_pose_gn import JointPoseProblem, optimise_joints_and_poses, sizes, symmetry_residuals
+from .joint_pose_gn import SCAN_CHUNK, JointPoseProblem, optimise_joints_and_poses, sizes, symmetry_residuals
 from .laplacian import components, uniform_laplacian
 from .model import Model, Poses, Skeleton
 from .pose_init import poses_from_part_fits
@@ -53,10 +53,11 @@ class LearnResult:
 # ----------------------------------------------------------------------------- input checks
 
 def working_memory_bytes(num_scans, num_vertices, num_parts):
-    """Estimated peak memory (bytes) of the joint/pose step: the posed-vertex Jacobians and their
-    Laplacians, ``2 · 8 · M · 3V · (5(B−1) + 3B + 3)``."""
+    """Estimated peak memory (bytes): the joint/pose step holds the analytic Jacobians of SCAN_CHUNK scans
+    (pose, joint and frame Jacobians, their reordered copy and its Laplacian: ~4 copies of
+    ``8 · 3V · (5(B−1) + 3B + 3)`` per scan) plus ~12 arrays of all posed vertices ``8 · M · 3V``."""
     n_s, n_o = sizes(num_parts)
-    return 2 * 8 * num_scans * 3 * num_vertices * (n_s + n_o)
+    return 4 * 8 * SCAN_CHUNK * 3 * num_vertices * (n_s + n_o) + 12 * 8 * num_scans * 3 * num_vertices
 
 
 def check_input(scans, faces, parts, k_max):
