@@ -98,3 +98,17 @@ def test_bcd_recovers_smooth_weights_from_binary_start():
     e0 = np.linalg.norm(hybrid_skin(start, poses) - scans, axis=2).mean()
     e1 = np.linalg.norm(hybrid_skin(fitted, poses) - scans, axis=2).mean()
     assert e1 < 0.2 * e0                                          # G13: error falls by > 80 %
+
+
+def test_two_ring_colouring_separates_interacting_vertices():
+    from articula.solver.weights_bcd import two_ring_colouring
+    _, faces, _ = body()
+    V = faces.max() + 1
+    L = uniform_laplacian(faces, V)
+    A1 = (L != 0).astype(float)
+    ring2 = (A1 @ A1).tocsr()
+    colour = two_ring_colouring(ring2)
+    rows, cols = ring2.nonzero()
+    off = rows != cols
+    assert np.all(colour[rows[off]] != colour[cols[off]])
+    assert colour.max() + 1 <= ring2.getnnz(axis=1).max()        # greedy bound: at most max degree + 1
