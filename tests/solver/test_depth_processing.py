@@ -299,3 +299,18 @@ def test_threaded_import_equals_sequential_and_reports_the_first_bad_frame(tmp_p
     write_png16(paths[11], np.zeros((60, 80), np.uint16))   # frame 11 is in the second chunk of 8
     with pytest.raises(ArticulaInputError, match=r"depth_11.png: 80x60 pixels"):
         ps.import_depth(ps.png_frames(paths), INTR, opts(workers=3))
+
+
+def test_cancelling_stops_the_threaded_import(tmp_path):
+    from articula.solver.errors import Cancelled
+    write_recording(tmp_path / "rec", n=40)
+    paths = ps.list_frames(str(tmp_path / "rec"), ps.DEPTH_EXTENSIONS)
+    calls = []
+
+    def progress(fraction, text=""):
+        calls.append(fraction)
+        if fraction > 0.3:
+            raise Cancelled("test")
+    with pytest.raises(Cancelled):
+        ps.import_depth(ps.png_frames(paths), INTR, opts(workers=3), progress)
+    assert max(calls) < 0.6
