@@ -27,7 +27,7 @@ import numpy as np
 from .errors import ArticulaInputError, Cancelled  # noqa: F401
 from .joint_pose_gn import SCAN_CHUNK, JointPoseProblem, optimise_joints_and_poses, sizes, symmetry_residuals
 from .laplacian import components, uniform_laplacian
-from .model import Model, Poses, Skeleton
+from .model import Model, Poses
 from .pose_init import poses_from_part_fits
 from .procrustes import fit_parts
 from .rest_shape import solve_rest_vertices

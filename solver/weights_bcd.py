@@ -31,7 +31,6 @@ exactly the sum of the applied gains (checked by the tests against a full recomp
 import itertools
 
 import numpy as np
-import scipy.sparse as sp
 
 from .errors import Cancelled  # noqa: F401  (raised by progress callbacks)
 from .dualquat import dq_apply
