@@ -281,6 +281,14 @@ def test_point_cloud_files(tmp_path):
     np.save(tmp_path / "f_3.npy", a[:, :2])
     with pytest.raises(ArticulaInputError, match=r"f_3.npy: expected a \(K, 3\) or \(K, 6\)"):
         ps.read_point_file(str(tmp_path / "f_3.npy"))
+    # binary PLY point cloud (vertex element only, with colour properties that are skipped)
+    rec = np.zeros(50, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1")])
+    rec["x"], rec["y"], rec["z"] = a[:50].T
+    header = ("ply\nformat binary_little_endian 1.0\nelement vertex 50\nproperty float x\nproperty float y\n"
+              "property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n")
+    (tmp_path / "f_4.ply").write_bytes(header.encode() + rec.tobytes())
+    pts, col = ps.read_point_file(str(tmp_path / "f_4.ply"))
+    np.testing.assert_allclose(pts, a[:50], rtol=1e-6)
     seq = ps.import_clouds([str(tmp_path / "f_0.npy")] * 2, opts(voxel_size=0.2, estimate_normals=True))
     assert seq.frame_count == 2 and seq.normals.shape == seq.points.shape
     assert len(seq.points[seq.frame(0)]) < 500
