@@ -125,8 +125,7 @@ def write_frame(mesh, seq: PointSequence, k: int) -> None:
             seq._linear_rgba = rgba
         if len(pts):
             attr.data.foreach_set("color", np.ascontiguousarray(rgba[sl]).ravel())
-        if hasattr(mesh, "color_attributes"):
-            mesh.color_attributes.active_color = attr
+        mesh.color_attributes.active_color = attr
     mesh.update()
 
 
