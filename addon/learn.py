@@ -8,8 +8,8 @@ Pipeline (what ``articula.learn_rig``, the ``learn-rig`` batch command and the d
    :func:`check_scans` (at least 3 scans, finite coordinates, triangles);
 2. :func:`learn` (no bpy: runs in the worker thread) calls :func:`solver.learn.learn_rig`, turning its
    ``progress(fraction, stage, objective)`` into the job's ``progress(fraction, text)``, then measures
-   the per-vertex error: the distance of every posed vertex to the surface of its scan, averaged over
-   the scans (:func:`solver.surface_distance.per_vertex_scan_distances`);
+   the per-vertex error: the distance of every scan vertex to the posed model's surface, averaged over
+   the scans (:func:`vertex_error_mm`; the distances the solver's report summarises);
 3. :func:`build` (main thread, inside ``scene_guard``) builds the exact swing/twist rig with the rig
    builder from an in-memory bundle, bakes the poses on the scan-sequence object's frames (scan k on
    frame ``frame_start + k``, so scrubbing replays the scans with the learned rig), adds the heat map
@@ -76,16 +76,14 @@ class LearnOptions:
     parts: int = 0                  # 0: chosen from the motion
     alpha: float = 100.0
     symmetry: bool = True
-    max_iterations: int = 0         # 0: the solver's default
+    max_iterations: int = 10        # outer rounds of the alternating optimisation; 0: initialisation only
     seed: int = 0
     initial_skeleton: Skeleton | None = None
 
     def solver_kwargs(self) -> dict:
-        kw = dict(parts=self.parts or None, alpha=float(self.alpha), symmetry=bool(self.symmetry),
-                  seed=int(self.seed), initial_skeleton=self.initial_skeleton)
-        if self.max_iterations:
-            kw["max_iterations"] = int(self.max_iterations)
-        return kw
+        return dict(parts=self.parts or None, alpha=float(self.alpha), symmetry=bool(self.symmetry),
+                    max_iterations=int(self.max_iterations), seed=int(self.seed),
+                    initial_skeleton=self.initial_skeleton)
 
 
 @dataclass
@@ -237,15 +235,17 @@ def learn(inp: LearnInput, options: LearnOptions, progress=None) -> LearnOutcome
     return LearnOutcome(inp, result, heat, options)
 
 
-def vertex_error_mm(model, poses, scans, faces) -> np.ndarray:
-    """Heat map ``(V,)``: mean over the scans of the distance (mm) of posed vertex v to scan m's surface."""
+def vertex_error_mm(model, poses, scans, faces=None) -> np.ndarray:
+    """Heat map ``(V,)``: for every vertex v, the mean over the scans of the distance (mm) of scan vertex v
+    to the posed model's surface (the rig mesh keeps the scans' vertex order).  This is the distance the
+    solver's ``surface_error_mm`` statistics summarise, so the heat map's mean is their mean."""
     posed = hybrid_skin(model, poses)
-    return 1000.0 * per_vertex_scan_distances(posed, scans, faces).mean(axis=0)
+    return 1000.0 * per_vertex_scan_distances(scans, posed, model.faces).mean(axis=0)
 
 
 def error_summary(report: dict) -> dict:
     """The error statistics in mm from the solver's report (keys mean, median, max, ...)."""
-    for key in ("error_mm", "errors_mm", "error", "errors"):
+    for key in ("surface_error_mm", "error_mm"):
         if isinstance(report.get(key), dict):
             return report[key]
     return {k: report[k] for k in ("mean", "std", "median", "mad", "iqr", "max") if k in report}

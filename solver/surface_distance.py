@@ -7,8 +7,8 @@
   exactly: the nearest mesh vertex gives an upper bound d; a triangle can only be closer if its
   bounding sphere (centroid, circumradius about the centroid) comes within d, so only triangles whose
   centroid lies within d + max radius are tested (a k-d tree ball query), in chunks.
-* :func:`per_vertex_scan_distances` — for registered sequences: the distance of posed vertex v of frame m
-  to the surface of scan m, ``(M, V)``; the heat map of a learned rig is its mean over m.
+* :func:`per_vertex_scan_distances` — per frame m, the distance of points m to surface m, ``(M, N)``; the
+  heat map of a learned rig is its mean over m of scan vertex v to the posed model's surface.
 * :func:`error_statistics` — mean, std, median, MAD = median |x − median|, IQR = Q3 − Q1 and max.
   Q1/Q3 are the medians of the lower/upper halves (the middle element excluded for odd n), as the
   spec defines them.
@@ -94,11 +94,13 @@ def distance_to_surface(points, vertices, faces):
     return best
 
 
-def per_vertex_scan_distances(posed, scans, faces):
-    """``(M, V)``: distance of posed vertex ``posed[m, v]`` to the surface of scan m (``scans (M, V', 3)``
-    sharing ``faces (F, 3)``)."""
-    posed = np.asarray(posed, dtype=np.float64)
-    return np.stack([distance_to_surface(posed[m], scans[m], faces) for m in range(len(posed))])
+def per_vertex_scan_distances(points, surfaces, faces):
+    """``(M, N)``: distance of ``points[m, i]`` (``(M, N, 3)``) to the surface of frame m, vertices
+    ``surfaces (M, V, 3)`` sharing triangles ``faces (F, 3)``.  For a registered sequence either side may be
+    the scans: scan vertices to the posed model (what the learned rig's report and heat map use) or posed
+    vertices to the scans."""
+    points = np.asarray(points, dtype=np.float64)
+    return np.stack([distance_to_surface(points[m], surfaces[m], faces) for m in range(len(points))])
 
 
 def _median(x):
