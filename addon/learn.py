@@ -134,7 +134,10 @@ def input_from_object(ob) -> LearnInput:
     if not scan_sequence.is_scan_sequence(ob):
         raise ArticulaInputError(f"{ob.name!r} is not a scan-sequence object; import the scans first "
                                  f"(Import › Scans…) and select the result")
-    scans, faces = scan_sequence.scan_frames(ob)        # names the object if unregistered / cache missing
+    if not ob.articula.registered:
+        raise ArticulaInputError(f"{ob.name!r}: the scans are not registered (vertex count or faces change between "
+                                 f"frames); learning a rig needs registered scans of one topology")
+    scans, faces = scan_sequence.scan_frames(ob)        # names the object if its frame cache is missing
     check_scans(scans, faces, repr(ob.name))
     return LearnInput(scans.astype(np.float64), faces, ob.name, ob.name, int(ob.articula.frame_start), ob.name)
 

@@ -178,7 +178,7 @@ def test_initial_skeleton_from_an_armature(pkg, truth):
 @pytest.mark.parametrize("case, message", [
     ("missing", "no object named 'nowhere'"),
     ("not_sequence", "'Cube' is not a scan-sequence object"),
-    ("unregistered", "not registered"),
+    ("unregistered", "'u': the scans are not registered .* needs registered scans"),
     ("two_frames", "2 scans; learning a rig needs at least 3"),
     ("nan", "scan 1 .* non-finite coordinate .* vertex 7"),
     ("no_armature", "initial armature: no object named 'ghost'"),
