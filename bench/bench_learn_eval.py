@@ -128,11 +128,12 @@ def _child_learn(src, dst):
     from articula.solver.bundle import save_bundle
     from articula.solver.learn import learn_rig
     data = np.load(src)
-    parts = int(data["parts"])
+    parts, rounds = int(data["parts"]), int(data["rounds"])
+    options = {"max_iterations": rounds} if rounds > 0 else {}
     base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     t0, c0 = time.perf_counter(), time.process_time()
     result = learn_rig(np.asarray(data["scans"]), np.asarray(data["faces"]), parts=parts if parts > 0 else None,
-                       seed=0)
+                       seed=0, **options)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     try:
@@ -144,6 +145,7 @@ def _child_learn(src, dst):
 
 
 LEARN_TIMEOUT = [None]        # seconds per learn_rig run (--learn-timeout)
+LEARN_ROUNDS = [0]            # learn_rig max_iterations (--learn-iterations; 0 = its default)
 
 
 def run_learner(scans, faces, parts, tmp):
@@ -154,7 +156,7 @@ def run_learner(scans, faces, parts, tmp):
     if os.path.exists(dst):
         os.remove(dst)
     np.savez(src, scans=np.asarray(scans, dtype=np.float64), faces=np.asarray(faces, dtype=np.int32),
-             parts=int(parts or 0))
+             parts=int(parts or 0), rounds=int(LEARN_ROUNDS[0]))
     try:
         proc = subprocess.run([sys.executable, os.path.join(HERE, "bench_learn_eval.py"), "--child-learn", src, dst],
                               capture_output=True, text=True, timeout=LEARN_TIMEOUT[0])
@@ -469,10 +471,13 @@ def main(argv=None):
     p.add_argument("--out", default=None, help="results file (default bench/results/learn[-quick].txt)")
     p.add_argument("--parts", type=int, default=0, help="parts for the MakeHuman runs (0: learn_rig chooses)")
     p.add_argument("--learn-timeout", type=float, default=None, help="seconds per learn_rig run (default none)")
+    p.add_argument("--learn-iterations", type=int, default=0,
+                   help="learn_rig max_iterations (outer rounds; 0: the learner's default)")
     p.add_argument("--order", default="makehuman,skinning_gt,dembones",
                    help="sections to run, in this order (comma-separated)")
     args = p.parse_args(argv)
     LEARN_TIMEOUT[0] = args.learn_timeout
+    LEARN_ROUNDS[0] = args.learn_iterations
     order = [x.strip() for x in args.order.split(",") if x.strip()]
     unknown = set(order) - {"makehuman", "skinning_gt", "dembones"}
     if unknown:
@@ -498,6 +503,8 @@ def main(argv=None):
         ours, first = {}, None
         if args.parts:
             line(f"MakeHuman part count: {args.parts} (--parts)")
+        if args.learn_iterations:
+            line(f"learn_rig outer rounds: at most {args.learn_iterations} (--learn-iterations)")
         if args.learn_timeout:
             line(f"learn_rig time limit: {args.learn_timeout:.0f} s per run (--learn-timeout)")
         with tempfile.TemporaryDirectory(prefix="articula_bench_learn_") as tmp:
