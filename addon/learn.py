@@ -338,8 +338,11 @@ def save(path: str, outcome: LearnOutcome) -> None:
     """Write the learned model and its per-scan poses (scan order) to a bundle; the report goes into
     the provenance."""
     check_output_path(path)
-    save_bundle(path, outcome.model, outcome.poses,
-                {"source": "learn_rig", "scans": outcome.input.source, "report": report_json(outcome)})
+    try:
+        save_bundle(path, outcome.model, outcome.poses,
+                    {"source": "learn_rig", "scans": outcome.input.source, "report": report_json(outcome)})
+    except OSError as exc:
+        raise ArticulaInputError(f"{path}: cannot write the bundle ({exc.strerror or exc})") from None
 
 
 def learn_from_object(context, ob, options: LearnOptions = None, name: str = "", progress=None):

@@ -300,6 +300,18 @@ def test_initial_armature_becomes_the_skeleton(pkg, tmp_path, truth, needs_learn
     assert json.loads(bpy.data.objects["FromArmature"][learn.REPORT_PROPERTY])["options"]["initial_skeleton"]
 
 
+def test_failure_after_building_rolls_the_rig_back(pkg, tmp_path, truth, needs_learn):
+    """The bundle cannot be written (its path is a folder): reported, and the rig already built is removed."""
+    model, poses, scans = truth
+    ob = import_sequence(pkg, tmp_path, scans, model.faces)
+    os.makedirs(tmp_path / "taken.npz")
+    before = scene_state()
+    with pytest.raises(RuntimeError, match="taken.npz: cannot write the bundle"):
+        bpy.ops.articula.learn_rig(source_object=ob.name, parts=8, max_iterations=0,
+                                   output_bundle=str(tmp_path / "taken.npz"))
+    assert scene_state() == before
+
+
 def test_learn_from_object_for_scripts(pkg, tmp_path, truth, needs_learn):
     """The synchronous entry point the demo uses: same rig layout, poses on the scan frames."""
     learn = pkg("addon.learn")
