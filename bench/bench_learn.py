@@ -56,7 +56,8 @@ def _print_result(tag, stats, seconds, extra=""):
 def run_learn(tag, frames, faces, parts, args):
     t0, c0 = time.perf_counter(), time.process_time()
     res = learn_rig(frames, faces, parts=parts, max_iterations=args.iterations, bcd_sweeps=args.bcd_sweeps,
-                    gn_iterations=args.gn_iterations, seed=args.seed)
+                    gn_iterations=args.gn_iterations, seed=args.seed, alpha=args.alpha,
+                    symmetry=not args.no_symmetry)
     seconds = time.perf_counter() - t0
     rep = res.report
     timing = ", ".join(f"{k} {v:.1f}s" for k, v in rep["timings_s"].items() if k != "total")
@@ -123,6 +124,8 @@ def main(argv):
     p.add_argument("--bcd-sweeps", type=int, default=3)
     p.add_argument("--gn-iterations", type=int, default=3)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--alpha", type=float, default=100.0, help="shape-conformance weight")
+    p.add_argument("--no-symmetry", action="store_true")
     p.add_argument("--peer", action="store_true", help="also run Dem Bones (separate venv)")
     args = p.parse_args(argv)
     if args.data == "dembones":
