@@ -72,3 +72,20 @@ def test_rest_step_never_increases_q():
         trial = copy.deepcopy(start)
         trial.rest_vertices = start.rest_vertices + 1e-4 * rng.normal(size=start.rest_vertices.shape)
         assert obj.value(hybrid_skin(trial, poses)) > q1
+
+
+def test_alpha_trades_position_error_for_local_shape_error():
+    """G15 (qualitative): larger α fits the scans' Laplacians better and absolute positions worse."""
+    model, poses, scans = hybrid_truth(5)
+    L = uniform_laplacian(model.faces, model.num_vertices)
+    rng = np.random.default_rng(3)
+    noisy = scans + 0.002 * rng.normal(size=scans.shape)
+    obj = RigObjective(noisy, L, 1.0)
+    terms = []
+    for alpha in (0.0, 100.0, 1e4):
+        m = copy.deepcopy(model)
+        m.rest_vertices = solve_rest_vertices(model, poses, noisy, L, alpha)
+        d, l = obj.residuals(hybrid_skin(m, poses))
+        terms.append((np.sum(d * d), np.sum(l * l)))
+    (d0, l0), (d1, l1), (d2, l2) = terms
+    assert d0 < d1 < d2 and l0 > l1 > l2
