@@ -130,14 +130,14 @@ def test_batch_commands(pkg, tmp_path):
     assert cli.main(["build-rig", "--bundle", str(tmp_path / "missing.npz")]) == 2
 
 
-def test_build_warns_where_blender_blends_twists_differently(pkg, tmp_path):
+def test_build_with_large_fork_twists_needs_no_warning(pkg, tmp_path):
+    """The solver blends twists with Blender's own hemisphere rule, so even fork twists adding up to
+    more than 180° (where that rule flips a twist) build without caveats; exactness is checked in
+    test_rig_exactness.py."""
     model = subject(pkg, rings=6, segments=8, fork_twist="all")
     p = poses(pkg, model.skeleton.num_bones, 20, seed=1)
+    assert pkg("solver.skinning").twist_flips(model, p).any()
     path = str(tmp_path / "forks.npz")
     pkg("solver.bundle").save_bundle(path, model, p)
     rig, action = pkg("addon.rig_io").build_from_bundle(bpy.context, path)
-    assert action is not None and any("Preserve Volume" in w for w in rig.warnings)
-    tame = poses(pkg, model.skeleton.num_bones, 20, seed=1, max_twist_deg=89)
-    pkg("solver.bundle").save_bundle(path, model, tame)
-    rig, _ = pkg("addon.rig_io").build_from_bundle(bpy.context, path)
-    assert rig.warnings == ()
+    assert action is not None and rig.warnings == ()
