@@ -83,3 +83,10 @@ def push_to_nla(ob, action, slot, start: int):
     if slot is not None and getattr(strip, "action_slot", None) != slot:
         strip.action_slot = slot
     return track
+
+
+def blend_relative_path_options() -> set:
+    """``options`` for FILE_PATH properties that hold ``//``-relative paths: newer Blender (the
+    ``PATH_SUPPORTS_BLEND_RELATIVE`` flag exists, e.g. 5.x) warns without it, 4.2 rejects it."""
+    supported = "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties
+    return {'PATH_SUPPORTS_BLEND_RELATIVE'} if supported else set()

@@ -4,6 +4,8 @@ Stored data carries ``data_version`` so later releases can migrate it.
 """
 import bpy
 
+from . import compat
+
 DATA_VERSION = 1
 
 OBJECT_KINDS = (
@@ -26,7 +28,7 @@ class ArticulaObjectData(bpy.types.PropertyGroup):
     frame_start: bpy.props.IntProperty(name="First Frame", default=1)
     frame_count: bpy.props.IntProperty(name="Frames", default=0, min=0)
     cache_file: bpy.props.StringProperty(
-        name="Cache File", subtype='FILE_PATH',
+        name="Cache File", subtype='FILE_PATH', options=compat.blend_relative_path_options(),
         description="Array cache holding every frame (relative to the .blend when saved)")
 
 

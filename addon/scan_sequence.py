@@ -30,7 +30,6 @@ from __future__ import annotations
 import os
 import shutil
 import uuid
-import warnings
 
 import bpy
 import numpy as np
@@ -224,11 +223,8 @@ def create_object(context, name: str, seq: ScanSequence, cache_path: str, frame_
 
 
 def set_cache_path(ob, path: str) -> None:
-    # Blender 5.x warns that this FILE_PATH property lacks the PATH_SUPPORTS_BLEND_RELATIVE option
-    # (which 4.2 does not know); the "//" prefix is resolved here with bpy.path.abspath, so it is fine.
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=".*blend relative", category=RuntimeWarning)
-        ob.articula.cache_file = path
+    """Store the cache path (``//``-relative when saved; resolved with bpy.path.abspath)."""
+    ob.articula.cache_file = path
 
 
 def is_scan_sequence(ob) -> bool:
