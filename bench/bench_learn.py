@@ -102,7 +102,13 @@ def bench_tube(args):
     from learn_data import hybrid_truth
     truth, poses, scans = hybrid_truth(args.frames, seed=args.seed)
     print(f"tube body: {len(scans)} scans, {truth.num_vertices} vertices, hybrid skin ground truth")
-    run_learn("tube", scans, truth.faces, args.parts[0] if args.parts else 8, args)
+    res = run_learn("tube", scans, truth.faces, args.parts[0] if args.parts else 8, args)
+    from articula.solver.kinematics import forward_kinematics
+    Rm, tm = forward_kinematics(truth.skeleton, poses)
+    r, par = res.report["rest_scan"], np.maximum(truth.skeleton.parents, 0)
+    joints = np.einsum("bij,bj->bi", Rm[r, par], truth.skeleton.heads) + tm[r, par]
+    d = np.array([np.linalg.norm(joints[1:] - h, axis=1).min() for h in res.model.skeleton.heads[1:]]) * 1e3
+    _common.report("tube joint error", float(d.max()), "mm", f"max over joints; median {np.median(d):.3g} mm")
 
 
 def bench_makehuman(args):
@@ -111,7 +117,11 @@ def bench_makehuman(args):
     verts, faces, gt = posed_sequence(n_poses=args.frames, skin="hybrid", seed=args.seed)
     print(f"makehuman registered: {verts.shape[0]} scans, {verts.shape[1]} vertices (generated in "
           f"{time.perf_counter() - t0:.1f}s)")
-    run_learn("makehuman", verts, faces, args.parts[0] if args.parts else 19, args)
+    res = run_learn("makehuman", verts, faces, args.parts[0] if args.parts else 19, args)
+    truth = gt["posed_heads"][res.report["rest_scan"]]           # true joints in the rest scan
+    d = np.array([np.linalg.norm(truth - h, axis=1).min() for h in res.model.skeleton.heads[1:]]) * 1e3
+    _common.report("makehuman joint to nearest true joint", float(np.median(d)), "mm",
+                   f"median over {len(d)} learned joints; max {d.max():.3g} mm; rig has {len(truth)} true joints")
 
 
 def main(argv):
