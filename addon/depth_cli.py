@@ -12,16 +12,14 @@ import os
 
 import bpy
 
-from ..solver.errors import ArticulaInputError
+from .cli import call_operator, save_blend_first, save_blend_again
 
 PRESETS = ("KINECT_V1", "KINECT_V2", "AZURE_KINECT", "REALSENSE_D435")
 
 
 def run(args) -> int:
     if args.blend:
-        blend = os.path.abspath(args.blend)
-        os.makedirs(os.path.dirname(blend), exist_ok=True)
-        bpy.ops.wm.save_as_mainfile(filepath=blend)
+        save_blend_first(args.blend)
     props = dict(directory=os.path.abspath(args.depth), depth_min=args.depth_min, depth_max=args.depth_max,
                  remove_floor=not args.keep_floor, floor_tolerance=args.floor_tolerance,
                  subtract_background=args.subtract_background or bool(args.background),
@@ -43,16 +41,12 @@ def run(args) -> int:
         props["cache_file"] = os.path.abspath(args.cache)
     if args.name:
         props["collection_name"] = args.name
-    try:
-        bpy.ops.articula.import_depth(**props)
-    except RuntimeError as exc:  # the operator reported an error: bad input
-        raise ArticulaInputError(str(exc).replace("Error: ", "").strip()) from None
+    call_operator(bpy.ops.articula.import_depth, **props)
     ob = bpy.context.view_layer.objects.active
     data = ob.articula
     print(f"{ob.name}: {data.frame_count} frames, cache {data.cache_file}")
     if args.blend:
-        bpy.ops.wm.save_mainfile()
-        print(f"saved {bpy.data.filepath}")
+        save_blend_again()
     return 0
 
 

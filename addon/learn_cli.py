@@ -18,6 +18,7 @@ import numpy as np
 
 from ..solver.errors import ArticulaInputError
 from . import jobs, learn
+from .cli import call_operator, save_blend_again
 
 
 def report_document(outcome) -> dict:
@@ -58,21 +59,13 @@ def _save_blend(blend: str, paths, outcome) -> None:
     existed = os.path.exists(blend)
     bpy.ops.wm.save_as_mainfile(filepath=blend)            # the scans' frame cache goes beside it
     try:
-        try:
-            bpy.ops.articula.import_scans(directory=os.path.dirname(paths[0]),
-                                          files=[{"name": os.path.basename(p)} for p in paths],
-                                          require_registered=True, frame_start=1)
-        except RuntimeError as exc:
-            raise ArticulaInputError(str(exc).replace("Error: ", "").strip()) from None
+        call_operator(bpy.ops.articula.import_scans, directory=os.path.dirname(paths[0]),
+                      files=[{"name": os.path.basename(p)} for p in paths],
+                      require_registered=True, frame_start=1)
         outcome.input.frame_start = 1
         with jobs.scene_guard():
             learn.build(bpy.context, outcome, f"{outcome.input.name} Rig")
-        prefs = bpy.context.preferences.filepaths
-        versions, prefs.save_version = prefs.save_version, 0   # no .blend1 of the file saved just before
-        try:
-            bpy.ops.wm.save_mainfile()
-        finally:
-            prefs.save_version = versions
+        save_blend_again()
     except BaseException:
         if not existed:
             try:

@@ -13,14 +13,13 @@ import os
 import bpy
 
 from ..solver.errors import ArticulaInputError
+from .cli import call_operator, save_blend_first, save_blend_again
 
 
 def run(args) -> int:
     scans = [os.path.abspath(p) for p in args.scans]
     if args.blend:
-        blend = os.path.abspath(args.blend)
-        os.makedirs(os.path.dirname(blend), exist_ok=True)
-        bpy.ops.wm.save_as_mainfile(filepath=blend)
+        save_blend_first(args.blend)
     props = dict(frame_start=args.frame_start, require_registered=args.require_registered)
     if args.name:
         props["name"] = args.name
@@ -34,22 +33,13 @@ def run(args) -> int:
             raise ArticulaInputError("give files from one folder (or the folder itself)")
         props["directory"] = folders.pop()
         props["files"] = [{"name": os.path.basename(p)} for p in scans]
-    try:
-        bpy.ops.articula.import_scans(**props)
-    except RuntimeError as exc:  # the operator reported an error: bad input
-        raise ArticulaInputError(str(exc).replace("Error: ", "").strip()) from None
+    call_operator(bpy.ops.articula.import_scans, **props)
     ob = bpy.context.view_layer.objects.active
     data = ob.articula
     print(f"{ob.name}: {data.frame_count} frames of {len(ob.data.vertices)} vertices, "
           f"{'registered' if data.registered else 'unregistered'}, cache {data.cache_file}")
     if args.blend:
-        paths = bpy.context.preferences.filepaths
-        versions, paths.save_version = paths.save_version, 0   # no .blend1 of the file saved just before
-        try:
-            bpy.ops.wm.save_mainfile()
-        finally:
-            paths.save_version = versions
-        print(f"saved {bpy.data.filepath}")
+        save_blend_again()
     return 0
 
 
