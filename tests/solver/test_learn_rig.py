@@ -28,6 +28,9 @@ def test_result_shapes_and_validity(learned):
     for key in ("mean", "std", "median", "mad", "iqr"):
         assert np.isfinite(res.report["surface_error_mm"][key])
     assert set(res.report["timings_s"]) >= {"initialisation", "joints_and_poses", "weights", "rest_vertices"}
+    # a scan vertex is never farther from the posed surface than from its own posed vertex
+    assert res.report["surface_error_mm"]["mean"] <= res.report["vertex_rms_mm"] + 1e-9
+    assert res.report["surface_error_mm"]["count"] == scans.shape[0] * scans.shape[1]
 
 
 def test_objective_monotone_and_fit_improves(learned):
