@@ -259,8 +259,25 @@ def skinning_gt(name):
         A, t = igl_formats.read_tmat(obj[:-4] + ".Tmat", num_bones=len(bones))
         exact.append(np.einsum("vb,bvi->vi", W, np.einsum("bij,vj->bvi", A, rest) + t[:, None]))
         scans.append(read_obj(obj)[0])
-    return dict(rest=rest, faces=tris, joints=joints, bones=bones, weights=W, scans=np.stack(scans),
-                exact=np.stack(exact))
+    g = dict(rest=rest, faces=tris, joints=joints, bones=bones, weights=W, scans=np.stack(scans),
+             exact=np.stack(exact), dropped=0)
+    return _largest_component(g)
+
+
+def _largest_component(g):
+    """Keep the largest connected part of the mesh (learn_rig needs one connected mesh; the wolf's eyes are
+    separate islands).  ``dropped`` = the number of vertices removed."""
+    from articula.solver.laplacian import components
+    _, labels = components(g["faces"], len(g["rest"]))
+    if labels.max() == 0:
+        return g
+    keep = labels == np.argmax(np.bincount(labels))
+    new = -np.ones(len(keep), dtype=np.int64)
+    new[keep] = np.arange(keep.sum())
+    faces = g["faces"][keep[g["faces"]].all(axis=1)]
+    out = dict(g, rest=g["rest"][keep], faces=new[faces].astype(np.int32), weights=g["weights"][keep],
+               scans=g["scans"][:, keep], exact=g["exact"][:, keep], dropped=int((~keep).sum()))
+    return out
 
 
 def part_joints(joints, bones):
@@ -353,7 +370,7 @@ def section_makehuman(args, tmp, have_learner, why, failures, ours):
 
 def section_skinning_gt(args, tmp, have_learner, why, failures, db_py):
     line("== 2. skinning_gt (exact rigs, libigl formats; lengths in the files' units)")
-    for name in (("cylinder",) if args.quick else ("cylinder", "wolf")):
+    for name in args.gt or (("cylinder",) if args.quick else ("cylinder", "wolf")):
         d = os.path.join(SHARED, "skinning_gt", f"{name}-all")
         if not os.path.isdir(d):
             line(f"-- {name}: SKIPPED ({d} not present)")
@@ -364,7 +381,9 @@ def section_skinning_gt(args, tmp, have_learner, why, failures, db_py):
         diag = float(np.linalg.norm(g["rest"].max(0) - g["rest"].min(0)))
         ref_joints = part_joints(g["joints"], g["bones"])
         err = np.abs(g["exact"] - g["scans"]).max()
-        line(f"-- {name}: {N} posed meshes x {V} vertices, {B} bones, {len(g['joints'])} joints, "
+        islands = (f" (largest connected part: {g['dropped']} vertices of separate islands dropped, as "
+                   f"learn_rig needs one connected mesh; Dem Bones gets the same)" if g["dropped"] else "")
+        line(f"-- {name}: {N} posed meshes x {V} vertices{islands}, {B} bones, {len(g['joints'])} joints, "
              f"rest bounding-box diagonal {diag:.3f}")
         line(f"   exact rig (.DMAT weights, .Tmat transforms) reproduces the meshes to {err:.2e} "
              f"({err / diag:.1e} of the diagonal; the files are rounded)")
@@ -407,8 +426,9 @@ def section_dembones(args, tmp, have_learner, why, failures, db_py, first_mh, ou
     order = float(np.abs(frames[0] - rest).max())
     line(f"-- Bone_Anim: {frames.shape[0]} frames x {frames.shape[1]} vertices; rest bounding-box diagonal "
          f"{diag:.3f} (published 4.418); frame 0 equals the rest mesh vertex by vertex to {order:.1e} (same order)")
-    for bones in ((5, 10) if args.quick else (5, 10, 20)):
-        pub = DEMBONES_PUBLISHED[bones]
+    counts = args.bone_counts or ((5, 10) if args.quick else (5, 10, 20))
+    for bones in counts:
+        pub = DEMBONES_PUBLISHED.get(bones, "-")
         if db_py is None:
             line(f"   {bones:2d} bones  Dem Bones: FAILED - no venv-dembones")
         else:
@@ -473,6 +493,10 @@ def main(argv=None):
     p.add_argument("--learn-timeout", type=float, default=None, help="seconds per learn_rig run (default none)")
     p.add_argument("--learn-iterations", type=int, default=0,
                    help="learn_rig max_iterations (outer rounds; 0: the learner's default)")
+    p.add_argument("--bone-counts", type=lambda t: [int(x) for x in t.split(",")], default=None,
+                   help="bone/part counts on Dem Bones' Bone_Anim (default 5,10,20; --quick 5,10)")
+    p.add_argument("--gt", type=lambda t: t.split(","), default=None,
+                   help="skinning_gt rigs (default cylinder,wolf; --quick cylinder)")
     p.add_argument("--order", default="makehuman,skinning_gt,dembones",
                    help="sections to run, in this order (comma-separated)")
     args = p.parse_args(argv)
