@@ -27,6 +27,12 @@ residuals that earlier blocks updated in place) and every improving one takes it
 A sweep visits all classes (cyclic BCD rather than a global best-gain heap: every vertex is updated
 once per sweep at the cost of one vectorised evaluation per class).  The objective decreases by
 exactly the sum of the applied gains (checked by the tests against a full recomputation).
+
+Joint move (before the classes of every sweep, :func:`joint_move`): with α = 100 a lone vertex move is
+penalised by its one-ring's Laplacian rows, so single-vertex blocks creep.  Every vertex proposes its
+best data-only candidate and the proposals are applied together (all, else the best half, else a
+quarter) only if the exactly recomputed Q decreases.  Measured on the tube body from binary weights,
+5 sweeps: Q 0.0007 with it vs 0.023 without; error reduction 98 % vs 72 %.
 """
 import itertools
 
@@ -199,6 +205,50 @@ class _State:
             self.R[m] += self.L[:, idx] @ d[m]
 
 
+class _DataTargets:
+    """A stand-in for :class:`_State` whose targets ignore the Laplacian term (κ = 1, g = the scan vertex):
+    candidate evaluation then proposes each vertex's best data fit, independently of its neighbours."""
+
+    def __init__(self, state):
+        self.P = state.P
+        self.kappa = np.ones_like(state.kappa)
+        self.scans = state.obj.scans
+
+    def targets(self, idx):
+        return self.scans[:, idx]
+
+
+def joint_move(model, skin, state, objective, Q, steps=STEPS, chunk=2000):
+    """Jacobi proposal with exact acceptance: every vertex proposes its best *data-only* candidate; the
+    proposals with the largest data gains (all, then the best half, then a quarter) are applied together
+    if that lowers the exact Q (recomputed in full).  Neighbouring vertices moving together keep the
+    Laplacian term small where single-vertex moves are penalised by it.  Returns the new Q (≤ Q)."""
+    V = model.num_vertices
+    proxy = _DataTargets(state)
+    gain = np.zeros(V)
+    prop = [np.empty(V, np.int32), np.empty_like(model.twist_weights), np.empty_like(model.swing_weights),
+            np.empty_like(state.P)]
+    for c0 in range(0, V, chunk):
+        idx = np.arange(c0, min(V, c0 + chunk))
+        g, a, tw, sw, p = evaluate(model, skin, proxy, idx, steps)
+        gain[idx], prop[0][idx], prop[1][idx], prop[2][idx], prop[3][:, idx] = g, a, tw, sw, p
+    movers = np.flatnonzero(gain > 0)
+    movers = movers[np.argsort(-gain[movers], kind="stable")]
+    for frac in (1.0, 0.5, 0.25):
+        sel = movers[:int(np.ceil(frac * len(movers)))]
+        if len(sel) == 0:
+            break
+        P_try = state.P.copy()
+        P_try[:, sel] = prop[3][:, sel]
+        Q_try = objective.value(P_try)
+        if Q_try < Q:
+            model.anchor[sel], model.twist_weights[sel], model.swing_weights[sel] = \
+                prop[0][sel], prop[1][sel], prop[2][sel]
+            state.update(sel, prop[3][:, sel])
+            return Q_try
+    return Q
+
+
 class CandidateSkin:
     """Posed positions of single vertices under candidate anchors/weights, from the per-(scan, bone) terms
     of :func:`solver.skinning.bone_terms` computed once (skeleton and poses are fixed during BCD).
@@ -302,7 +352,8 @@ def two_ring_colouring(ring2):
     return colour
 
 
-def optimise_weights(model, poses, objective, max_sweeps=20, steps=STEPS, rel_tol=1e-6, progress=None):
+def optimise_weights(model, poses, objective, max_sweeps=20, steps=STEPS, rel_tol=1e-6, progress=None,
+                     jacobi=True):
     """Sampling-based BCD on twist (and exact swing) weights with anchors; rest mesh, skeleton and poses
     fixed.  Returns ``(model, log)``: the updated model (new anchor / weight arrays) and the objective
     after every sweep (strictly decreasing).
@@ -322,6 +373,8 @@ def optimise_weights(model, poses, objective, max_sweeps=20, steps=STEPS, rel_to
     log = []
     for sweep in range(max_sweeps):
         Q_start = Q
+        if jacobi:
+            Q = joint_move(model, skin, state, objective, Q, steps)
         for idx in classes:
             gain, a, tw, sw, p = evaluate(model, skin, state, idx, steps)
             ok = gain > 1e-15 * max(Q, 1e-300)

@@ -82,7 +82,7 @@ def test_bcd_decreases_q_exactly_by_the_incremental_gains():
     obj = RigObjective(scans, uniform_laplacian(model.faces, model.num_vertices), 100.0)
     start = _binary_start(model)
     q0 = obj.value(hybrid_skin(start, poses))
-    fitted, log = optimise_weights(start, poses, obj, max_sweeps=3, steps=(0.2, 0.05))
+    fitted, log = optimise_weights(start, poses, obj, max_sweeps=3, steps=(0.2, 0.05), jacobi=False)
     assert len(log) == 3 and log[0] < q0 and all(b < a for a, b in zip(log, log[1:]))
     q_full = obj.value(hybrid_skin(fitted, poses))
     assert abs(q_full - log[-1]) <= 1e-9 * q_full               # incremental gains = full recomputation
@@ -90,14 +90,32 @@ def test_bcd_decreases_q_exactly_by_the_incremental_gains():
 
 
 def test_bcd_recovers_smooth_weights_from_binary_start():
-    """With α = 1 (weak shape coupling; single-vertex blocks converge slowly at α = 100, see the report)."""
+    """G13 at the default α = 100: the error falls by > 80 %; without the joint (Jacobi) move the
+    single-vertex blocks are held back by the Laplacian coupling (measured: 72 % after 5 sweeps)."""
     model, poses, scans = hybrid_truth(6)
-    obj = RigObjective(scans, uniform_laplacian(model.faces, model.num_vertices), 1.0)
+    obj = RigObjective(scans, uniform_laplacian(model.faces, model.num_vertices), 100.0)
     start = _binary_start(model)
-    fitted, log = optimise_weights(start, poses, obj, max_sweeps=5)
+    fitted, log = optimise_weights(start, poses, obj, max_sweeps=3)
     e0 = np.linalg.norm(hybrid_skin(start, poses) - scans, axis=2).mean()
     e1 = np.linalg.norm(hybrid_skin(fitted, poses) - scans, axis=2).mean()
-    assert e1 < 0.2 * e0                                          # G13: error falls by > 80 %
+    assert e1 < 0.2 * e0
+    assert abs(obj.value(hybrid_skin(fitted, poses)) - log[-1]) <= 1e-9 * log[-1]
+
+
+def test_joint_move_never_increases_q_and_reports_it_exactly():
+    from articula.solver.weights_bcd import CandidateSkin, _State, joint_move
+    model, poses, scans = hybrid_truth(4)
+    rng = np.random.default_rng(5)
+    noisy = scans + 0.002 * rng.normal(size=scans.shape)
+    obj = RigObjective(noisy, uniform_laplacian(model.faces, model.num_vertices), 100.0)
+    m = _binary_start(model)
+    state = _State(m, poses, obj)
+    Q0 = obj.value(state.P)
+    Q1 = joint_move(m, CandidateSkin(m.skeleton, poses), state, obj, Q0)
+    assert Q1 < Q0
+    assert np.isclose(obj.value(hybrid_skin(m, poses)), Q1, rtol=1e-12)      # model and state agree
+    assert np.allclose(state.R, obj.laplacian(state.P) - obj.scan_lap, atol=1e-12)
+    m.validate()
 
 
 def test_two_ring_colouring_separates_interacting_vertices():
