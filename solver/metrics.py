@@ -10,7 +10,9 @@ error against a reference rig, and Dem Bones' RMSE.
   and upper halves, the middle element excluded for odd n).
 * :func:`match_joints` — a learned skeleton has its own joint order and count; each learned joint centre
   is assigned to a distinct reference joint minimising the summed distance (Hungarian algorithm,
-  ``scipy.optimize.linear_sum_assignment``).
+  ``scipy.optimize.linear_sum_assignment``).  Given joint *trajectories* ``(M, J, 3)`` (joints posed in every
+  frame, e.g. :func:`posed_joints`), one assignment is made for all frames with the mean distance over the
+  frames as cost — needed when the learned rest pose is one of the scans, not the reference's rest pose.
 * :func:`dem_bones_rmse` — the RMSE Dem Bones prints and publishes: ``sqrt(Σ_frames Σ_vertices ‖x̂ − x‖² /
   (N·V))``, i.e. the root mean square of per-vertex Euclidean distances (not divided by 3 coordinates), in
   the units of the data.
@@ -69,14 +71,31 @@ class JointMatch:
 
 def match_joints(learned, reference) -> JointMatch:
     """Assign every learned joint centre ``(J1, 3)`` to a distinct reference joint ``(J2, 3)`` (or the other
-    way round when J1 > J2) so that the summed distance is minimal."""
+    way round when J1 > J2) so that the summed distance is minimal.  With trajectories ``(M, J1, 3)`` and
+    ``(M, J2, 3)`` the cost of a pair is its distance averaged over the M frames, and ``distances`` are
+    those averages."""
     from scipy.optimize import linear_sum_assignment
-    a, b = _points("learned", learned, 2), _points("reference", reference, 2)
-    if not len(a) or not len(b):
-        raise ArticulaInputError(f"match_joints: need joints on both sides, got {len(a)} and {len(b)}")
-    cost = np.linalg.norm(a[:, None] - b[None], axis=2)
+    ndim = np.ndim(learned)
+    if ndim not in (2, 3):
+        raise ArticulaInputError(f"learned: expected shape (J, 3) or (M, J, 3), got {np.shape(learned)}")
+    a, b = _points("learned", learned, ndim), _points("reference", reference, ndim)
+    if ndim == 3 and len(a) != len(b):
+        raise ArticulaInputError(f"reference: {len(b)} frames for {len(a)} learned frames")
+    if not a.shape[-2] or not b.shape[-2]:
+        raise ArticulaInputError(f"match_joints: need joints on both sides, got {a.shape[-2]} and {b.shape[-2]}")
+    cost = np.linalg.norm(a[..., :, None, :] - b[..., None, :, :], axis=-1)
+    if ndim == 3:
+        cost = cost.mean(axis=0)
     i, j = linear_sum_assignment(cost)
     return JointMatch(i, j, cost[i, j])
+
+
+def posed_joints(skeleton, poses):
+    """Joint centres in every frame ``(N, B, 3)``: ``heads[b]`` moved by its part's chain map (a joint is
+    the fixed point of its own rotation, so this is also where the parent part carries it)."""
+    from .kinematics import forward_kinematics
+    Rm, tm = forward_kinematics(skeleton, poses)
+    return np.einsum("nbij,bj->nbi", Rm, skeleton.heads) + tm
 
 
 def dem_bones_rmse(reconstructed, targets) -> float:

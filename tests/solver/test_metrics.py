@@ -117,3 +117,32 @@ def test_bad_input():
         metrics.dem_bones_rmse(np.zeros((2, 3, 3)), np.zeros((2, 4, 3)))
     with pytest.raises(ArticulaInputError, match="learned: expected shape"):
         metrics.match_joints(np.zeros((3, 2)), np.zeros((3, 3)))
+
+
+def test_joint_matching_of_trajectories_uses_the_mean_distance_over_frames():
+    rng = np.random.default_rng(9)
+    ref = rng.normal(size=(6, 5, 3))                                      # 6 frames, 5 joints
+    perm = np.array([3, 0, 4, 1])
+    learned = ref[:, perm] + 0.01 * rng.normal(size=(6, 4, 3))
+    match = metrics.match_joints(learned, ref)
+    np.testing.assert_array_equal(match.reference, perm[match.learned])
+    expect = np.linalg.norm(learned[:, match.learned] - ref[:, match.reference], axis=2).mean(axis=0)
+    np.testing.assert_allclose(match.distances, expect)
+    best = min(np.linalg.norm(learned - ref[:, list(p)], axis=2).mean(axis=0).sum()     # brute force
+               for p in itertools.permutations(range(5), 4))
+    assert match.distances.sum() == pytest.approx(best, rel=1e-12)
+    with pytest.raises(ArticulaInputError, match="reference: 5 frames for 6"):
+        metrics.match_joints(learned, ref[:5])
+
+
+def test_posed_joints_follow_the_chain():
+    from articula.solver import synthetic
+    from articula.solver.kinematics import forward_kinematics
+    sk = synthetic.human_skeleton()
+    poses = synthetic.random_poses(3, sk.num_bones, seed=2)
+    p = metrics.posed_joints(sk, poses)
+    Rm, tm = forward_kinematics(sk, poses)
+    for b in range(1, sk.num_bones):                                      # carried by the parent part too
+        parent = sk.parents[b]
+        np.testing.assert_allclose(p[:, b], np.einsum("nij,j->ni", Rm[:, parent], sk.heads[b]) + tm[:, parent],
+                                   atol=1e-12)
