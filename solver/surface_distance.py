@@ -4,9 +4,9 @@
   Voronoi-region test (vertex, edge or face region; Ericson, *Real-Time Collision Detection* §5.1.5,
   written from the description), vectorised over rows.
 * :func:`distance_to_surface` — distance of every query point to the nearest triangle of a mesh,
-  exactly: the nearest mesh vertex gives an upper bound d; a triangle can only be closer if its
-  bounding sphere (centroid, circumradius about the centroid) comes within d, so only triangles whose
-  centroid lies within d + max radius are tested (a k-d tree ball query), in chunks.
+  exactly: the triangles around the nearest mesh vertex give an upper bound d; a triangle can only be
+  closer if its bounding sphere (centroid, radius about the centroid) comes within d, so only triangles
+  whose centroid lies within d + radius are tested (k-d trees per group of similar radii), in chunks.
 * :func:`per_vertex_scan_distances` — per frame m, the distance of points m to surface m, ``(M, N)``; the
   heat map of a learned rig is its mean over m of scan vertex v to the posed model's surface.
 * :func:`error_statistics` — mean, std, median, MAD = median |x − median|, IQR = Q3 − Q1 and max.
@@ -68,29 +68,78 @@ def closest_points_on_triangles(p, a, b, c):
     return out
 
 
-def distance_to_surface(points, vertices, faces):
+def _pair_distances(points, tri, pi, ti, out):
+    """``out[pi] = min(out[pi], |points[pi] − closest point of triangle tri[ti]|)`` in chunks of pairs."""
+    for s in range(0, len(ti), CHUNK_PAIRS):
+        p, t = pi[s:s + CHUNK_PAIRS], ti[s:s + CHUNK_PAIRS]
+        q = closest_points_on_triangles(points[p], tri[t, 0], tri[t, 1], tri[t, 2])
+        np.minimum.at(out, p, np.linalg.norm(q - points[p], axis=1))
+
+
+def _incident_faces(faces, V):
+    """``(V, K)`` faces around each vertex, padded with −1."""
+    f = np.repeat(np.arange(len(faces)), 3)
+    v = faces.ravel()
+    order = np.argsort(v, kind="stable")
+    v, f = v[order], f[order]
+    counts = np.bincount(v, minlength=V)
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    table = np.full((V, max(1, counts.max())), -1, dtype=np.int64)
+    table[v, np.arange(len(v)) - start[v]] = f
+    return table
+
+
+def _radius_bins(radius, ratio=2.0):
+    """Triangle indices grouped so that radii within a group differ by at most ``ratio``: a list of
+    ``(indices, max radius)``."""
+    level = np.floor(np.log(np.maximum(radius, 1e-300) / max(radius.max(), 1e-300)) / np.log(ratio))
+    level = np.maximum(level, -40)
+    return [(np.flatnonzero(level == lv), radius[level == lv].max()) for lv in np.unique(level)]
+
+
+def distance_to_surface(points, vertices, faces, knn=8):
     """Distance ``(N,)`` of each point ``(N, 3)`` to the nearest triangle of the mesh ``vertices (V, 3)``,
-    ``faces (F, 3)`` (exact; see the module docstring)."""
+    ``faces (F, 3)`` (exact; see the module docstring).
+
+    Pruning: the triangles around the nearest mesh vertex give an upper bound d (exact distances).  A
+    triangle with centroid c and radius r (about c) can only be closer if ``|p − c| − r < d``.  Triangles
+    are grouped by radius (within a factor 2); per group a k-d tree over the centroids returns the
+    ``knn`` nearest centroids, of which those within ``d + r_max(group)`` are tested; points for which
+    that list may be truncated (all ``knn`` within reach) get a full ball query.  Every pair that is not pruned is evaluated exactly."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     if len(faces) == 0:
         raise ValueError("distance_to_surface: the mesh has no triangles")
+    N = len(points)
     used = np.unique(faces)
-    bound, _ = cKDTree(vertices[used]).query(points)
+    _, nearest = cKDTree(vertices[used]).query(points)
     tri = vertices[faces]                                   # (F, 3, 3)
+    around = _incident_faces(faces, len(vertices))[used[nearest]]          # (N, K)
+    pi, k = np.nonzero(around >= 0)
+    best = np.full(N, np.inf)
+    _pair_distances(points, tri, pi, around[pi, k], best)
     centre = tri.mean(axis=1)
     radius = np.linalg.norm(tri - centre[:, None], axis=2).max(axis=1)
-    reach = bound + radius.max() * (1 + 1e-9) + 1e-12
-    lists = cKDTree(centre).query_ball_point(points, reach)
-    counts = np.fromiter((len(x) for x in lists), dtype=np.int64, count=len(points))
-    tri_idx = np.fromiter((i for x in lists for i in x), dtype=np.int64, count=int(counts.sum()))
-    pt_idx = np.repeat(np.arange(len(points)), counts)
-    best = bound.copy()
-    for s in range(0, len(tri_idx), CHUNK_PAIRS):
-        pi, ti = pt_idx[s:s + CHUNK_PAIRS], tri_idx[s:s + CHUNK_PAIRS]
-        q = closest_points_on_triangles(points[pi], tri[ti, 0], tri[ti, 1], tri[ti, 2])
-        np.minimum.at(best, pi, np.linalg.norm(q - points[pi], axis=1))
+    for group, r_max in _radius_bins(radius):
+        tree = cKDTree(centre[group])
+        kk = min(knn, len(group))
+        reach = best + r_max * (1 + 1e-9) + 1e-12
+        dist, idx = tree.query(points, k=kk)
+        dist, idx = dist.reshape(N, kk), idx.reshape(N, kk)
+        hit = dist < reach[:, None]
+        full = hit[:, -1] & (kk < len(group))               # maybe more than kk within reach
+        hit[full] = False
+        pi, col = np.nonzero(hit)
+        ti = group[idx[pi, col]]
+        keep = dist[pi, col] - radius[ti] < best[pi] + 1e-12
+        _pair_distances(points, tri, pi[keep], ti[keep], best)
+        rows = np.flatnonzero(full)
+        if len(rows):
+            lists = tree.query_ball_point(points[rows], reach[rows])
+            counts = np.fromiter((len(x) for x in lists), dtype=np.int64, count=len(rows))
+            ti = group[np.fromiter((i for x in lists for i in x), dtype=np.int64, count=int(counts.sum()))]
+            _pair_distances(points, tri, np.repeat(rows, counts), ti, best)
     return best
 
 

@@ -80,3 +80,22 @@ def test_error_statistics_as_the_spec_defines_them():
     assert s["iqr"] == pytest.approx(52 - 1.5)           # Q1 = median(1, 2), Q3 = median(4, 100)
     assert s["mean"] == pytest.approx(22.0) and s["std"] == pytest.approx(np.std([1, 2, 3, 4, 100]))
     assert error_statistics([[2.0, 4.0], [6.0, 8.0]])["iqr"] == pytest.approx(7 - 3)
+
+
+@pytest.mark.parametrize("knn", [1, 3, 8])
+def test_distance_to_surface_equals_brute_force_on_mixed_triangle_sizes(knn):
+    """Tiny and huge triangles (several radius groups) and few nearest centroids per group (the
+    ball-query fallback): the pruned distance equals the brute-force minimum over all triangles."""
+    rng = np.random.default_rng(7)
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 9), np.linspace(0, 1, 9), indexing="ij"), -1).reshape(-1, 2)
+    g = g ** 3                                              # cells from 0.002 to 0.3 wide
+    verts = np.column_stack([g, 0.05 * rng.normal(size=len(g))])
+    idx = np.arange(81).reshape(9, 9)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    points = rng.uniform(-0.2, 1.2, size=(400, 3)) * [1, 1, 0.3]
+    dist = distance_to_surface(points, verts, faces, knn=knn)
+    P = np.repeat(points, len(faces), axis=0)
+    T = verts[np.tile(faces, (len(points), 1))]
+    brute = np.linalg.norm(closest_points_on_triangles(P, T[:, 0], T[:, 1], T[:, 2]) - P, axis=1)
+    np.testing.assert_allclose(dist, brute.reshape(len(points), -1).min(axis=1), rtol=1e-12, atol=0)
