@@ -15,7 +15,7 @@ Sections (every number with its unit; the output is also written to ``bench/resu
      assignment, ``solver.metrics.match_joints``), both posed in every training scan (the learned rest pose
      is one of the scans), mean distance over the scans per matched pair, mm;
    * wall and CPU time, and peak resident memory of the learning process (a fresh child process per
-     run, ``resource.getrusage``; its baseline after the imports is printed too).
+     run, ``VmHWM``; its baseline after the imports is printed too).
    A reference row needs no learner: ``pose_fit`` with the generating rig's own hybrid model on the held-out
    scans (0 mm for hybrid-skinned data: checks the fitter and the metric end to end).
 2. ``../shared/data/skinning_gt`` cylinder and wolf (libigl .tgf skeleton, .DMAT weights, .Tmat transforms,
@@ -124,6 +124,19 @@ def learner_status():
         return False, f"{type(e).__name__}: {e}"
 
 
+def peak_rss_kb():
+    """Peak resident memory of this process in kB: ``VmHWM`` of /proc/self/status (reset by exec, unlike
+    ``ru_maxrss``, which a child inherits from the parent's high-water mark at fork), else ``ru_maxrss``."""
+    try:
+        with open("/proc/self/status") as f:
+            for ln in f:
+                if ln.startswith("VmHWM:"):
+                    return float(ln.split()[1])
+    except OSError:
+        pass
+    return float(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+
+
 def _child_learn(src, dst):
     """In a fresh process: load scans, run learn_rig, save the bundle and the measurements."""
     from articula.solver.bundle import save_bundle
@@ -131,12 +144,12 @@ def _child_learn(src, dst):
     data = np.load(src)
     parts, rounds = int(data["parts"]), int(data["rounds"])
     options = {"max_iterations": rounds} if rounds > 0 else {}
-    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    base = peak_rss_kb()
     t0, c0 = time.perf_counter(), time.process_time()
     result = learn_rig(np.asarray(data["scans"]), np.asarray(data["faces"]), parts=parts if parts > 0 else None,
                        seed=0, **options)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    peak = peak_rss_kb()
     try:
         report = json.loads(json.dumps(getattr(result, "report", {}), default=str))
     except (TypeError, ValueError):

@@ -53,7 +53,16 @@ def main(src, dst):
     recon = np.einsum("bv,nbvi->nvi", weights, posed)
     np.savez(dst, weights=weights, transforms=m, reconstruction=recon, rmse=float(db.rmse()),
              seconds=seconds, bones=B, version=str(py_dem_bones.__version__),
-             rss_kb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+             rss_kb=_peak_rss_kb())
+
+
+def _peak_rss_kb():
+    """VmHWM (reset by exec; ru_maxrss would carry the parent's high-water mark over from the fork)."""
+    try:
+        with open("/proc/self/status") as f:
+            return float(next(ln.split()[1] for ln in f if ln.startswith("VmHWM:")))
+    except (OSError, StopIteration):
+        return float(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
 
 
 if __name__ == "__main__":
