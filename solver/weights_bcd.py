@@ -268,13 +268,27 @@ class CandidateSkin:
 
     @staticmethod
     def _affine(maps, v):
-        return np.einsum("mnij,mnj->mni", maps[..., :3], v) + maps[..., 3]
+        """``maps (M,n,3,4)`` applied to points ``v (M,n,3)`` → ``(M,n,3)`` (elementwise, no einsum)."""
+        return (maps[..., 0] * v[..., 0, None] + maps[..., 1] * v[..., 1, None]
+                + maps[..., 2] * v[..., 2, None] + maps[..., 3])
+
+    def _blend(self, twist, kids):
+        """``identity + Σ_c w_t,c (dq_c − identity)`` ``(M,n,8)`` for twist ``(n,B)`` whose non-zeros lie on
+        ``kids (n,K)`` (the anchor's children): K gathers instead of a sum over all B bones."""
+        rows = np.arange(len(kids))
+        out = np.broadcast_to(self.ident, (self.dq_minus_id.shape[0], len(kids), 8)).copy()
+        for j in range(kids.shape[1]):
+            has = kids[:, j] >= 0
+            c = np.where(has, kids[:, j], 0)
+            w = np.where(has, twist[rows, c], 0.0)
+            out += w[None, :, None] * self.dq_minus_id[:, c]
+        return out
 
     def base_and_columns(self, x, anchor, twist, kids):
         """x (n,3), anchor (n,), twist (n,B) float, kids (n,K) children of the anchor (-1 padded).
         Returns ``base (M,n,3)`` (swing weights 0) and ``G (M,n,3,K)`` (column j: effect of swing weight 1
         on kids[:, j]; 0 for padding)."""
-        blended = self.ident + np.einsum("nb,mbk->mnk", twist, self.dq_minus_id)
+        blended = self._blend(twist, kids)
         vt = dq_apply(blended, x[None])
         base = self._affine(self.chain[:, anchor], vt)
         G = np.zeros(base.shape + (kids.shape[1],))
@@ -285,6 +299,20 @@ class CandidateSkin:
                 Gj[:, has] = self._affine(self.swing_chain[:, kids[has, j]], vt[:, has]) - base[:, has]
                 G[..., j] = Gj
         return base, G
+
+
+def _normal_equations(G, r):
+    """Per candidate ``H = Σ_m,i G_k G_l`` ``(n,K,K)`` and ``b = Σ_m,i G_k r`` ``(n,K)`` for columns
+    ``G (M,n,3,K)`` and targets ``r (M,n,3)``: elementwise products summed over scans and xyz."""
+    K = G.shape[3]
+    cols = [np.ascontiguousarray(G[..., k]) for k in range(K)]
+    H = np.empty((G.shape[1], K, K))
+    b = np.empty((G.shape[1], K))
+    for k in range(K):
+        b[:, k] = np.sum(cols[k] * r, axis=(0, 2))
+        for l in range(k, K):
+            H[:, k, l] = H[:, l, k] = np.sum(cols[k] * cols[l], axis=(0, 2))
+    return H, b
 
 
 def evaluate(model, skin, state, idx, steps=STEPS):
@@ -314,11 +342,13 @@ def evaluate(model, skin, state, idx, steps=STEPS):
     ck = kids[a]
     base, G = skin.base_and_columns(model.rest_vertices[idx][v], a, tw32.astype(np.float64), ck)
     gs = g[:, v]
-    H = np.einsum("mvik,mvil->vkl", G, G)
-    bvec = np.einsum("mvik,mvi->vk", G, gs - base)
+    H, bvec = _normal_equations(G, gs - base)
     w = box_simplex_qp(H, bvec, (ck >= 0).sum(axis=1)).astype(np.float32)
-    p_new = base + np.einsum("mvik,vk->mvi", G, w.astype(np.float64))
-    gain = f_cur[v] - kap[v] * np.sum((p_new - gs) ** 2, axis=(0, 2))
+    p_new = base.copy()
+    for j in range(G.shape[3]):
+        p_new += G[..., j] * w[None, :, j, None].astype(np.float64)
+    d = p_new - gs
+    gain = f_cur[v] - kap[v] * np.sum(d * d, axis=(0, 2))
     order = np.lexsort((-gain, v))                    # per vertex, the largest gain first
     first = order[np.r_[True, v[order][1:] != v[order][:-1]]]
     first = first[gain[first] > 0]

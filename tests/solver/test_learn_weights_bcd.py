@@ -130,3 +130,38 @@ def test_two_ring_colouring_separates_interacting_vertices():
     off = rows != cols
     assert np.all(colour[rows[off]] != colour[cols[off]])
     assert colour.max() + 1 <= ring2.getnnz(axis=1).max()        # greedy bound: at most max degree + 1
+
+
+def test_candidate_evaluation_equals_hybrid_skin_for_every_candidate():
+    """The fast candidate path (twist blend over the anchor's children only, elementwise affine maps and
+    normal equations) against the slow reference: ``hybrid_skin`` of a model carrying each candidate's
+    anchor, twist and solved swing weights, and the dense einsum normal equations (1e-9 relative)."""
+    from articula.solver.weights_bcd import _normal_equations
+    model, poses, _ = hybrid_truth(3)
+    sk = model.skeleton
+    kids_table = _children_table(sk.parents)
+    skin = CandidateSkin(sk, poses)
+    rng = np.random.default_rng(2)
+    tried = 0
+    for anchor, tw, valid in candidates(model.anchor, model.twist_weights.astype(np.float64), sk.parents):
+        if not valid.any():
+            continue
+        kids = kids_table[anchor]
+        base, G = skin.base_and_columns(model.rest_vertices, anchor, tw, kids)
+        ws = np.where(kids >= 0, rng.uniform(0, 0.3, size=kids.shape), 0.0)
+        sw = np.zeros(model.swing_weights.shape)
+        r, c = np.nonzero(kids >= 0)
+        sw[r, c * 0 + kids[r, c]] = ws[r, c]
+        ref_model = Model(model.rest_vertices, model.faces, sk, anchor.astype(np.int32), tw.astype(np.float32),
+                          sw.astype(np.float32))
+        ref_model.twist_weights = tw                       # float64 so both paths see the same numbers
+        ref_model.swing_weights = sw
+        ref = hybrid_skin(ref_model, poses)
+        fast = base + np.einsum("mvik,vk->mvi", G, ws)
+        scale = np.abs(ref).max()
+        assert np.abs(fast - ref)[:, valid].max() <= 1e-9 * scale
+        H, b = _normal_equations(G, ref)
+        assert np.allclose(H, np.einsum("mvik,mvil->vkl", G, G), rtol=1e-9, atol=1e-12 * np.abs(H).max())
+        assert np.allclose(b, np.einsum("mvik,mvi->vk", G, ref), rtol=1e-9, atol=1e-12 * np.abs(b).max())
+        tried += 1
+    assert tried > 10
