@@ -353,7 +353,7 @@ def section_makehuman(args, tmp, have_learner, why, failures, ours):
     from articula.sample_scenes.subjects import make_subject
     line("== 1. MakeHuman sequences: learned model vs the generating rig")
     first = None
-    for rig, shape, skin in makehuman_cases(args.quick)[:args.mh_cases or None]:
+    for rig, shape, skin in makehuman_cases(args.quick)[args.mh_skip:][:args.mh_cases or None]:
         t0 = time.perf_counter()
         train, faces, gt = posed_sequence(rig, shape, TRAIN_POSES, "rom", skin, seed=0)
         test, _, _ = posed_sequence(rig, shape, TEST_POSES, "rom", skin, seed=1)
@@ -526,6 +526,7 @@ def main(argv=None):
     p.add_argument("--bone-counts", type=lambda t: [int(x) for x in t.split(",")], default=None,
                    help="bone/part counts on Dem Bones' Bone_Anim (default 5,10,20; --quick 5,10)")
     p.add_argument("--mh-cases", type=int, default=0, help="only the first N MakeHuman cases (0: all)")
+    p.add_argument("--mh-skip", type=int, default=0, help="skip the first N MakeHuman cases")
     p.add_argument("--gt", type=lambda t: t.split(","), default=None,
                    help="skinning_gt rigs (default cylinder,wolf; --quick cylinder)")
     p.add_argument("--order", default="makehuman,skinning_gt,dembones",
