@@ -84,7 +84,7 @@ def _qp_group(H, b):
         feas = np.all(w >= -1e-12, axis=2) & np.all(w <= 1 + 1e-12, axis=2) & (w.sum(axis=2) <= 1 + 1e-12)
         w = np.clip(w, 0.0, 1.0)
         w /= np.maximum(w.sum(axis=2, keepdims=True), 1.0)
-        f = np.einsum("nci,nij,ncj->nc", w, H, w) - 2 * np.einsum("ni,nci->nc", b, w)
+        f = _quadratic(w, H, b)
         f = np.where(feas, f, np.inf)
         c = np.argmin(f, axis=1)
         fc = f[np.arange(N), c]
@@ -99,7 +99,7 @@ def _qp_group(H, b):
         Hs = H[:, S[:, :, None], S[:, None, :]] + ridge[:, None, None, None] * np.eye(size)   # (N,C,s,s)
         bs = b[:, S]                                                                           # (N,C,s)
         rows = np.arange(C)[:, None]
-        sol = np.linalg.solve(Hs, bs[..., None])[..., 0]
+        sol = solve_small(Hs, bs[..., None])[..., 0]
         w = np.zeros((N, C, k))
         w[:, rows, S] = sol
         consider(w)
@@ -108,11 +108,46 @@ def _qp_group(H, b):
             KKT[..., :size, :size] = Hs
             KKT[..., :size, size] = KKT[..., size, :size] = 1.0
             rhs = np.concatenate([bs, np.ones((N, C, 1))], axis=2)
-            sol = np.linalg.solve(KKT, rhs[..., None])[..., :size, 0]
+            sol = solve_small(KKT, rhs[..., None])[..., :size, 0]
             w = np.zeros((N, C, k))
             w[:, rows, S] = sol
             consider(w)
     return best
+
+
+def _quadratic(w, H, b):
+    """``wᵀHw − 2bᵀw`` ``(N,C)`` for candidates ``w (N,C,k)``, ``H (N,k,k)``, ``b (N,k)`` (k small)."""
+    k = w.shape[2]
+    f = np.zeros(w.shape[:2])
+    for i in range(k):
+        Hw = np.zeros(w.shape[:2])
+        for j in range(k):
+            Hw += H[:, None, i, j] * w[..., j]
+        f += w[..., i] * (Hw - 2.0 * b[:, None, i])
+    return f
+
+
+def solve_small(A, B):
+    """``X = A⁻¹ B`` for a batch of small systems ``A (...,s,s)``, ``B (...,s,r)``: closed forms (Cramer /
+    adjugate) for s ≤ 3, LAPACK otherwise.  A singular system gives non-finite entries (no exception);
+    the QP treats those candidates as infeasible."""
+    s = A.shape[-1]
+    if s > 3:
+        return np.linalg.solve(A, B)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if s == 1:
+            return B / A
+        if s == 2:
+            a, b_, c, d = A[..., 0, 0], A[..., 0, 1], A[..., 1, 0], A[..., 1, 1]
+            det = (a * d - b_ * c)[..., None]
+            x0 = (d[..., None] * B[..., 0, :] - b_[..., None] * B[..., 1, :]) / det
+            x1 = (a[..., None] * B[..., 1, :] - c[..., None] * B[..., 0, :]) / det
+            return np.stack([x0, x1], axis=-2)
+        r0, r1, r2 = A[..., 0, :], A[..., 1, :], A[..., 2, :]
+        c0, c1, c2 = np.cross(r1, r2), np.cross(r2, r0), np.cross(r0, r1)    # columns of adj(A)
+        det = np.sum(r0 * c0, axis=-1)[..., None, None]
+        inv = np.stack([c0, c1, c2], axis=-1) / det
+        return inv @ B
 
 
 # ----------------------------------------------------------------------------- candidates
