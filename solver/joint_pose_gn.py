@@ -34,6 +34,7 @@ from .jacobians import frame_jacobian, joint_jacobian, pose_jacobian
 from .skinning import AnchorGroups, hybrid_skin
 
 FD_STEP = 1e-6
+BLAS_MIN_ROWS = 12_000    # normal_blocks: rows 3V from which the per-scan Gram blocks use BLAS
 
 
 def sizes(num_bones):
@@ -138,7 +139,11 @@ def normal_blocks(Js, Jo, rd, rl, L, alpha):
         return (L @ J.reshape(M, V, 3 * n).transpose(1, 0, 2).reshape(V, -1)).reshape(V, M, 3, n) \
             .transpose(1, 0, 2, 3).reshape(M, R3, n)
 
-    def tmm(X, Y):                                   # Σ_r X[m,r,i] Y[m,r,j] per scan, by BLAS matmul
+    def tmm(X, Y):
+        """Σ_r X[m,r,i] Y[m,r,j] per scan.  BLAS matmul for large meshes; einsum (single-threaded) for
+        small ones, where a multi-threaded BLAS on a busy 2-core machine was measured ~100x slower."""
+        if X.shape[1] < BLAS_MIN_ROWS:
+            return np.einsum("mri,mrj->mij", X, Y)
         return np.matmul(np.swapaxes(X, 1, 2), Y)
 
     LJs, LJo = lap(Js), lap(Jo)
