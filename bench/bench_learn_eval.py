@@ -549,6 +549,9 @@ def main(argv=None):
         line(f"command: ./run bench learn_eval {' '.join(argv)}".rstrip())
         line(f"date: {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC")
         line(f"machine: {machine()}")
+        rev = subprocess.run(["git", "-C", REPO, "log", "-1", "--format=%h %cd", "--date=format:%H:%M"],
+                             capture_output=True, text=True).stdout.strip()
+        line(f"code: commit {rev or '?'} (uncommitted changes, if any, included)")
         have, why = learner_status()
         line(f"learner: {'solver.learn.learn_rig' if have else 'MISSING (' + why + ')'}")
         db_py = None
