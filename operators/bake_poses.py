@@ -3,16 +3,15 @@ import bpy
 
 from ..addon import rig_io
 from ..addon.jobs import JobOperator
+from .bundle_file import BundleFileInput
 
 
-class ARTICULA_OT_bake_poses(JobOperator, bpy.types.Operator):
+class ARTICULA_OT_bake_poses(BundleFileInput, JobOperator, bpy.types.Operator):
     """Bake the poses of a bundle (.npz) as a new action on an Articula rig"""
     bl_idname = "articula.bake_poses"
     bl_label = "Bake Poses to Action"
     bl_options = {'REGISTER', 'UNDO'}
 
-    filepath: bpy.props.StringProperty(name="Bundle", subtype='FILE_PATH')
-    filter_glob: bpy.props.StringProperty(default="*.npz", options={'HIDDEN'})
     armature: bpy.props.StringProperty(name="Armature", description="Rig armature (default: the active rig)")
     nla: bpy.props.BoolProperty(name="Push to NLA", default=False,
                                 description="Put the action on a new NLA track instead of making it active")
@@ -20,12 +19,6 @@ class ARTICULA_OT_bake_poses(JobOperator, bpy.types.Operator):
     action_name: bpy.props.StringProperty(name="Action Name", description="Default: '<bundle> poses'")
 
     job_label = "Bake poses"
-
-    def invoke(self, context, event):
-        if not self.filepath:
-            context.window_manager.fileselect_add(self)
-            return {'RUNNING_MODAL'}
-        return self.execute(context)
 
     def prepare(self, context):
         path = bpy.path.abspath(self.filepath)

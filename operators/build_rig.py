@@ -4,28 +4,21 @@ import bpy
 
 from ..addon import rig_io, rig_reader
 from ..addon.jobs import JobOperator
+from .bundle_file import BundleFileInput
 
 
-class ARTICULA_OT_build_rig(JobOperator, bpy.types.Operator):
+class ARTICULA_OT_build_rig(BundleFileInput, JobOperator, bpy.types.Operator):
     """Build an Articula rig from a model bundle (.npz): mesh, control armature and twist armature"""
     bl_idname = "articula.build_rig"
     bl_label = "Build Rig from Bundle"
     bl_options = {'REGISTER', 'UNDO'}
 
-    filepath: bpy.props.StringProperty(name="Bundle", subtype='FILE_PATH')
-    filter_glob: bpy.props.StringProperty(default="*.npz", options={'HIDDEN'})
     name: bpy.props.StringProperty(name="Name", description="Rig name (default: the bundle's file name)")
     bake: bpy.props.BoolProperty(name="Bake Poses", default=True,
                                  description="Bake the bundle's poses as a new action")
     frame_start: bpy.props.IntProperty(name="First Frame", default=1)
 
     job_label = "Build rig"
-
-    def invoke(self, context, event):
-        if not self.filepath:
-            context.window_manager.fileselect_add(self)
-            return {'RUNNING_MODAL'}
-        return self.execute(context)
 
     def prepare(self, context):
         path = bpy.path.abspath(self.filepath)
