@@ -68,13 +68,17 @@ def _with(model, skeleton):
     return m
 
 
-def posed_jacobians(model, poses):
+def posed_jacobians(model, poses, own_only=False):
     """Analytic Jacobians of the posed vertices ``(J_shared (M,3V,n_s), J_own (M,3V,n_o))`` in this
     module's layout, from :mod:`solver.jacobians` (pose, joint-centre and frame Jacobians; the frame
-    columns are its world-ω columns projected on the frame's X and Z axes)."""
+    columns are its world-ω columns projected on the frame's X and Z axes).  own_only: poses only,
+    ``J_shared`` has no columns (joint and frame Jacobians are not computed)."""
     sk, M, V, B = model.skeleton, len(poses), model.num_vertices, model.skeleton.num_bones
     groups = AnchorGroups(model)
     _, Jp = pose_jacobian(model, poses, groups)                          # (M,V,3,4+3B): t, s, δ_b
+    if own_only:
+        Jo = np.concatenate([Jp[..., 4:], Jp[..., :3]], axis=3).reshape(M, 3 * V, 3 * B + 3)
+        return np.zeros((M, 3 * V, 0)), Jo
     _, Jh = joint_jacobian(model, poses, groups)                         # (M,V,3,3B)
     _, Jf = frame_jacobian(model, poses, groups)                         # (M,V,3,3B) world ω_b
     Jo = np.concatenate([Jp[..., 4:], Jp[..., :3]], axis=3).reshape(M, 3 * V, 3 * B + 3)
@@ -171,16 +175,17 @@ def schur_solve(H_ss, H_so, H_oo, g_s, g_o):
 SCAN_CHUNK = 2      # scans whose Jacobians are held in memory at once
 
 
-def gauss_newton_blocks(model, poses, objective, chunk=SCAN_CHUNK):
+def gauss_newton_blocks(model, poses, objective, chunk=SCAN_CHUNK, own_only=False):
     """:func:`normal_blocks` accumulated over chunks of scans, so that only ``chunk`` scans' Jacobians
-    are in memory at once.  Returns ``H_ss, H_so (M,..), H_oo (M,..), g_s, g_o (M,..)``."""
+    are in memory at once.  Returns ``H_ss, H_so (M,..), H_oo (M,..), g_s, g_o (M,..)``; with own_only
+    (poses only) the shared blocks have size 0."""
     M = len(poses)
     rd, rl = objective.residuals(hybrid_skin(model, poses))
     parts = []
     for m0 in range(0, M, chunk):
         sl = slice(m0, min(M, m0 + chunk))
         sub = Poses(poses.rotations[sl], poses.translations[sl], poses.scales[sl])
-        Js, Jo = posed_jacobians(model, sub)
+        Js, Jo = posed_jacobians(model, sub, own_only)
         parts.append(normal_blocks(Js, Jo, rd[sl], rl[sl], objective.L, objective.alpha))
     H_ss = sum(p[0] for p in parts)
     g_s = sum(p[3] for p in parts)
@@ -212,13 +217,14 @@ def optimise_joints_and_poses(model, poses, problem, iterations=10, mu=1e-3, ste
     problem: :class:`JointPoseProblem`.  fix_joints: keep joint centres and axes (poses only).  Returns ``(model, poses, log)`` with log the objective after every
     accepted step (never increasing).  ``progress(fraction, stage, objective)`` after each iteration."""
     obj = problem.objective
+    n_s, _ = sizes(model.skeleton.num_bones)
     E = problem.value(model, poses)
     log = []
     for it in range(iterations):
-        H_ss, H_so, H_oo, g_s, g_o = gauss_newton_blocks(model, poses, obj)
+        H_ss, H_so, H_oo, g_s, g_o = gauss_newton_blocks(model, poses, obj, own_only=fix_joints)
         # damping from the data part only: the huge symmetry weight must not freeze the joints it couples
         diag_s = np.diag(H_ss).copy()
-        if problem.sym_pairs and problem.lam > 0:
+        if problem.sym_pairs and problem.lam > 0 and not fix_joints:
             r, J = symmetry_residuals(model.skeleton, problem.sym_pairs)
             H_ss = H_ss + problem.lam * J.T @ J
             g_s = g_s + problem.lam * J.T @ r
@@ -230,7 +236,7 @@ def optimise_joints_and_poses(model, poses, problem, iterations=10, mu=1e-3, ste
             Do = mu * (np.diagonal(H_oo, axis1=1, axis2=2) + 1e-6 * scale_o)
             H_oo_d = H_oo + Do[:, :, None] * np.eye(H_oo.shape[1])
             if fix_joints:
-                x_s, x_o = np.zeros_like(g_s), np.linalg.solve(H_oo_d, -g_o[..., None])[..., 0]
+                x_s, x_o = np.zeros(n_s), np.linalg.solve(H_oo_d, -g_o[..., None])[..., 0]
             else:
                 x_s, x_o = schur_solve(H_ss + np.diag(Ds), H_so, H_oo_d, -g_s, -g_o)
             sk_new, poses_new = apply_increment(model.skeleton, poses, x_s, x_o)
