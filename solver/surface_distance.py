@@ -105,7 +105,8 @@ def distance_to_surface(points, vertices, faces, knn=8):
     triangle with centroid c and radius r (about c) can only be closer if ``|p − c| − r < d``.  Triangles
     are grouped by radius (within a factor 2); per group a k-d tree over the centroids returns the
     ``knn`` nearest centroids, of which those within ``d + r_max(group)`` are tested; points for which
-    that list may be truncated (all ``knn`` within reach) get a full ball query.  Every pair that is not pruned is evaluated exactly."""
+    that list may be truncated (all ``knn`` within reach) get a full ball query.  Every pair that is
+    not pruned is evaluated exactly."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
