@@ -167,20 +167,6 @@ def test_symmetry_term_equalises_bone_lengths():
     assert abs(symmetry_residuals(fitted.skeleton, pairs)[0][0]) < 1e-7       # < 1e-4 mm
 
 
-def test_normal_blocks_blas_path_equals_einsum_path(monkeypatch):
-    """Large meshes use BLAS matmul for the Gram blocks, small ones einsum: both give the same blocks."""
-    from articula.solver import joint_pose_gn
-    model, poses, scans = hybrid_truth(2)
-    L = uniform_laplacian(model.faces, model.num_vertices)
-    Js, Jo = posed_jacobians(model, poses)
-    rd, rl = np.random.default_rng(1).normal(size=(2, 2, model.num_vertices, 3))
-    monkeypatch.setattr(joint_pose_gn, "BLAS_MIN_ROWS", 10 ** 9)
-    ref = normal_blocks(Js, Jo, rd, rl, L, 5.0)
-    monkeypatch.setattr(joint_pose_gn, "BLAS_MIN_ROWS", 0)
-    for a, b in zip(normal_blocks(Js, Jo, rd, rl, L, 5.0), ref):
-        assert np.abs(a - b).max() <= 1e-9 * np.abs(b).max()
-
-
 def test_pose_only_blocks_equal_the_full_blocks():
     """The warm-up rounds (joints fixed) build only the per-scan blocks: the same as in the full system."""
     from articula.solver.joint_pose_gn import gauss_newton_blocks
