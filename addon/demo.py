@@ -21,6 +21,7 @@ from ..sample_scenes.depth_recording import generate_depth
 from ..sample_scenes.registered import generate_registered, posed_sequence
 from ..solver.errors import ArticulaInputError
 from . import render
+from .cli import save_blend_again, save_blend_first
 
 SPACING = 1.1  # metres between the demo's exhibits along X
 
@@ -64,9 +65,11 @@ def _shift(objects, dx: float) -> None:
         ob.matrix_world.translation.x += dx
 
 
-def build_scene(paths: dict) -> dict:
-    """Import and build everything into a new empty scene; return the created objects by role."""
+def build_scene(paths: dict, blend: str) -> dict:
+    """Import and build everything into a new empty scene saved as ``blend`` first (so the importers'
+    frame caches go next to it); return the created objects by role."""
     bpy.ops.wm.read_homefile(use_empty=True)
+    save_blend_first(blend)
     scans = _call(bpy.ops.articula.import_scans, directory=paths["scans"])
     depth = _call(bpy.ops.articula.import_depth, directory=paths["depth"],
                   intrinsics=os.path.join(paths["depth"], "intrinsics.json"), remove_floor=True)
@@ -92,18 +95,17 @@ def run(args) -> int:
     t0 = time.perf_counter()
     paths = make_data(os.path.join(out, "demo_data"), args.scans, args.depth_frames, args.seed)
     t = _stage("sample data written", t0)
-    built = build_scene(paths)
+    blend = os.path.join(out, "demo.blend")
+    built = build_scene(paths, blend)
     t = _stage(f"imported and built ({', '.join(f'{k}: {len(v)} objects' for k, v in built.items())})", t)
     scene = bpy.context.scene
     scene.frame_set(max(1, args.scans // 2))
-    blend = os.path.join(out, "demo.blend")
-    bpy.ops.wm.save_as_mainfile(filepath=blend)
-    t = _stage(f"saved {blend}", t)
     png = os.path.join(out, "demo.png")
     titles = {"depth": "Depth recording", "rig": "Articula rig (baked poses)", "scans": "Registered scans"}
     render.render_overview(scene, png, {titles[k]: v for k, v in built.items()})
-    bpy.ops.wm.save_mainfile(filepath=blend)
-    _stage(f"rendered {png}", t)
+    t = _stage(f"rendered {png}", t)
+    save_blend_again()
+    _stage(f"saved {blend}", t)
     print(f"demo: done in {time.perf_counter() - t0:.1f} s -> {blend}, {png}")
     return 0
 
