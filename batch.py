@@ -23,8 +23,10 @@ def _argv():
     return argv[1:]                         # python batch.py cmd ...
 
 
-def _dev_repo_dir() -> str:
-    """A folder that contains ``articula`` -> this checkout (Blender requires dir name == manifest id)."""
+def dev_package_root() -> str:
+    """A folder that contains ``articula`` -> this checkout (Blender requires dir name == manifest id).
+    Used as the local extension repository here and, on ``sys.path``, by tests and benchmarks so
+    ``import articula`` works with plain Python."""
     root = os.path.join(REPO, ".pkgroot")
     link = os.path.join(root, "articula")
     if not os.path.exists(link):
@@ -50,7 +52,7 @@ def enable_addon(bpy) -> str:
         repos = bpy.context.preferences.extensions.repos
         if DEV_REPO_MODULE not in [r.module for r in repos]:
             repos.new(name=DEV_REPO_MODULE, module=DEV_REPO_MODULE,
-                      custom_directory=_dev_repo_dir(), source='USER')
+                      custom_directory=dev_package_root(), source='USER')
         module = f"bl_ext.{DEV_REPO_MODULE}.articula"
     bpy.ops.preferences.addon_enable(module=module)
     if module not in bpy.context.preferences.addons:

@@ -1,13 +1,14 @@
 """Shared by the benchmarks: makes ``import articula`` work (the checkout as a package) and
 formats result lines."""
+import importlib.util
 import os
 import sys
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-_ROOT = os.path.join(REPO, ".pkgroot")
-if not os.path.exists(os.path.join(_ROOT, "articula")):
-    os.makedirs(_ROOT, exist_ok=True)
-    os.symlink("..", os.path.join(_ROOT, "articula"))
+_spec = importlib.util.spec_from_file_location("articula_batch", os.path.join(REPO, "batch.py"))
+_batch = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_batch)            # batch.py imports bpy only when run as a script
+_ROOT = _batch.dev_package_root()
 if _ROOT not in sys.path:
     sys.path.insert(0, _ROOT)
 

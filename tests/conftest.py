@@ -5,18 +5,16 @@
   never touch the user's Blender configuration.
 Blender fixtures live in ``tests/blender/conftest.py``; ``tests/solver`` never imports bpy.
 """
+import importlib.util
 import os
 import sys
 import tempfile
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-PKGROOT = os.path.join(REPO, ".pkgroot")
-if not os.path.exists(os.path.join(PKGROOT, "articula")):
-    os.makedirs(PKGROOT, exist_ok=True)
-    try:
-        os.symlink("..", os.path.join(PKGROOT, "articula"))
-    except FileExistsError:
-        pass
+_spec = importlib.util.spec_from_file_location("articula_batch", os.path.join(REPO, "batch.py"))
+_batch = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_batch)            # batch.py imports bpy only when run as a script
+PKGROOT = _batch.dev_package_root()
 if PKGROOT not in sys.path:
     sys.path.insert(0, PKGROOT)
 
