@@ -12,7 +12,8 @@
   for the root the largest unpaired child), or for end parts towards the part's mean vertex, with the
   tail at the part's far extent along it; X/Z completed by :func:`solver.model.frames_from_bones`.
 * Mirror pairs: the mesh's symmetry plane (best of principal/world axes, refined by iterated
-  reflect-and-match; among several the one pairing most parts), parts matched by reflection; pairs are
+  reflect-and-match of a fixed 1,000-point subsample against all points, then scored once on all points;
+  among several the one pairing most parts), parts matched by reflection; pairs are
   named ``part_NN.L`` / ``part_NN.R``, .L on the side the plane normal points to, the normal's largest
   component made positive (+X for a character facing −Y: Blender's left).
 Units: metres.
@@ -88,41 +89,92 @@ def rotation_centre(Rp, tp, Rc, tc, h0, mu=0.02):
     return np.linalg.solve(H, g)
 
 
-def symmetry_planes(points, iterations=8, tol=0.02):
-    """Candidate mirror planes of a point set, best first: ``[(normal (3,), offset, score), ...]`` with
-    the plane ``x·n = offset`` and score = median distance of reflected points to their nearest point,
-    relative to the size.  Candidates start at the principal and world axes through the centroid and
-    are refined by reflect-and-match; only those with score < tol are returned (distinct normals)."""
+SYMMETRY_SAMPLE = 1000          # points that take part in the reflect-and-match iterations
+
+
+def _reflect(pts, n, d):
+    """Mirror images ``(N,3)`` of ``pts (N,3)`` in the plane ``x·n = d`` (n unit)."""
+    return pts - 2.0 * ((pts @ n) - d)[:, None] * n
+
+
+def _nn_tree(pts):
+    """k-d tree for nearest neighbours of reflected points.  Sliding-midpoint splits with unshrunk node
+    boxes and 64-point leaves answer such queries (many far from the surface) 2-3x faster than scipy's
+    default tree (measured on 13,380 MakeHuman vertices); the neighbours are the same (exact search)."""
+    return cKDTree(pts, leafsize=64, compact_nodes=False, balanced_tree=False)
+
+
+def _sample(pts, count, seed=0):
+    """Up to ``count`` rows of ``pts (N,3)``, a fixed pseudo-random subset in index order."""
+    if len(pts) <= count:
+        return pts
+    return pts[np.sort(np.random.default_rng(seed).choice(len(pts), count, replace=False))]
+
+
+def _refine_plane(pts, tree, sub, n, d, iterations, size):
+    """Reflect-and-match from the plane ``x·n = d``: reflect the sample ``sub (S,3)``, match each point
+    to the nearest of ``pts (N,3)`` (``tree``), take the normal along the summed point-to-match
+    differences and the offset as the median midpoint; up to ``iterations`` times, fewer once the
+    plane no longer moves.  Returns ``(n (3,), d)`` (metres)."""
+    for _ in range(iterations):
+        idx = tree.query(_reflect(sub, n, d))[1]
+        diff = sub - pts[idx]
+        diff *= np.sign(diff @ n)[:, None]
+        keep = np.linalg.norm(diff, axis=1) > 1e-9 * size
+        if keep.sum() < 3:
+            break
+        n_new = diff[keep].sum(axis=0)
+        n_new /= np.linalg.norm(n_new)
+        d_new = float(np.median((0.5 * (sub + pts[idx]))[keep] @ n_new))
+        still = n_new @ n > 1.0 - 1e-15 and abs(d_new - d) <= 1e-12 * size
+        n, d = n_new, d_new
+        if still:
+            break
+    return n, d
+
+
+def _plane_score(pts, tree, n, d, size, tol):
+    """Median distance of reflected ``pts (N,3)`` to their nearest point, over ``size``; exact when
+    below ``tol``, else possibly ``inf``.  The search is bounded at tol·size; only when the lower middle
+    value is within it but the upper one (even N) is not is it repeated up to 2·tol·size (beyond that
+    the mean of the two is at least tol·size)."""
+    refl = _reflect(pts, n, d)
+    dist = tree.query(refl, distance_upper_bound=tol * size)[0]
+    s = np.median(dist)
+    lower = (len(dist) - 1) // 2
+    if np.isinf(s) and np.isfinite(np.partition(dist, lower)[lower]):
+        s = np.median(tree.query(refl, distance_upper_bound=2.0 * tol * size)[0])
+    return float(s) / size
+
+
+def symmetry_planes(points, iterations=8, tol=0.02, sample=SYMMETRY_SAMPLE):
+    """Candidate mirror planes of a point set ``points (N,3)``, best first: ``[(normal (3,), offset,
+    score), ...]`` with the plane ``x·n = offset`` (metres) and score = median distance of all reflected
+    points to their nearest point, relative to the size (bounding-box diagonal).  Candidates start at
+    the principal and world axes through the centroid (near-duplicate starts, |cos| >= 0.99, skipped),
+    are refined by reflect-and-match on a fixed subsample of ``sample`` points (:func:`_refine_plane`)
+    and scored once on all points; only those with score < tol are returned (distinct normals)."""
     pts = np.asarray(points, dtype=np.float64)
     size = np.linalg.norm(np.ptp(pts, axis=0))
     c = pts.mean(axis=0)
     _, vecs = np.linalg.eigh(np.cov((pts - c).T))
-    tree = cKDTree(pts)
-
-    def score(n, d):
-        refl = pts - 2.0 * ((pts @ n) - d)[:, None] * n
-        dist, idx = tree.query(refl)
-        return np.median(dist) / size, idx
-
-    found = []
+    tree = _nn_tree(pts)
+    sub = _sample(pts, sample)
+    starts = []
     for n in [vecs[:, i] for i in range(3)] + list(np.eye(3)):
-        d = c @ n
-        for _ in range(iterations):
-            _, idx = score(n, d)
-            diff = pts - pts[idx]
-            diff *= np.sign(diff @ n)[:, None]
-            keep = np.linalg.norm(diff, axis=1) > 1e-9 * size
-            if keep.sum() < 3:
-                break
-            n_new = diff[keep].sum(axis=0)
-            n_new /= np.linalg.norm(n_new)
-            n, d = n_new, float(np.median((0.5 * (pts + pts[idx]))[keep] @ n_new))
-        s, _ = score(n, d)
+        if all(abs(n @ m) < 0.99 for m in starts):
+            starts.append(n)
+    found = []
+    for n in starts:
+        n, d = _refine_plane(pts, tree, sub, n, c @ n, iterations, size)
         axis = int(np.argmax(np.abs(n)))
         if n[axis] < 0:
             n, d = -n, -d
-        if s < tol and all(abs(n @ m) < 0.99 for m, _, _ in found):
-            found.append((n, float(d), float(s)))
+        if any(abs(n @ m) >= 0.99 for m, _, _ in found):
+            continue
+        s = _plane_score(pts, tree, n, d, size, tol)
+        if s < tol:
+            found.append((n, float(d), s))
     return sorted(found, key=lambda f: f[2])
 
 
