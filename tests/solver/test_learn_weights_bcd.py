@@ -6,7 +6,7 @@ from articula.solver.laplacian import uniform_laplacian
 from articula.solver.model import Model
 from articula.solver.rig_objective import RigObjective
 from articula.solver.skinning import hybrid_skin
-from articula.solver.weights_bcd import (CandidateSkin, _children_table, box_simplex_qp, candidates,
+from articula.solver.weights_bcd import (CandidateSkin, _children_table, _qp_group, box_simplex_qp, candidates,
                                          optimise_weights)
 
 from .learn_data import body, hybrid_truth
@@ -37,6 +37,14 @@ def test_qp_matches_brute_force_grid_and_slsqp():
                            bounds=[(0, 1)] * k, constraints=[{"type": "ineq", "fun": lambda x: 1 - x.sum()}],
                            method="SLSQP", options={"ftol": 1e-14, "maxiter": 500})
             assert f <= res.fun + 1e-9
+        w2, f2 = _qp_group(H, b)                                 # the batched solver reports its value
+        assert np.array_equal(w2, w)
+        assert np.allclose(f2, np.einsum("ni,nij,nj->n", w, H, w) - 2 * np.sum(b * w, 1), atol=1e-12)
+    for h, c in ((2.0, 1.0), (2.0, -1.0), (0.5, 3.0), (0.0, 1.0), (0.0, -1.0), (0.0, 0.0)):   # k = 1 closed form
+        w, f = _qp_group(np.array([[[h]]]), np.array([[c]]))
+        grid = np.linspace(0, 1, 100001)
+        assert f[0] <= np.min(h * grid ** 2 - 2 * c * grid) + 1e-12 and 0 <= w[0, 0] <= 1
+        assert np.isclose(f[0], h * w[0, 0] ** 2 - 2 * c * w[0, 0], atol=1e-15)
 
 
 def test_qp_respects_number_of_variables():
@@ -133,9 +141,10 @@ def test_two_ring_colouring_separates_interacting_vertices():
 
 
 def test_candidate_evaluation_equals_hybrid_skin_for_every_candidate():
-    """The fast candidate path (twist blend over the anchor's children only, elementwise affine maps and
-    normal equations) against the slow reference: ``hybrid_skin`` of a model carrying each candidate's
-    anchor, twist and solved swing weights, and the dense einsum normal equations (1e-9 relative)."""
+    """The fast candidate path (per-anchor columns: closed-form single-child twist or component-wise DLB,
+    one batched product for base and swing columns; normal equations) against the slow reference:
+    ``hybrid_skin`` of a model carrying each candidate's anchor, twist and random swing weights, and the
+    dense einsum normal equations (1e-9 relative)."""
     from articula.solver.weights_bcd import _normal_equations
     model, poses, _ = hybrid_truth(3)
     sk = model.skeleton
@@ -160,9 +169,19 @@ def test_candidate_evaluation_equals_hybrid_skin_for_every_candidate():
         fast = base + np.einsum("mvik,vk->mvi", G, ws)
         scale = np.abs(ref).max()
         assert np.abs(fast - ref)[:, valid].max() <= 1e-9 * scale
-        H, b = _normal_equations(G, ref)
-        assert np.allclose(H, np.einsum("mvik,mvil->vkl", G, G), rtol=1e-9, atol=1e-12 * np.abs(H).max())
-        assert np.allclose(b, np.einsum("mvik,mvi->vk", G, ref), rtol=1e-9, atol=1e-12 * np.abs(b).max())
+        for a in np.unique(anchor[valid]):                 # the per-anchor columns and normal equations
+            rows = np.flatnonzero(valid & (anchor == a))
+            k = len(skin.kids[a])
+            C = skin.columns(a, model.rest_vertices[rows].T, tw[rows][:, skin.kids[a]].T)
+            assert np.abs(C[:, :3] - base[:, rows].transpose(0, 2, 1)).max() <= 1e-12 * scale
+            if k == 0:
+                continue
+            Gr = G[:, rows, :, :k]
+            r = ref[:, rows].transpose(0, 2, 1)
+            H, b = _normal_equations(C, r)
+            H_ref, b_ref = np.einsum("mvik,mvil->vkl", Gr, Gr), np.einsum("mvik,mvi->vk", Gr, ref[:, rows])
+            assert np.allclose(H, H_ref, rtol=1e-9, atol=1e-12 * np.abs(H_ref).max())
+            assert np.allclose(b, b_ref, rtol=1e-9, atol=1e-12 * np.abs(b_ref).max())
         tried += 1
     assert tried > 10
 
@@ -182,3 +201,78 @@ def test_solve_small_equals_lapack():
         B = rng.normal(size=(50, s, 2))
         ref = np.linalg.solve(A, B)
         assert np.abs(solve_small(A, B) - ref).max() <= 1e-9 * np.abs(ref).max()
+
+
+def test_candidate_skin_follows_the_running_hemisphere_rule():
+    """Opposing 170° twists of two children of one anchor (as in test_skinning): hybrid_skin flips one
+    twist quaternion; the candidate skin (component-wise blend with the same rule) matches it to 1e-12.
+    Includes float32 weights 0.4 + 0.6 summing to 1 + 3e-8, where the rule flips the first child."""
+    from articula.solver import synthetic
+    from articula.solver.model import Poses
+    from articula.solver.rotations import rotvec_to_quat
+    from articula.solver.skinning import twist_flips
+    sk = synthetic.human_skeleton()
+    model = synthetic.random_model(200, seed=4)
+    fork, kids = min(((a, (c, d)) for a in range(sk.num_bones) for c in sk.children(a) for d in sk.children(a)
+                      if c < d), key=lambda ap: sk.frames[ap[1][0], :, 1] @ sk.frames[ap[1][1], :, 1])
+    r = np.zeros((3, sk.num_bones, 3))
+    r[:, list(kids), 1] = np.radians(170.0)
+    r[1, kids[1], 1] = np.radians(-120.0)
+    r[2] = 0.3 * np.random.default_rng(1).normal(size=(sk.num_bones, 3))
+    poses = Poses(rotvec_to_quat(r), np.zeros((3, 3)), np.ones(3))
+    sel = np.flatnonzero(model.anchor == fork)
+    wt = np.zeros_like(model.twist_weights)
+    wt[sel, kids[0]], wt[sel, kids[1]] = 0.4, np.linspace(0.1, 0.6, len(sel))
+    model = Model(model.rest_vertices, model.faces, sk, model.anchor, wt, model.swing_weights)
+    assert twist_flips(model, poses)[0, sel].any()
+    table = _children_table(sk.parents)[model.anchor]
+    base, G = CandidateSkin(sk, poses).base_and_columns(model.rest_vertices, model.anchor,
+                                                        wt.astype(np.float64), table)
+    ws = np.where(table >= 0, model.swing_weights[np.arange(model.num_vertices)[:, None], np.maximum(table, 0)], 0)
+    ref = hybrid_skin(model, poses)
+    assert np.abs(base + np.einsum("mvik,vk->mvi", G, ws) - ref).max() <= 1e-12 * np.abs(ref).max()
+
+
+def _noisy_problem(M=5, seed=3):
+    model, poses, scans = hybrid_truth(M)
+    noisy = scans + 0.002 * np.random.default_rng(seed).normal(size=scans.shape)
+    return _binary_start(model), poses, RigObjective(noisy, uniform_laplacian(model.faces, model.num_vertices), 100.0)
+
+
+def test_active_set_gives_the_full_evaluation_result():
+    """Skipping vertices whose own state and two-ring did not change (and reusing unchanged joint-move
+    proposals) changes nothing: same Q log as evaluating every vertex every sweep, strictly decreasing
+    and equal to a full recomputation of Q from the returned model."""
+    start, poses, obj = _noisy_problem()
+    fast, log_fast = optimise_weights(start, poses, obj, max_sweeps=4, steps=(0.2, 0.05))
+    full, log_full = optimise_weights(start, poses, obj, max_sweeps=4, steps=(0.2, 0.05), active_set=False)
+    assert len(log_fast) == len(log_full) == 4
+    assert np.allclose(log_fast, log_full, rtol=1e-9, atol=0)
+    assert all(b < a for a, b in zip(log_fast, log_fast[1:]))
+    assert abs(obj.value(hybrid_skin(fast, poses)) - log_fast[-1]) <= 1e-9 * log_fast[-1]
+    fast.validate()
+
+
+def test_tracker_skips_only_vertices_without_improving_candidates():
+    """After some sweeps, against a state rebuilt from scratch (hybrid_skin of the model): every vertex
+    the tracker holds clean has no candidate gaining more than the acceptance floor, every cached
+    joint-move proposal equals a fresh data-only evaluation, and the running Q is the recomputed Q."""
+    from articula.solver.weights_bcd import MIN_GAIN, _DataTargets, _setup, _State, _sweep, evaluate
+    start, poses, obj = _noisy_problem()
+    model, state, skin, Q, classes, tracker = _setup(start, poses, obj)
+    for _ in range(3):
+        Q = _sweep(model, skin, state, obj, classes, tracker, Q, steps=(0.2, 0.05))
+    fresh = _State(model, poses, obj)
+    assert np.isclose(obj.value(fresh.P), Q, rtol=1e-9, atol=0)
+    assert np.allclose(fresh.R, state.R, atol=1e-12) and np.allclose(fresh.P, state.P, atol=1e-12)
+    clean = np.flatnonzero(~tracker.dirty)
+    assert 0 < len(clean) < model.num_vertices
+    gain = evaluate(model, skin, fresh, clean, steps=(0.2, 0.05))[0]
+    assert gain.max() <= MIN_GAIN * Q + 1e-12 * Q
+    dirty = np.flatnonzero(tracker.dirty)
+    assert (evaluate(model, skin, fresh, dirty, steps=(0.2, 0.05))[0] > MIN_GAIN * Q).any()   # not vacuous
+    cached = np.flatnonzero(~tracker.stale)
+    g, *_, p = evaluate(model, skin, _DataTargets(fresh), cached, steps=(0.2, 0.05))
+    assert np.allclose(tracker.proposal[0][cached], g, rtol=1e-9, atol=1e-15)
+    moving = cached[g > 0]
+    assert np.allclose(tracker.proposal[4][moving], p[g > 0], atol=1e-12)
