@@ -25,6 +25,9 @@ Derivation (world axes; Rm_b = s·Rot_b is the chain of part b, p_b its posed jo
 * child c of the anchor: through the twist (DLB: chain rule through the normalising dual-quaternion map
   and the swing/twist split) and the swing (LBS: ∂R_sw = R_sw [ω]×);  see the helper docstrings.
 """
+import contextlib
+import functools
+
 import numpy as np
 
 from .dualquat import dq_apply
@@ -187,35 +190,107 @@ def _group_posed(bt, groups, group):
     return x, bq, vt, L3, np.einsum("nvij,nvj->nvi", L3, vt) + L[..., 3]
 
 
-def pose_jacobian(model, poses, groups=None):
-    """Posed vertices ``(N, V, 3)`` and their Jacobian ``(N, V, 3, P)`` w.r.t. the pose parameters
-    (module docstring for the layout and conventions).  ``groups``: optional :class:`AnchorGroups`."""
-    check_pose_shapes(model, poses)
-    groups = _groups_for(model, groups)
+def jacobian_terms(model, poses, heads=False, frame_basis=None):
+    """Per (frame, bone) quantities shared by all anchor groups of one Jacobian evaluation: those of
+    :func:`_pose_bone_terms` plus ``sk`` (the skeleton), ``s (N, 1, 1)`` scales, ``t (N, 3)``
+    translations; with ``heads``: ``chain_block (N, B, 3, 3)`` = ∂x'/∂h_b through the chain and
+    ``T_head (N, B, 8, 3)`` = ∂(world twist dual quaternion)/∂h_b; with ``frame_basis (B, 3, m_f)``:
+    the frame terms of :func:`_frame_bone_terms` for rotations ω_b = frame_basis[b] @ θ (θ (m_f,)
+    radians): ``T_f (N, B, 8, m_f)``, ``G_f (N, B, 3, m_f)``."""
     sk = model.skeleton
     bt = _pose_bone_terms(sk, poses)
-    N, V, P = len(poses), model.num_vertices, 4 + 3 * sk.num_bones
-    posed = np.empty((N, V, 3))
-    J = np.zeros((N, V, 3, P))                                       # in AnchorGroups order until the end
-    s = poses.scales[:, None, None]
-    for group in groups.groups:
-        a, kids, start, stop, wt, ws = group
-        x, bq, vt, L3, xp = _group_posed(bt, groups, group)
-        posed[:, start:stop] = xp
-        Jg = J[:, start:stop]
-        Jg[..., 0, 0] = Jg[..., 1, 1] = Jg[..., 2, 2] = 1.0
-        Jg[..., 3] = (xp - sk.heads[0] - poses.translations[:, None]) / s
-        for b in _chain_of(sk, a):                                   # −[x' − p_b]× Rot_b F_b
-            Jg[..., 4 + 3 * b:7 + 3 * b] = -_skew_times(xp - bt["p"][:, b, None], bt["K"][:, b, None])
-        if not len(kids):
-            continue
-        L3Jdq = L3 @ _dq_apply_jacobian(bq, x)                       # (N, V_a, 3, 8)
-        swt = signed_twist_weights(bt, kids, wt)
-        for k, c in enumerate(kids):
-            Jg[..., 4 + 3 * c:7 + 3 * c] = _child_block(bt, sk, a, c, swt[..., k], ws[:, k], L3Jdq, vt, s,
-                                                        bt["T"][:, c], bt["G"][:, c])
-    inv = groups.inverse
-    return posed[:, inv], J[:, inv]
+    bt.update(sk=sk, s=poses.scales[:, None, None], t=poses.translations)
+    if heads:
+        Rm = bt["Rm"]
+        chain_block = np.empty_like(Rm)
+        chain_block[:, 0] = np.eye(3) - Rm[:, 0]
+        chain_block[:, 1:] = Rm[:, np.maximum(sk.parents[1:], 0)] - Rm[:, 1:]
+        T_head = np.zeros(Rm.shape[:2] + (8, 3))                     # ∂(dual vector h × u)/∂h = −[u]×
+        T_head[..., 5:8, :] = -_skew(bt["twist_dq"][..., 1:4])
+        bt.update(chain_block=chain_block, T_head=T_head)
+    if frame_basis is not None:
+        T, G = _frame_bone_terms(sk, poses)
+        bt.update(T_f=T @ frame_basis, G_f=G @ frame_basis)
+    return bt
+
+
+def piece_width(key, terms):
+    """Columns of one Jacobian piece (see :func:`group_jacobian`)."""
+    if key == "s":
+        return 1
+    if key[0] == "frame":
+        return terms["T_f"].shape[-1]
+    return 3
+
+
+def group_jacobian(bt, groups, group, cols, width, extra=0):
+    """Jacobian of one anchor group in factored form ``J = R T`` (one product per frame).
+
+    bt: :func:`jacobian_terms`; group: an entry of ``groups.groups`` (:class:`AnchorGroups`);
+    cols: the first column (< width) of every wanted piece: ``"t"`` (3: root translation), ``"s"``
+    (1: scale), ``("rot", b)`` (3: δ_b), ``("head", b)`` (3: heads[b]; needs ``heads``),
+    ``("frame", b)`` (m_f: frame rotation; needs ``frame_basis``).
+    Returns the posed points ``(N, V_a, 3)`` (metres), the per-vertex columns ``R (N, V_a, 3, r + extra)``
+    = ``[I | −[x' − c]× | x' − c (only with "s") | blended-child pieces]`` (c = the posed joint of the
+    anchor; the ``extra`` last columns are left to the caller) and ``T (N, r, width)``, their
+    combination into the wanted pieces (zero columns elsewhere).  Every vertex moves rigidly with its
+    anchor's chain except through its blended children, so the chain pieces need no per-vertex columns:
+    ∂x'/∂δ_b = [p_b − x']× K_b = [p_b − c]× K_b − [x' − c]× K_b, ∂x'/∂h_b = chain_block_b, ∂x'/∂t = I."""
+    a, kids, start, stop, wt, ws = group
+    x, bq, vt, L3, xp = _group_posed(bt, groups, group)
+    kid_keys = [[(kind, c) for kind in ("rot", "frame", "head") if (kind, c) in cols] for c in kids]
+    n0 = 7 if "s" in cols else 6
+    r = n0 + sum(piece_width(k, bt) for keys in kid_keys for k in keys)
+    N, Va = xp.shape[:2]
+    R = np.empty((N, Va, 3, r + extra))
+    T = np.zeros((N, r, width))
+    d = xp - bt["p"][:, a, None]
+    R[..., :3] = np.eye(3)
+    _minus_skew_into(d, R[..., 3:6])
+    if n0 == 7:
+        R[..., 6] = d
+    _chain_combination(bt, a, cols, T)
+    if not any(kid_keys):
+        return xp, R, T
+    L3Jdq = L3 @ _dq_apply_jacobian(bq, x)                           # (N, V_a, 3, 8)
+    swt = signed_twist_weights(bt, kids, wt)
+    j = n0
+    for k, (c, keys) in enumerate(zip(kids, kid_keys)):
+        if keys:
+            blk = _kid_block(bt, a, c, swt[..., k], ws[:, k], L3Jdq, vt, keys)
+            R[..., j:j + blk.shape[-1]] = blk
+            for key in keys:
+                m = piece_width(key, bt)
+                T[:, j + np.arange(m), cols[key] + np.arange(m)] = 1.0
+                j += m
+    return xp, R, T
+
+
+def _minus_skew_into(d, out):
+    """``out (..., 3, 3) = −[d]×`` for vectors ``d (..., 3)``."""
+    out[..., 0, 0] = out[..., 1, 1] = out[..., 2, 2] = 0.0
+    out[..., 0, 1], out[..., 0, 2] = d[..., 2], -d[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = -d[..., 2], d[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = d[..., 1], -d[..., 0]
+
+
+def _chain_combination(bt, a, cols, T):
+    """Rows 0-6 of ``T (N, r, width)`` for the pieces of group a's chain (:func:`group_jacobian`):
+    ``[p_b − c]× K_b`` and ``K_b`` for δ_b, chain_block_b for h_b, I for t, and for s
+    ``(x' − h_0 − t)/s = (c − h_0 − t)/s + (x' − c)/s``."""
+    c = bt["p"][:, a]
+    if "t" in cols:
+        T[:, :3, cols["t"]:cols["t"] + 3] = np.eye(3)
+    if "s" in cols:
+        T[:, :3, cols["s"]] = (c - bt["sk"].heads[0] - bt["t"]) / bt["s"][:, 0]
+        T[:, 6, cols["s"]] = 1.0 / bt["s"][:, 0, 0]
+    for b in _chain_of(bt["sk"], a):
+        if ("rot", b) in cols:
+            j = cols[("rot", b)]
+            T[:, :3, j:j + 3] = _skew_times(bt["p"][:, b] - c, bt["K"][:, b])
+            T[:, 3:6, j:j + 3] = bt["K"][:, b]
+        if ("head", b) in cols:
+            T[:, :3, cols[("head", b)]:cols[("head", b)] + 3] = bt["chain_block"][:, b]
 
 
 def signed_twist_weights(bt, kids, wt):
@@ -226,53 +301,60 @@ def signed_twist_weights(bt, kids, wt):
     return np.broadcast_to(wt[None], (N,) + wt.shape) if signs is None else signs * wt[None]
 
 
-def _child_block(bt, sk, a, c, wt_k, ws_k, L3Jdq, vt, s, T, G):
-    """Block ``(N, V_a, 3, m)`` of a blended child c for parameters that move its world twist dual
-    quaternion by ``T (N, 8, m)`` and its world swing by ``∂R_sw = R_sw [G ·]×`` with ``G (N, 3, m)``.
-    ``wt_k (N, V_a)``: the child's signed twist weight (:func:`signed_twist_weights`).
-    Twist: ``w_t L3 (∂f/∂b) T``.  Swing: ``w_s Rm_a R_sw [G·]× (v_t − h_c)`` =
-    ``−w_s [RR (v_t − h_c)]× (RR G / s)`` with RR = Rm_a R_sw = s·rotation."""
-    twist = wt_k[..., None, None] * _per_frame_matmul(L3Jdq, T)
-    RR = bt["Rm"][:, a] @ bt["R_sw"][:, c]
-    lever = np.einsum("nij,nvj->nvi", RR, vt - sk.heads[c])
-    swing = -ws_k[None, :, None, None] * _skew_times(lever, ((RR @ G) / s)[:, None])
-    return twist + swing
+def _kid_block(bt, a, c, wt_k, ws_k, L3Jdq, vt, keys):
+    """Columns ``(N, V_a, 3, m)`` of a blended child c for the pieces ``keys`` (in the order rot, frame,
+    head).  ``wt_k (N, V_a)``: the child's signed twist weight (:func:`signed_twist_weights`),
+    ``ws_k (V_a,)`` its swing weight.  A piece that moves the world twist dual quaternion by
+    ``T (N, 8, m)`` and the world swing by ``∂R_sw = R_sw [G ·]×`` (G (N, 3, m)) has twist part
+    ``w_t L3 (∂f/∂b) T`` and swing part ``w_s Rm_a R_sw [G·]× (v_t − h_c)`` =
+    ``−w_s [RR (v_t − h_c)]× (RR G / s)`` (RR = Rm_a R_sw = s·rotation); a head moves the swing map's
+    translation: ``w_s Rm_a (I − R_sw)``."""
+    names = {"rot": ("T", "G"), "frame": ("T_f", "G_f"), "head": ("T_head", None)}
+    T = np.concatenate([bt[names[k[0]][0]][:, c] for k in keys], axis=-1)
+    Gs = [bt[names[k[0]][1]][:, c] for k in keys if k[0] != "head"]
+    blk = wt_k[..., None, None] * _per_frame_matmul(L3Jdq, T)
+    Rm_a, R_sw = bt["Rm"][:, a], bt["R_sw"][:, c]
+    RR = Rm_a @ R_sw
+    w = ws_k[None, :, None, None]
+    if Gs:
+        G = np.concatenate(Gs, axis=-1)
+        lever = (vt - bt["sk"].heads[c]) @ np.swapaxes(RR, 1, 2)         # RR (v_t − h_c), (N, V_a, 3)
+        blk[..., :G.shape[-1]] -= w * _skew_times(lever, ((RR @ G) / bt["s"])[:, None])
+    if keys[-1][0] == "head":
+        blk[..., -3:] += w * (Rm_a @ (np.eye(3) - R_sw))[:, None]
+    return blk
+
+
+def dense_jacobian(model, poses, cols, width, groups=None, heads=False, frame_basis=None):
+    """Posed vertices ``(N, V, 3)`` and the Jacobian ``(N, V, 3, width)`` with the pieces at the columns
+    ``cols`` (:func:`group_jacobian`), zero elsewhere.  ``groups``: optional :class:`AnchorGroups`."""
+    check_pose_shapes(model, poses)
+    groups = _groups_for(model, groups)
+    bt = jacobian_terms(model, poses, heads, frame_basis)
+    N, V = len(poses), model.num_vertices
+    posed = np.empty((N, V, 3))
+    J = np.empty((N, V, 3, width))                                   # in AnchorGroups order until the end
+    for group in groups.groups:
+        xp, R, T = group_jacobian(bt, groups, group, cols, width)
+        posed[:, group[2]:group[3]], J[:, group[2]:group[3]] = xp, _per_frame_matmul(R, T)
+    inv = groups.inverse
+    return posed[:, inv], J[:, inv]
+
+
+def pose_jacobian(model, poses, groups=None):
+    """Posed vertices ``(N, V, 3)`` and their Jacobian ``(N, V, 3, P)`` w.r.t. the pose parameters
+    (module docstring for the layout and conventions).  ``groups``: optional :class:`AnchorGroups`."""
+    B = model.skeleton.num_bones
+    cols = {"t": 0, "s": 3, **{("rot", b): 4 + 3 * b for b in range(B)}}
+    return dense_jacobian(model, poses, cols, 4 + 3 * B, groups)
 
 
 def joint_jacobian(model, poses, groups=None):
     """Posed vertices ``(N, V, 3)`` and their Jacobian ``(N, V, 3, 3B)`` w.r.t. the rest joint centres
     ``heads`` (columns 3b … 3b+2 = x, y, z of heads[b]; frames, tails, rest vertices fixed).
     ``groups``: optional :class:`AnchorGroups`."""
-    check_pose_shapes(model, poses)
-    groups = _groups_for(model, groups)
-    sk = model.skeleton
-    bt = _pose_bone_terms(sk, poses)
-    N, V, B = len(poses), model.num_vertices, sk.num_bones
-    Rm = bt["Rm"]
-    eye = np.eye(3)
-    chain_block = np.empty_like(Rm)                                  # ∂x'/∂h_b through the chain
-    chain_block[:, 0] = eye - Rm[:, 0]
-    chain_block[:, 1:] = Rm[:, np.maximum(sk.parents[1:], 0)] - Rm[:, 1:]
-    minus_skew_u = -_skew(bt["twist_dq"][..., 1:4])                  # ∂(dual vector h × u)/∂h, (N, B, 3, 3)
-    posed = np.empty((N, V, 3))
-    J = np.zeros((N, V, 3, 3 * B))
-    for group in groups.groups:
-        a, kids, start, stop, wt, ws = group
-        x, bq, vt, L3, xp = _group_posed(bt, groups, group)
-        posed[:, start:stop] = xp
-        Jg = J[:, start:stop]
-        for b in _chain_of(sk, a):
-            Jg[..., 3 * b:3 * b + 3] = chain_block[:, b, None]
-        if not len(kids):
-            continue
-        L3Jd = L3 @ _dq_apply_jacobian(bq, x)[..., 5:8]              # through the dual vector part
-        swt = signed_twist_weights(bt, kids, wt)
-        for k, c in enumerate(kids):
-            twist = swt[..., k, None, None] * _per_frame_matmul(L3Jd, minus_skew_u[:, c])
-            swing = ws[None, :, k, None, None] * (Rm[:, a] @ (eye - bt["R_sw"][:, c]))[:, None]
-            Jg[..., 3 * c:3 * c + 3] = twist + swing
-    inv = groups.inverse
-    return posed[:, inv], J[:, inv]
+    B = model.skeleton.num_bones
+    return dense_jacobian(model, poses, {("head", b): 3 * b for b in range(B)}, 3 * B, groups, heads=True)
 
 
 def apply_frame_increment(skeleton, poses, omega):
@@ -298,7 +380,7 @@ def apply_frame_increment(skeleton, poses, omega):
 
 def _frame_bone_terms(skeleton, poses):
     """Per (frame, bone) derivatives of the world twist w.r.t. a frame rotation ω (world axis-angle)
-    with the world rotation fixed: ``T (N, B, 8, 3)`` and ``G (N, B, 3, 3)`` (see :func:`_child_block`).
+    with the world rotation fixed: ``T (N, B, 8, 3)`` and ``G (N, B, 3, 3)`` (see :func:`_kid_block`).
 
     With world quaternion (w, u) of the bone's rotation and twist axis Y: η = Y·u, n = √(w² + η²),
     twist (w_t, y_t) = (w, η)/n, world twist dual quaternion ((w_t, y_t Y), (0, y_t h × Y)).
@@ -331,29 +413,56 @@ def frame_jacobian(model, poses, groups=None):
     rotations ω_b of the rest frames, with the update of :func:`apply_frame_increment` (each bone's world
     rotation kept, so only the swing/twist split of blended children moves; heads fixed).  Columns
     3b … 3b+2 = ω_b.  For rotations about the frame's own X and Z axes use ``J_b @ F_b[:, 0]`` and
-    ``J_b @ F_b[:, 2]``.  ``groups``: optional :class:`AnchorGroups`."""
-    check_pose_shapes(model, poses)
-    groups = _groups_for(model, groups)
-    sk = model.skeleton
-    bt = _pose_bone_terms(sk, poses)
-    T, G = _frame_bone_terms(sk, poses)
-    N, V, B = len(poses), model.num_vertices, sk.num_bones
-    posed = np.empty((N, V, 3))
-    J = np.zeros((N, V, 3, 3 * B))
-    s = poses.scales[:, None, None]
-    for group in groups.groups:
-        a, kids, start, stop, wt, ws = group
-        x, bq, vt, L3, xp = _group_posed(bt, groups, group)
-        posed[:, start:stop] = xp
-        if not len(kids):
+    ``J_b @ F_b[:, 2]`` (or :func:`dense_jacobian` with ``frame_basis``).  ``groups``: optional
+    :class:`AnchorGroups`."""
+    B = model.skeleton.num_bones
+    basis = np.broadcast_to(np.eye(3), (B, 3, 3))
+    return dense_jacobian(model, poses, {("frame", b): 3 * b for b in range(B)}, 3 * B, groups,
+                          frame_basis=basis)
+
+
+@functools.lru_cache(maxsize=None)
+def _openblas_threads():
+    """``(get, set)`` thread-count functions of the OpenBLAS bundled with numpy (wheels: ``numpy.libs/``,
+    macOS ``numpy/.dylibs/``), or None (another BLAS, or not found)."""
+    import ctypes
+    import glob
+    import os
+    root = os.path.dirname(np.__file__)
+    for path in glob.glob(os.path.join(root + ".libs", "*openblas*")) + \
+            glob.glob(os.path.join(root, ".dylibs", "*openblas*")):
+        try:
+            lib = ctypes.CDLL(path)                                  # already loaded: the same library
+        except OSError:
             continue
-        L3Jdq = L3 @ _dq_apply_jacobian(bq, x)
-        swt = signed_twist_weights(bt, kids, wt)
-        for k, c in enumerate(kids):
-            J[:, start:stop, :, 3 * c:3 * c + 3] = _child_block(bt, sk, a, c, swt[..., k], ws[:, k], L3Jdq, vt, s,
-                                                                T[:, c], G[:, c])
-    inv = groups.inverse
-    return posed[:, inv], J[:, inv]
+        for name in ("scipy_openblas_get_num_threads64_", "openblas_get_num_threads64_", "openblas_get_num_threads"):
+            get, put = getattr(lib, name, None), getattr(lib, name.replace("_get_", "_set_"), None)
+            if get is not None and put is not None:
+                get.restype, put.argtypes = ctypes.c_int, [ctypes.c_int]
+                return get, put
+    return None
+
+
+@contextlib.contextmanager
+def single_blas_thread():
+    """Run the block with numpy's OpenBLAS on one thread (the previous count is restored after).
+
+    For the Gauss–Newton solvers, which make hundreds of mid-size BLAS calls between other numpy work:
+    with several threads, every call waits for the worker threads and the workers spin between calls.
+    Measured on the shared 2-core machine under load (numpy 2.x, OpenBLAS 0.3.34): ``X.T @ X`` for
+    X (12,000 × 30) took 331 ms process CPU time with 2 threads and 1 ms with one.  Does nothing when
+    numpy's BLAS is not a bundled OpenBLAS.  Not for concurrent use from several Python threads."""
+    threads = _openblas_threads()
+    if threads is None:
+        yield
+        return
+    get, put = threads
+    before = get()
+    put(1)
+    try:
+        yield
+    finally:
+        put(before)
 
 
 def to_sparse(J_frame):

@@ -19,9 +19,13 @@ Damping: Levenberg–Marquardt ``μ (diag H_data + ε)`` (the diagonal of the da
 weight λ ≈ 1e10 would otherwise freeze the joints it couples); a step is accepted only if the objective
 decreases.
 
-Jacobian of the posed vertices: analytic, from :mod:`solver.jacobians` (:func:`posed_jacobians`);
-:func:`posed_jacobians_fd` computes the same by central differences through :func:`apply_increment`
-(the tests compare them).
+Jacobian of the posed vertices: analytic, from :mod:`solver.jacobians`.  The solver never forms it
+densely: a vertex depends only on its anchor's chain and children, so each anchor group's Jacobian is
+``R T`` (per-vertex columns R, per-scan combination T, :func:`jacobians.group_jacobian`) and the
+normal-equation blocks are assembled from the small Gram matrices of R (:func:`gauss_newton_blocks`,
+BLAS on one thread).  :func:`posed_jacobians` gives the dense Jacobian, :func:`posed_jacobians_fd` the
+same by central differences through :func:`apply_increment`, :func:`normal_blocks` the blocks from dense
+Jacobians (the tests compare them).
 """
 import copy
 
@@ -30,7 +34,7 @@ import numpy as np
 from .errors import Cancelled  # noqa: F401  (raised by progress callbacks)
 from .model import Poses, Skeleton
 from .rotations import matrix_to_quat, quat_conj, quat_mul, quat_normalize, rotvec_to_matrix, rotvec_to_quat
-from .jacobians import frame_jacobian, joint_jacobian, pose_jacobian
+from .jacobians import _chain_of, dense_jacobian, group_jacobian, jacobian_terms, single_blas_thread
 from .skinning import AnchorGroups, hybrid_skin
 
 FD_STEP = 1e-6
@@ -67,25 +71,35 @@ def _with(model, skeleton):
     return m
 
 
+def _columns(num_bones, own_only):
+    """Columns of the pieces of :func:`jacobians.group_jacobian` in this module's layout ``[shared | own]``
+    and the number of shared columns (0 with own_only)."""
+    B = num_bones
+    n_s = 0 if own_only else 5 * (B - 1)
+    cols = {("rot", b): n_s + 3 * b for b in range(B)}
+    cols["t"] = n_s + 3 * B
+    if not own_only:
+        for b in range(1, B):
+            cols[("head", b)], cols[("frame", b)] = 5 * (b - 1), 5 * (b - 1) + 3
+    return cols, n_s
+
+
+def _frame_basis(model, own_only):
+    """Frame rotation axes ``(B, 3, 2)`` of the shared block: each frame's X and Z axes (None: poses only)."""
+    return None if own_only else model.skeleton.frames[:, :, [0, 2]]
+
+
 def posed_jacobians(model, poses, own_only=False):
     """Analytic Jacobians of the posed vertices ``(J_shared (M,3V,n_s), J_own (M,3V,n_o))`` in this
     module's layout, from :mod:`solver.jacobians` (pose, joint-centre and frame Jacobians; the frame
-    columns are its world-ω columns projected on the frame's X and Z axes).  own_only: poses only,
-    ``J_shared`` has no columns (joint and frame Jacobians are not computed)."""
-    sk, M, V, B = model.skeleton, len(poses), model.num_vertices, model.skeleton.num_bones
-    groups = AnchorGroups(model)
-    _, Jp = pose_jacobian(model, poses, groups)                          # (M,V,3,4+3B): t, s, δ_b
-    if own_only:
-        Jo = np.concatenate([Jp[..., 4:], Jp[..., :3]], axis=3).reshape(M, 3 * V, 3 * B + 3)
-        return np.zeros((M, 3 * V, 0)), Jo
-    _, Jh = joint_jacobian(model, poses, groups)                         # (M,V,3,3B)
-    _, Jf = frame_jacobian(model, poses, groups)                         # (M,V,3,3B) world ω_b
-    Jo = np.concatenate([Jp[..., 4:], Jp[..., :3]], axis=3).reshape(M, 3 * V, 3 * B + 3)
-    Jf = Jf.reshape(M, V, 3, B, 3)
-    Jx = np.einsum("mvibk,bk->mvib", Jf, sk.frames[:, :, 0])
-    Jz = np.einsum("mvibk,bk->mvib", Jf, sk.frames[:, :, 2])
-    Js = np.concatenate([Jh.reshape(M, V, 3, B, 3), Jx[..., None], Jz[..., None]], axis=4)[:, :, :, 1:]
-    return Js.reshape(M, 3 * V, 5 * (B - 1)), Jo
+    columns are rotations about the frame's X and Z axes).  own_only: poses only, ``J_shared`` has no
+    columns.  Dense (for tests; the solver uses the compact blocks of :func:`gauss_newton_blocks`)."""
+    M, V = len(poses), model.num_vertices
+    cols, n_s = _columns(model.skeleton.num_bones, own_only)
+    n = n_s + sizes(model.skeleton.num_bones)[1]
+    _, J = dense_jacobian(model, poses, cols, n, heads=not own_only, frame_basis=_frame_basis(model, own_only))
+    J = J.reshape(M, 3 * V, n)
+    return J[..., :n_s].copy(), J[..., n_s:].copy()
 
 
 def posed_jacobians_fd(model, poses, step=FD_STEP):
@@ -129,29 +143,21 @@ def symmetry_residuals(skeleton, sym_pairs):
 
 
 def normal_blocks(Js, Jo, rd, rl, L, alpha):
-    """Gauss–Newton blocks from posed-vertex Jacobians and residuals.
+    """Gauss–Newton blocks from dense posed-vertex Jacobians and residuals (reference for tests).
 
     Js (M,3V,n_s), Jo (M,3V,n_o); rd, rl (M,V,3) data and Laplacian residuals; L (V,V).
     Returns ``H_ss (n_s,n_s), H_so (M,n_s,n_o), H_oo (M,n_o,n_o), g_s (n_s,), g_o (M,n_o)``."""
     M, R3, n_s = Js.shape
     V = R3 // 3
-    n_o = Jo.shape[2]
-
-    def lap(J):
-        n = J.shape[2]
-        return (L @ J.reshape(M, V, 3 * n).transpose(1, 0, 2).reshape(V, -1)).reshape(V, M, 3, n) \
-            .transpose(1, 0, 2, 3).reshape(M, R3, n)
-
-    LJs, LJo = lap(Js), lap(Jo)
-    rd, rl = rd.reshape(M, -1), rl.reshape(M, -1)
-    # einsum, not BLAS matmul: on the shared 2-core machine a multi-threaded BLAS was measured 4-5x slower
-    # (one LM iteration, 13,380 v x 10 scans: 9.4-10.1 s CPU with einsum, 38-53 s with matmul)
-    H_ss = np.einsum("mri,mrj->ij", Js, Js) + alpha * np.einsum("mri,mrj->ij", LJs, LJs)
-    H_so = np.einsum("mri,mrj->mij", Js, Jo) + alpha * np.einsum("mri,mrj->mij", LJs, LJo)
-    H_oo = np.einsum("mri,mrj->mij", Jo, Jo) + alpha * np.einsum("mri,mrj->mij", LJo, LJo)
-    g_s = np.einsum("mri,mr->i", Js, rd) + alpha * np.einsum("mri,mr->i", LJs, rl)
-    g_o = np.einsum("mri,mr->mi", Jo, rd) + alpha * np.einsum("mri,mr->mi", LJo, rl)
-    return H_ss, H_so, H_oo, g_s, g_o
+    J = np.concatenate([Js, Jo], axis=2)
+    n = J.shape[2]
+    LJ = (L @ J.reshape(M, V, 3 * n).transpose(1, 0, 2).reshape(V, -1)).reshape(V, M, 3, n) \
+        .transpose(1, 0, 2, 3).reshape(M, R3, n)
+    A = np.concatenate([J, rd.reshape(M, R3, 1)], axis=2)
+    B = np.concatenate([LJ, rl.reshape(M, R3, 1)], axis=2)
+    H = np.matmul(np.swapaxes(A, 1, 2), A) + alpha * np.matmul(np.swapaxes(B, 1, 2), B)
+    return (H[:, :n_s, :n_s].sum(axis=0), H[:, :n_s, n_s:n], H[:, n_s:n, n_s:n], H[:, :n_s, n].sum(axis=0),
+            H[:, n_s:n, n])
 
 
 def schur_solve(H_ss, H_so, H_oo, g_s, g_o):
@@ -166,25 +172,129 @@ def schur_solve(H_ss, H_so, H_oo, g_s, g_o):
     return x_s, x_o
 
 
-SCAN_CHUNK = 2      # scans whose Jacobians are held in memory at once
+def _local_columns(skeleton, a, kids, cols, n):
+    """Compact columns of anchor group a (the pieces that move its vertices): ``(local, index)`` with
+    ``local`` the first column of every piece in the group's block and ``index (C+1,)`` the global column
+    of every block column plus the residual column n."""
+    chain = _chain_of(skeleton, a)
+    keys = [("rot", b) for b in chain] + ["t"] + [("head", b) for b in chain] + \
+        [(kind, c) for c in kids for kind in ("rot", "frame", "head")]
+    local, index = {}, []
+    for key in (k for k in keys if k in cols):
+        local[key] = len(index)
+        index.extend(range(cols[key], cols[key] + (2 if key[0] == "frame" else 3)))
+    return local, np.array(index + [n])
 
 
-def gauss_newton_blocks(model, poses, objective, chunk=SCAN_CHUNK, own_only=False):
-    """:func:`normal_blocks` accumulated over chunks of scans, so that only ``chunk`` scans' Jacobians
-    are in memory at once.  Returns ``H_ss, H_so (M,..), H_oo (M,..), g_s, g_o (M,..)``; with own_only
-    (poses only) the shared blocks have size 0."""
+class _Structure:
+    """Sparsity structure of the normal equations (fixed while anchors, mesh and objective are).
+
+    Every anchor group's Jacobian rows are non-zero only in its compact columns (:func:`_local_columns`);
+    the Laplacian rows of a vertex whose one-ring lies in its group ("interior") too; the other
+    ("boundary") rows of group a use the union of the columns of the groups they touch.  Vertices are in
+    :class:`AnchorGroups` order; ``L`` = √α L permuted to it, ``scans`` and ``scan_lap`` (= √α L s) too."""
+
+    def __init__(self, model, objective, own_only):
+        self.groups = groups = AnchorGroups(model)
+        sk, order = model.skeleton, groups.order
+        cols, self.n_s = _columns(sk.num_bones, own_only)
+        self.n = self.n_s + sizes(sk.num_bones)[1]                   # also the residual column
+        self.local, self.index = zip(*[_local_columns(sk, g[0], g[1], cols, self.n) for g in groups.groups])
+        root_alpha = np.sqrt(objective.alpha)
+        self.L = (root_alpha * objective.L).tocsr()[order][:, order].tocsr()
+        self.scans = objective.scans[:, order]
+        self.scan_lap = root_alpha * objective.scan_lap[:, order]
+        bounds = np.array([g[2] for g in groups.groups] + [groups.num_vertices])
+        self.interior, self.boundary = [], []
+        for start, stop in zip(bounds[:-1], bounds[1:]):
+            rows = self.L[start:stop]
+            outside = (rows.indices < start) | (rows.indices >= stop)
+            nnz_row = np.repeat(np.arange(stop - start), np.diff(rows.indptr))
+            touches = np.bincount(nnz_row[outside], minlength=stop - start) > 0
+            inner, edge = np.flatnonzero(~touches), np.flatnonzero(touches)
+            self.interior.append((rows[inner][:, start:stop], start + inner))
+            if len(edge):
+                self.boundary.append(self._boundary(rows[edge], start + edge, bounds))
+
+    def _boundary(self, rows, vertices, bounds):
+        """``(columns (U+1,), vertices, [(group, L rows × group vertices, positions in columns)])``."""
+        touched = np.unique(np.searchsorted(bounds, rows.indices, side="right") - 1)
+        U = np.unique(np.concatenate([self.index[b][:-1] for b in touched]))
+        sources = [(b, rows[:, bounds[b]:bounds[b + 1]], np.searchsorted(U, self.index[b][:-1])) for b in touched]
+        return np.append(U, self.n), vertices, sources
+
+
+def _gram(X):
+    """``Xᵀ X`` per scan of ``X (N, R, 3, C)`` as (N, C, C) (one BLAS product per scan)."""
+    X = X.reshape(len(X), -1, X.shape[-1])
+    return np.matmul(np.swapaxes(X, 1, 2), X)
+
+
+def _expand(G, T):
+    """``T̃ᵀ G T̃`` with ``T̃ = [[T, 0], [0, 1]]``: Gram matrices ``G (N, r+1, r+1)`` of ``[R | residual]``
+    to those of ``[R T | residual]``; T (N, r, C)."""
+    N, r, C = T.shape
+    Te = np.zeros((N, r + 1, C + 1))
+    Te[:, :r, :C], Te[:, r, C] = T, 1.0
+    return np.swapaxes(Te, 1, 2) @ G @ Te
+
+
+def _chunk_system(st, model, poses, sl, own_only):
+    """Gram matrices ``(N, n+1, n+1)`` of ``[J | r]`` over the data and √α-weighted Laplacian rows of the
+    scans ``sl`` (``poses``), in the layout ``[shared | own | residual]``: the normal-equation blocks
+    and (last column) the gradients of one scan each.  Every group's Jacobian is ``R T``
+    (:func:`jacobians.group_jacobian`); its Gram matrices are formed from R and expanded by T."""
+    bt = jacobian_terms(model, poses, heads=not own_only, frame_basis=_frame_basis(model, own_only))
+    groups = st.groups.groups
+    N, V = len(poses), model.num_vertices
+    posed = np.empty((N, V, 3))
+    RT = []
+    for group, local, index in zip(groups, st.local, st.index):
+        xp, R, T = group_jacobian(bt, st.groups, group, local, len(index) - 1, extra=1)
+        posed[:, group[2]:group[3]] = xp
+        RT.append((R, T))
+    rl = (st.L @ posed.transpose(1, 0, 2).reshape(V, -1)).reshape(V, N, 3).transpose(1, 0, 2) - st.scan_lap[sl]
+    H = np.zeros((N, st.n + 1, st.n + 1))
+    for (R, T), group, index, (L_in, inner) in zip(RT, groups, st.index, st.interior):
+        R[..., -1] = posed[:, group[2]:group[3]] - st.scans[sl, group[2]:group[3]]
+        G = _gram(R)
+        for m in range(N if len(inner) else 0):
+            P = (L_in @ R[m].reshape(len(R[m]), -1)).reshape(len(inner), 3, R.shape[-1])
+            P[..., -1] = rl[m, inner]
+            G[m] += _gram(P[None])[0]
+        H[:, index[:, None], index] += _expand(G, T)
+    for index, vertices, sources in st.boundary:
+        Z = np.zeros((N, len(vertices), 3, len(index)))
+        for b, L_b, pos in sources:
+            R, T = RT[b]
+            for m in range(N):
+                LR = (L_b @ R[m].reshape(len(R[m]), -1)).reshape(3 * len(vertices), -1)[:, :-1]
+                Z[m][..., pos] += (LR @ T[m]).reshape(len(vertices), 3, -1)
+        Z[..., -1] = rl[:, vertices]
+        H[:, index[:, None], index] += _gram(Z)
+    return H
+
+
+SCAN_CHUNK = 8      # scans whose (compact) Jacobians are held in memory at once
+
+
+def gauss_newton_blocks(model, poses, objective, chunk=SCAN_CHUNK, own_only=False, structure=None):
+    """Gauss–Newton blocks (those of :func:`normal_blocks`) at ``(model, poses)`` for ``objective``,
+    accumulated over chunks of scans from compact per-anchor-group Jacobians (:class:`_Structure`; pass
+    ``structure`` to reuse one built for this model's anchors and weights), so that only ``chunk`` scans'
+    blocks are in memory at once.  Returns ``H_ss, H_so (M,..), H_oo (M,..), g_s, g_o (M,..)``; with
+    own_only (poses only) the shared blocks have size 0."""
+    st = _Structure(model, objective, own_only) if structure is None else structure
     M = len(poses)
-    rd, rl = objective.residuals(hybrid_skin(model, poses))
-    parts = []
-    for m0 in range(0, M, chunk):
-        sl = slice(m0, min(M, m0 + chunk))
-        sub = Poses(poses.rotations[sl], poses.translations[sl], poses.scales[sl])
-        Js, Jo = posed_jacobians(model, sub, own_only)
-        parts.append(normal_blocks(Js, Jo, rd[sl], rl[sl], objective.L, objective.alpha))
-    H_ss = sum(p[0] for p in parts)
-    g_s = sum(p[3] for p in parts)
-    return (H_ss, np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts]), g_s,
-            np.concatenate([p[4] for p in parts]))
+    H = np.empty((M, st.n + 1, st.n + 1))
+    with single_blas_thread():
+        for m0 in range(0, M, chunk):
+            sl = slice(m0, min(M, m0 + chunk))
+            sub = Poses(poses.rotations[sl], poses.translations[sl], poses.scales[sl])
+            H[sl] = _chunk_system(st, model, sub, sl, own_only)
+    n_s, n = st.n_s, st.n
+    return (H[:, :n_s, :n_s].sum(axis=0), H[:, :n_s, n_s:n].copy(), H[:, n_s:n, n_s:n].copy(),
+            H[:, :n_s, n].sum(axis=0), H[:, n_s:n, n].copy())
 
 
 class JointPoseProblem:
@@ -195,8 +305,9 @@ class JointPoseProblem:
         self.sym_pairs = list(sym_pairs)
         self.lam = float(lam)
 
-    def value(self, model, poses):
-        q = self.objective.value(hybrid_skin(model, poses))
+    def value(self, model, poses, groups=None):
+        """``Q + λ Q_sym`` (m²); groups: optional :class:`AnchorGroups` of the model."""
+        q = self.objective.value(hybrid_skin(model, poses, groups))
         if self.sym_pairs and self.lam > 0:
             r, _ = symmetry_residuals(model.skeleton, self.sym_pairs)
             q += self.lam * float(r @ r)
@@ -209,13 +320,21 @@ def optimise_joints_and_poses(model, poses, problem, iterations=10, mu=1e-3, ste
 
     model: current :class:`Model` (its skin and rest mesh are held fixed); poses: current poses;
     problem: :class:`JointPoseProblem`.  fix_joints: keep joint centres and axes (poses only).  Returns ``(model, poses, log)`` with log the objective after every
-    accepted step (never increasing).  ``progress(fraction, stage, objective)`` after each iteration."""
-    obj = problem.objective
+    accepted step (never increasing).  ``progress(fraction, stage, objective)`` after each iteration.
+    Runs with numpy's BLAS on one thread (:func:`jacobians.single_blas_thread`)."""
+    with single_blas_thread():
+        return _levenberg_marquardt(model, poses, problem, iterations, mu, step_tol, progress, fix_joints)
+
+
+def _levenberg_marquardt(model, poses, problem, iterations, mu, step_tol, progress, fix_joints):
+    """The iterations of :func:`optimise_joints_and_poses`."""
+    st = _Structure(model, problem.objective, fix_joints)           # anchors and weights stay fixed
     n_s, _ = sizes(model.skeleton.num_bones)
-    E = problem.value(model, poses)
+    E = problem.value(model, poses, st.groups)
     log = []
     for it in range(iterations):
-        H_ss, H_so, H_oo, g_s, g_o = gauss_newton_blocks(model, poses, obj, own_only=fix_joints)
+        H_ss, H_so, H_oo, g_s, g_o = gauss_newton_blocks(model, poses, problem.objective, own_only=fix_joints,
+                                                         structure=st)
         # damping from the data part only: the huge symmetry weight must not freeze the joints it couples
         diag_s = np.diag(H_ss).copy()
         if problem.sym_pairs and problem.lam > 0 and not fix_joints:
@@ -235,7 +354,7 @@ def optimise_joints_and_poses(model, poses, problem, iterations=10, mu=1e-3, ste
                 x_s, x_o = schur_solve(H_ss + np.diag(Ds), H_so, H_oo_d, -g_s, -g_o)
             sk_new, poses_new = apply_increment(model.skeleton, poses, x_s, x_o)
             model_new = _with(model, sk_new)
-            E_new = problem.value(model_new, poses_new)
+            E_new = problem.value(model_new, poses_new, st.groups)
             if E_new < E:
                 accepted = True
                 step = np.sqrt(x_s @ x_s + np.sum(x_o * x_o))
