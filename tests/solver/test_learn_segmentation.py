@@ -7,9 +7,10 @@ from scipy.sparse.csgraph import connected_components
 from articula.solver.errors import ArticulaInputError
 from articula.solver.laplacian import adjacency, components, uniform_laplacian
 from articula.solver.procrustes import fit_parts, fit_rigid
-from articula.solver.segmentation import choose_num_parts, knee, make_parts_connected, segment
+from articula.solver.segmentation import (Clustering, Mesh, Sample, centred, choose_num_parts, grid_sample,
+                                          make_parts_connected, parts_from_curve, segment, sums_cost)
 
-from .learn_data import body, rigid_scans, rotvec_matrix
+from .learn_data import body, hybrid_truth, rigid_scans, rotvec_matrix
 
 
 def _accuracy(truth, found):
@@ -101,17 +102,33 @@ def test_segmentation_deterministic_under_seed():
 
 
 def test_islands_are_merged_into_a_neighbour():
-    verts, faces, labels = body()
-    n, _ = components(faces, len(verts))
+    scans, faces, labels, rest, _, _ = rigid_scans(5, seed=2)
+    n, _ = components(faces, len(rest))
     assert n == 1
     bad = labels.copy()
     island = np.flatnonzero(labels == 1)[:8]          # one ring of the head given to a leg part
     bad[island] = 6
-    err = np.ones((len(verts), 8))
-    err[:, 1] = 0.0                                    # the head part fits it best
-    fixed = make_parts_connected(bad, adjacency(faces, len(verts)), err)
+    fixed = make_parts_connected(Mesh(*centred(rest, scans)), bad, adjacency(faces, len(rest)))
     assert _is_connected(fixed, faces)
-    assert np.array_equal(fixed, labels)
+    assert np.array_equal(fixed, labels)              # back to the head, whose motion fits it exactly
+
+
+def test_large_island_becomes_a_part_of_its_own():
+    """A part made of two distant pieces with one motion (forearm.R moved like forearm.L and labelled
+    so) keeps k parts by taking the island as a part and merging two adjacent parts that move alike
+    (thigh.L moved with the torso) instead of gluing it to a neighbour it does not fit."""
+    scans, faces, labels, rest, Rm, tm = rigid_scans(6, seed=3)
+    for part, like in ((6, 0), (5, 3)):
+        scans[:, labels == part] = np.einsum("mij,vj->mvi", Rm[:, like], rest[labels == part]) + tm[:, like, None]
+    bad = labels.copy()
+    bad[labels == 5] = 3                               # the island
+    bad[labels == 7] = 5                               # labels 0..6, all used
+    fixed = make_parts_connected(Mesh(*centred(rest, scans)), bad, adjacency(faces, len(rest)))
+    assert _is_connected(fixed, faces)
+    assert len(np.unique(fixed)) == 7
+    forearm_r = np.unique(fixed[labels == 5])
+    assert len(forearm_r) == 1 and forearm_r[0] not in fixed[labels != 5]
+    assert len(np.unique(fixed[(labels == 0) | (labels == 6)])) == 1
 
 
 def test_number_of_parts_chosen_from_motion():
@@ -121,9 +138,57 @@ def test_number_of_parts_chosen_from_motion():
     assert errors[7] < 1e-6 < errors[6]
 
 
-def test_knee_of_curves():
-    assert knee([10, 5, 1, 0.9, 0.8, 0.7]) == 2
-    assert knee([1, 1, 1]) == 0
+def test_number_of_parts_from_curves():
+    assert parts_from_curve([10, 5, 1, 0.5, 0, 0], floor=1e-9) == 4                  # exact: E = 0
+    assert parts_from_curve([100, 50, 20, 10, 5, 2.9, 2, 1.5]) == 5                # E <= 3 % of E(1)
+    assert parts_from_curve([100, 60, 50, 49, 48.5, 48.4]) == 2                    # plateau (noise)
+    assert parts_from_curve([1, 1, 1]) == 0
+
+
+def test_soft_body_parts_and_curve():
+    """Hybrid-skinned tube (8 bones, smooth joints): the curve falls steeply to 8 parts; the rule may
+    add a part or two for the skin bending; segment() reproduces the curve at full resolution."""
+    model, _, scans = hybrid_truth(M=8, seed=0)
+    k, errors = choose_num_parts(scans[0], scans, model.faces, k_max=12)
+    assert 8 <= k <= 10
+    assert np.all(np.diff(errors) <= 1e-12)
+    assert errors[7] < 0.5 * errors[6]
+    labels, rms = segment(scans[0], scans, model.faces, 8)
+    assert _is_connected(labels, model.faces) and len(np.unique(labels)) == 8
+    assert abs(rms - errors[7]) < 0.2 * errors[7]
+
+
+def test_cell_subsample_weights_and_spread():
+    rest, _, _ = body()
+    idx, cell = grid_sample(rest, 200)
+    assert 190 <= len(idx) <= 210 and len(np.unique(idx)) == len(idx)
+    assert np.array_equal(cell[idx], np.arange(len(idx)))                # every sample is in its own cell
+    assert np.bincount(cell).sum() == len(rest) and np.bincount(cell).min() >= 1
+    idx, cell = grid_sample(rest, 10 * len(rest))
+    assert np.array_equal(idx, np.arange(len(rest)))
+
+
+def test_incremental_clustering_matches_fresh_fit():
+    """Relabelling updates sums, fits and errors exactly as a fit from scratch; the expanded errors and the
+    cost from sums equal the direct residuals."""
+    scans, faces, labels, rest, _, _ = rigid_scans(5, seed=6)
+    scans = scans + np.random.default_rng(0).normal(scale=0.01, size=scans.shape)
+    rest, scans = centred(rest, scans)
+    sample = Sample.of_mesh(rest, scans, 150)
+    rng = np.random.default_rng(1)
+    cl = Clustering(sample, rng.integers(8, size=len(sample)), 8)
+    new = cl.labels.copy()
+    new[:40] = rng.integers(8, size=40)
+    cl.relabel(new)
+    fresh = Clustering(sample, new, 8)
+    assert np.allclose(cl.R, fresh.R, atol=1e-9) and np.allclose(cl.err, fresh.err, atol=1e-9)
+    mesh = Clustering(Mesh(rest, scans), labels, 8)
+    R, t = fit_parts(rest, scans, labels, 8)
+    direct = np.sum((np.einsum("mvij,vj->mvi", R[:, labels], rest) + t[:, labels] - scans) ** 2, axis=(0, 2))
+    assert np.allclose(mesh.R, R, atol=1e-9)
+    assert np.allclose(mesh.err[np.arange(len(rest)), labels], direct, atol=1e-9)
+    S, n = Mesh(rest, scans).sums(np.arange(len(rest)), labels, 8)
+    assert np.allclose(sums_cost(S, n, len(scans)), np.bincount(labels, weights=direct), atol=1e-9)
 
 
 def test_too_many_parts_for_vertices():
