@@ -13,7 +13,9 @@
   tail at the part's far extent along it; X/Z completed by :func:`solver.model.frames_from_bones`.
 * Mirror pairs: the mesh's symmetry plane (best of principal/world axes, refined by iterated
   reflect-and-match of a fixed 1,000-point subsample against all points, then scored once on all points;
-  among several the one pairing most parts), parts matched by reflection; pairs are
+  every plane of the rest scan and up to 12 other scans votes for the pairs it matches by reflection;
+  pairs are kept by votes if structurally plausible (:func:`consistent_pairs`: similar sizes, same or
+  mirrored parents); pairs are
   named ``part_NN.L`` / ``part_NN.R``, .L on the side the plane normal points to, the normal's largest
   component made positive (+X for a character facing −Y: Blender's left).
 Units: metres.
@@ -202,6 +204,57 @@ def mirror_pairs(rest, labels, k, plane, min_match=0.6):
     return pairs
 
 
+def pair_votes(shapes, labels, k):
+    """Mirror-pair votes over shapes ``[(V,3), ...]`` (the rest scan and other scans): for every symmetry
+    plane of every shape, each mutual pair of :func:`mirror_pairs` gets one vote for its (left, right)
+    order.  Returns ``{(left, right): votes}`` (part indices).  A posed scan is symmetric only in parts
+    (the trunk, a limb pair held alike), so different scans reveal different pairs."""
+    votes = {}
+    for pts in shapes:
+        for plane in symmetry_planes(pts):
+            for pair in mirror_pairs(pts, labels, k, plane):
+                key = (int(pair[0]), int(pair[1]))
+                votes[key] = votes.get(key, 0) + 1
+    return votes
+
+
+def consistent_pairs(votes, parent_part, sizes, min_size_ratio=0.6):
+    """The mirror pairs to keep, ``[(left, right), ...]`` (part indices), from ``votes`` of
+    :func:`pair_votes`.  A pair is kept only if it is structurally a mirror pair: neither part is the
+    root, the two are of similar size (vertex counts within ``min_size_ratio``), and their parents are
+    the same part or themselves a kept pair (with the left child under the left parent).  Candidates
+    are taken by votes (both orders of a pair summed; the order with more votes names left/right) and
+    revisited until nothing changes, so children are accepted after their parents.  A plane through a
+    posed scan can pair a neck with an arm; these rules reject that."""
+    total, order = {}, {}
+    for (l, r), n in votes.items():
+        key = (min(l, r), max(l, r))
+        total[key] = total.get(key, 0) + n
+        if n > order.get(key, (None, 0))[1]:
+            order[key] = ((l, r), n)
+    ranked = sorted(total, key=lambda key: (-total[key], key))
+    partner, left_of = {}, {}
+    changed = True
+    while changed:
+        changed = False
+        for key in ranked:
+            l, r = order[key][0]
+            if l in partner or r in partner or min(parent_part[l], parent_part[r]) < 0:
+                continue
+            if min(sizes[l], sizes[r]) < min_size_ratio * max(sizes[l], sizes[r]):
+                continue
+            pl, pr = parent_part[l], parent_part[r]
+            if pl != pr:
+                if partner.get(pl) != pr:
+                    continue
+                if not left_of[pl]:
+                    l, r = r, l
+            partner[l], partner[r] = r, l
+            left_of[l], left_of[r] = True, False
+            changed = True
+    return sorted((p, q) for p, q in partner.items() if left_of[p])
+
+
 def _main_child(b, kids, heads, parents, paired, subtree_size):
     """The child of bone b that continues the chain (see module doc)."""
     if parents[b] >= 0:
@@ -242,17 +295,13 @@ def build_skeleton(rest, labels, faces, k, part_R=None, part_t=None, symmetry=Tr
         heads[b] = h
     pairs = []
     if symmetry and k > 1:
-        # the plane that pairs the most parts (a tube body is also front/back symmetric)
         shapes = [rest]
         if symmetry_scans is not None:
             step = max(1, int(np.ceil(len(symmetry_scans) / max_symmetry_scans)))
             shapes += list(np.asarray(symmetry_scans)[::step])
-        for pts in shapes:
-            for plane in symmetry_planes(pts):
-                found = mirror_pairs(pts, labels, k, plane)
-                if len(found) > len(pairs):
-                    pairs = found
-        pairs = [(int(bone_of_part[a]), int(bone_of_part[b])) for a, b in pairs]
+        votes = pair_votes(shapes, labels, k)
+        part_pairs = consistent_pairs(votes, parent_part, np.bincount(labels, minlength=k))
+        pairs = [(int(bone_of_part[a]), int(bone_of_part[b])) for a, b in part_pairs]
     tails = _tails(rest, labels, order, parents, heads, {x for pr in pairs for x in pr})
     names = _names(k, pairs)
     frames = frames_from_bones(heads, tails)

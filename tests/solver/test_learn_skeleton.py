@@ -125,3 +125,16 @@ def test_pose_conversion_reproduces_rigid_fit():
     V = len(d["rest"])
     model = Model(d["rest"], d["faces"], sk, bone_of_part[d["lab"]], np.zeros((V, 8)), np.zeros((V, 8)))
     assert np.abs(hybrid_skin(model, poses) - d["scans"]).max() < 1e-9
+
+
+def test_consistent_pairs_keeps_only_structural_mirror_pairs():
+    from articula.solver.skeleton_init import consistent_pairs
+    #        0 root; 1, 2 thighs (siblings); 3 under 1, 4 under 2 (shins); 5 neck under 0 (small); 6 arm
+    parent = np.array([-1, 0, 0, 1, 2, 0, 0])
+    sizes = np.array([900, 300, 310, 200, 190, 60, 280])
+    votes = {(5, 6): 3,            # neck vs arm: siblings but sizes 60 vs 280 -> rejected
+             (1, 2): 1,            # thighs
+             (4, 3): 2,            # shins, voted right-before-left: left follows the parents' pair
+             (0, 5): 1,            # root never pairs
+             (3, 6): 1}            # parents 1 and 0 are not a pair -> rejected
+    assert consistent_pairs(votes, parent, sizes) == [(1, 2), (3, 4)]
