@@ -17,7 +17,10 @@ joint orientations.
 Shapes: Jacobians are dense per-vertex blocks ``(N, V, 3, P)`` (resp. ``(N, V, 3, 3B)``); memory is
 N·V·3·P·8 bytes (13,380 vertices × 19 bones ≈ 20 MB per frame).  Each vertex has non-zero columns only
 for t, s, its anchor's chain and its anchor's children; :func:`to_sparse` turns one frame into a
-``scipy.sparse.csr_matrix`` of shape (3V, P) (rows x0, y0, z0, x1, …).
+``scipy.sparse.csr_matrix`` of shape (3V, P) (rows x0, y0, z0, x1, …).  Solvers use the factored form
+of one anchor group instead (:func:`group_jacobian`): ``J = R T`` with per-vertex columns
+``R (N, V_a, 3, r)`` (r = 6 plus the columns of the blended children) and a per-frame combination
+``T (N, r, P)``; :func:`factored_gram` gives its normal equations without forming J.
 
 Derivation (world axes; Rm_b = s·Rot_b is the chain of part b, p_b its posed joint):
 * chain bone b of the anchor: ∂x'/∂δ_b = −[x' − p_b]× Rot_b F_b;  ∂x'/∂h_b = Rm_parent(b) − Rm_b
@@ -339,6 +342,29 @@ def dense_jacobian(model, poses, cols, width, groups=None, heads=False, frame_ba
         posed[:, group[2]:group[3]], J[:, group[2]:group[3]] = xp, _per_frame_matmul(R, T)
     inv = groups.inverse
     return posed[:, inv], J[:, inv]
+
+
+def factored_gram(R, T):
+    """Gram matrices of ``[R T | ρ]`` for a group Jacobian in factored form (:func:`group_jacobian` with
+    ``extra=1``, the caller's residual ρ in the last column of R): ``T̃ᵀ (Rᵀ R) T̃`` with
+    ``T̃ = [[T, 0], [0, 1]]``.  R (N, V_a, 3, r+1), T (N, r, C); returns (N, C+1, C+1): the normal matrix
+    ``JᵀJ``, the gradient ``Jᵀρ`` (last column) and ``ρᵀρ`` (corner) of every frame."""
+    return expand_gram(gram(R), T)
+
+
+def gram(X):
+    """``Xᵀ X`` per frame of ``X (N, R, 3, C)`` as (N, C, C) (one BLAS product per frame)."""
+    X = X.reshape(len(X), -1, X.shape[-1])
+    return np.matmul(np.swapaxes(X, 1, 2), X)
+
+
+def expand_gram(G, T):
+    """``T̃ᵀ G T̃`` with ``T̃ = [[T, 0], [0, 1]]``: Gram matrices ``G (N, r+1, r+1)`` of ``[R | ρ]`` to those
+    of ``[R T | ρ]``; T (N, r, C)."""
+    N, r, C = T.shape
+    Te = np.zeros((N, r + 1, C + 1))
+    Te[:, :r, :C], Te[:, r, C] = T, 1.0
+    return np.swapaxes(Te, 1, 2) @ G @ Te
 
 
 def pose_jacobian(model, poses, groups=None):

@@ -34,7 +34,8 @@ import numpy as np
 from .errors import Cancelled  # noqa: F401  (raised by progress callbacks)
 from .model import Poses, Skeleton
 from .rotations import matrix_to_quat, quat_conj, quat_mul, quat_normalize, rotvec_to_matrix, rotvec_to_quat
-from .jacobians import _chain_of, dense_jacobian, group_jacobian, jacobian_terms, single_blas_thread
+from .jacobians import (_chain_of, dense_jacobian, expand_gram, gram, group_jacobian, jacobian_terms,
+                        single_blas_thread)
 from .skinning import AnchorGroups, hybrid_skin
 
 FD_STEP = 1e-6
@@ -224,21 +225,6 @@ class _Structure:
         return np.append(U, self.n), vertices, sources
 
 
-def _gram(X):
-    """``Xᵀ X`` per scan of ``X (N, R, 3, C)`` as (N, C, C) (one BLAS product per scan)."""
-    X = X.reshape(len(X), -1, X.shape[-1])
-    return np.matmul(np.swapaxes(X, 1, 2), X)
-
-
-def _expand(G, T):
-    """``T̃ᵀ G T̃`` with ``T̃ = [[T, 0], [0, 1]]``: Gram matrices ``G (N, r+1, r+1)`` of ``[R | residual]``
-    to those of ``[R T | residual]``; T (N, r, C)."""
-    N, r, C = T.shape
-    Te = np.zeros((N, r + 1, C + 1))
-    Te[:, :r, :C], Te[:, r, C] = T, 1.0
-    return np.swapaxes(Te, 1, 2) @ G @ Te
-
-
 def _chunk_system(st, model, poses, sl, own_only):
     """Gram matrices ``(N, n+1, n+1)`` of ``[J | r]`` over the data and √α-weighted Laplacian rows of the
     scans ``sl`` (``poses``), in the layout ``[shared | own | residual]``: the normal-equation blocks
@@ -257,12 +243,12 @@ def _chunk_system(st, model, poses, sl, own_only):
     H = np.zeros((N, st.n + 1, st.n + 1))
     for (R, T), group, index, (L_in, inner) in zip(RT, groups, st.index, st.interior):
         R[..., -1] = posed[:, group[2]:group[3]] - st.scans[sl, group[2]:group[3]]
-        G = _gram(R)
+        G = gram(R)
         for m in range(N if len(inner) else 0):
             P = (L_in @ R[m].reshape(len(R[m]), -1)).reshape(len(inner), 3, R.shape[-1])
             P[..., -1] = rl[m, inner]
-            G[m] += _gram(P[None])[0]
-        H[:, index[:, None], index] += _expand(G, T)
+            G[m] += gram(P[None])[0]
+        H[:, index[:, None], index] += expand_gram(G, T)
     for index, vertices, sources in st.boundary:
         Z = np.zeros((N, len(vertices), 3, len(index)))
         for b, L_b, pos in sources:
@@ -271,7 +257,7 @@ def _chunk_system(st, model, poses, sl, own_only):
                 LR = (L_b @ R[m].reshape(len(R[m]), -1)).reshape(3 * len(vertices), -1)[:, :-1]
                 Z[m][..., pos] += (LR @ T[m]).reshape(len(vertices), 3, -1)
         Z[..., -1] = rl[:, vertices]
-        H[:, index[:, None], index] += _gram(Z)
+        H[:, index[:, None], index] += gram(Z)
     return H
 
 
@@ -319,9 +305,10 @@ def optimise_joints_and_poses(model, poses, problem, iterations=10, mu=1e-3, ste
     """Levenberg–Marquardt on joints (centres + twist axes) and all per-scan poses.
 
     model: current :class:`Model` (its skin and rest mesh are held fixed); poses: current poses;
-    problem: :class:`JointPoseProblem`.  fix_joints: keep joint centres and axes (poses only).  Returns ``(model, poses, log)`` with log the objective after every
-    accepted step (never increasing).  ``progress(fraction, stage, objective)`` after each iteration.
-    Runs with numpy's BLAS on one thread (:func:`jacobians.single_blas_thread`)."""
+    problem: :class:`JointPoseProblem`.  fix_joints: keep joint centres and axes (poses only).
+    Returns ``(model, poses, log)`` with log the objective after every accepted step (never increasing).
+    ``progress(fraction, stage, objective)`` after each iteration.  Runs with numpy's BLAS on one thread
+    (:func:`jacobians.single_blas_thread`)."""
     with single_blas_thread():
         return _levenberg_marquardt(model, poses, problem, iterations, mu, step_tol, progress, fix_joints)
 

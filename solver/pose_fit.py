@@ -4,7 +4,8 @@ learned rig; the per-frame core of tracking).
 For every frame n it minimises ``E_n(p) = Σ_v w_v ‖hybrid_skin(model, p)_v − y_n,v‖²`` (m²) over the pose
 parameters of :func:`solver.jacobians.pose_layout` — root translation t, optionally the subject scale s,
 and a bone-local rotation increment δ_b for every bone (``q_b ← q_b · exp(δ_b)``) — by Levenberg–Marquardt
-with the analytic Jacobian :func:`solver.jacobians.pose_jacobian`:
+with the analytic Jacobian of :mod:`solver.jacobians` (in factored per-anchor-group form,
+:func:`solver.jacobians.group_jacobian`; BLAS on one thread):
 
     (JᵀWJ + μ (diag(JᵀWJ) + ε·mean diag)) δ = −JᵀW r,   accept if E decreases (μ ← μ/3), else μ ← 4μ.
 
@@ -27,14 +28,14 @@ Initialisation (``init``):
 * a :class:`Poses` with N frames: start from those poses (e.g. a tracker's prediction).
 
 This is the pose-only fit; the rig learner's ``joint_pose_gn`` optimises joints *and* poses together
-(with the Laplacian term and finite-difference Jacobians), which is a different problem.
+(with the Laplacian term), which is a different problem.
 """
 from dataclasses import dataclass
 
 import numpy as np
 
 from .errors import ArticulaInputError
-from .jacobians import apply_pose_increment, pose_jacobian
+from .jacobians import apply_pose_increment, factored_gram, group_jacobian, jacobian_terms, single_blas_thread
 from .model import Poses
 from .pose_init import poses_from_part_fits
 from .procrustes import fit_rigid_soft
@@ -42,7 +43,7 @@ from .rotations import quat_canonical, quat_normalize
 from .skinning import AnchorGroups, check_pose_shapes, hybrid_skin
 
 MIN_SUPPORT = 4.0              # rigid-vertex weight a part needs for its own Procrustes fit
-JACOBIAN_BYTES = 40e6          # memory budget of one block of frame Jacobians (several copies exist)
+BLOCK_BYTES = 40e6             # memory budget of one block of frames (~8 arrays (V, 3) per frame)
 MU0, MU_MIN, MU_MAX = 1e-3, 1e-12, 1e12
 DAMP_FLOOR = 1e-9              # ε: damping floor relative to the mean of diag(JᵀWJ)
 
@@ -117,11 +118,17 @@ def procrustes_init(model, targets):
 
 
 class _Problem:
-    """The weighted least-squares problem of one block of frames."""
+    """The weighted least-squares problem of one block of frames.  The normal equations are summed over
+    the anchor groups from the factored group Jacobians (:func:`solver.jacobians.group_jacobian`), with
+    the residual as an extra column, so the dense (n, V, 3, P) Jacobian is never formed."""
 
     def __init__(self, model, groups, targets, weights, free):
         self.model, self.groups, self.y, self.free = model, groups, targets, free
         self.sw = None if weights is None else np.sqrt(weights)[None, :, None]
+        self.y_sorted = targets[:, groups.order]
+        self.sw_sorted = None if weights is None else np.sqrt(weights)[groups.order, None, None]
+        B = model.skeleton.num_bones
+        self.cols = {"t": 0, "s": 3, **{("rot", b): 4 + 3 * b for b in range(B)}}
 
     def residual(self, posed, idx):
         r = posed - self.y[idx]
@@ -133,15 +140,20 @@ class _Problem:
 
     def system(self, poses, idx):
         """``H (n, P_free, P_free)``, ``g (n, P_free)``, ``E (n,)`` at ``poses`` (frames ``idx``)."""
-        posed, J = pose_jacobian(self.model, poses, self.groups)
-        r = self.residual(posed, idx)
-        if self.sw is not None:
-            J *= self.sw[..., None]
-        n, V, _, P = J.shape
-        Jf = J.reshape(n, 3 * V, P)
-        H = np.matmul(np.swapaxes(Jf, 1, 2), Jf)[:, self.free][:, :, self.free]    # no copy of J
-        g = np.einsum("nrp,nr->np", Jf, r.reshape(n, 3 * V))[:, self.free]
-        return H, g, np.einsum("nvi,nvi->n", r, r)
+        bt = jacobian_terms(self.model, poses)
+        n, P = len(poses), len(self.free)
+        H = np.zeros((n, P + 1, P + 1))
+        E = np.zeros(n)
+        for group in self.groups.groups:
+            start, stop = group[2], group[3]
+            xp, R, T = group_jacobian(bt, self.groups, group, self.cols, P, extra=1)
+            R[..., -1] = xp - self.y_sorted[idx, start:stop]
+            if self.sw_sorted is not None:
+                R *= self.sw_sorted[start:stop]
+            E += np.einsum("nvi,nvi->n", R[..., -1], R[..., -1])
+            H += factored_gram(R, T)
+        free = self.free
+        return H[:, :P, :P][:, free][:, :, free], H[:, :P, P][:, free], E
 
 
 def gauss_newton_system(model, poses, targets, vertex_weights=None, fit_scale=False):
@@ -151,7 +163,8 @@ def gauss_newton_system(model, poses, targets, vertex_weights=None, fit_scale=Fa
     y, w = _check_targets(model, targets, vertex_weights)
     check_pose_shapes(model, poses)
     prob = _Problem(model, AnchorGroups(model), y, w, _free_columns(model.skeleton.num_bones, fit_scale))
-    return prob.system(poses, np.arange(len(y)))
+    with single_blas_thread():
+        return prob.system(poses, np.arange(len(y)))
 
 
 def _free_columns(B, fit_scale):
@@ -203,8 +216,10 @@ def _lm_block(prob, poses, idx, max_iterations, tol):
     return poses, E, iters, converged
 
 
-def _block_size(V, P):
-    return max(1, int(JACOBIAN_BYTES // (V * 3 * P * 8)))
+def _block_size(V):
+    """Frames solved together: the posed block, residuals and the compact Jacobian of one anchor group
+    (:class:`_Problem`) take about 8 float64 arrays (V, 3) per frame."""
+    return max(1, int(BLOCK_BYTES // (8 * V * 3 * 8)))
 
 
 def fit_poses(model, targets, init="procrustes", fit_scale=False, vertex_weights=None,
@@ -218,7 +233,13 @@ def fit_poses(model, targets, init="procrustes", fit_scale=False, vertex_weights
     max_iterations: LM iterations per frame; tol: stop when the relative decrease of E or the step norm
     falls below it; groups: an :class:`AnchorGroups` of the model to reuse;
     progress: optional ``progress(fraction, text)`` (may raise ``Cancelled``).
-    Returns :class:`PoseFit`."""
+    Returns :class:`PoseFit`.  Runs with numpy's BLAS on one thread (:func:`jacobians.single_blas_thread`)."""
+    with single_blas_thread():
+        return _fit_poses(model, targets, init, fit_scale, vertex_weights, max_iterations, tol, groups, progress)
+
+
+def _fit_poses(model, targets, init, fit_scale, vertex_weights, max_iterations, tol, groups, progress):
+    """The body of :func:`fit_poses`."""
     y, w = _check_targets(model, targets, vertex_weights)
     N, V = y.shape[:2]
     B = model.skeleton.num_bones
@@ -242,7 +263,7 @@ def fit_poses(model, targets, init="procrustes", fit_scale=False, vertex_weights
     if init == "previous":
         blocks = [np.array([n]) for n in range(N)]
     else:
-        size = _block_size(V, 4 + 3 * B)
+        size = _block_size(V)
         blocks = [np.arange(s, min(N, s + size)) for s in range(0, N, size)]
     for k, idx in enumerate(blocks):
         block = _take(poses, idx)

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from articula.solver import pose_fit, skinning, synthetic
+from articula.solver import jacobians, pose_fit, skinning, synthetic
 from articula.solver.errors import ArticulaInputError
 from articula.solver.model import Poses
 from articula.solver.rotations import quat_conj, quat_mul, rotvec_to_quat
@@ -83,6 +83,30 @@ def test_gradient_matches_finite_differences_and_the_step_decreases_the_objectiv
     step = np.linalg.solve(H[0] + 1e-3 * np.diag(np.diag(H[0])), -g[0])
     assert energy(step) < 0.5 * E[0]
     assert energy(-step) > E[0]               # the sign matters: the test can fail
+
+
+def test_normal_equations_equal_the_dense_einsum_reference(model):
+    """gauss_newton_system (summed over anchor groups from factored Jacobians, residual as an extra
+    column) = JᵀWJ, JᵀWr and rᵀWr by einsum on the dense Jacobian."""
+    truth = synthetic.random_poses(3, 19, seed=15)
+    targets = skinning.hybrid_skin(model, truth)
+    start = perturb(truth, 20.0, seed=4)
+    w = np.random.default_rng(5).uniform(0.0, 2.0, model.num_vertices)
+    H, g, E = pose_fit.gauss_newton_system(model, start, targets, vertex_weights=w, fit_scale=True)
+    posed, J = jacobians.pose_jacobian(model, start)
+    r = posed - targets
+    H_ref = np.einsum("nvip,v,nviq->npq", J, w, J)
+    g_ref = np.einsum("nvip,v,nvi->np", J, w, r)
+    E_ref = np.einsum("nvi,v,nvi->n", r, w, r)
+    assert np.abs(H - H_ref).max() < 1e-11 * np.abs(H_ref).max()
+    assert np.abs(g - g_ref).max() < 1e-11 * np.abs(g_ref).max()
+    assert np.abs(E - E_ref).max() < 1e-11 * E_ref.max()
+    H2, g2, _ = pose_fit.gauss_newton_system(model, start, targets)           # unweighted, scale fixed
+    keep = np.ones(J.shape[-1], dtype=bool)
+    keep[3] = False
+    H2_ref = np.einsum("nvip,nviq->npq", J, J)[:, keep][:, :, keep]
+    assert np.abs(H2 - H2_ref).max() < 1e-11 * np.abs(H2_ref).max()
+    assert np.abs(g2 - np.einsum("nvip,nvi->np", J, r)[:, keep]).max() < 1e-11 * np.abs(g_ref).max()
 
 
 def test_noise_robustness():
