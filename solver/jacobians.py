@@ -33,12 +33,12 @@ import functools
 
 import numpy as np
 
-from .dualquat import dq_apply
 from .errors import ArticulaInputError
 from .model import Poses
 from .rotations import (quat_canonical, quat_conj, quat_mul, quat_normalize, quat_to_matrix, rotvec_to_quat,
                         swing_twist_y)
-from .skinning import blend_group, bone_terms, check_pose_shapes, twist_signs, _groups_for
+from .skinning import (_apply_affine_components, _apply_dq_components, _groups_for, blend_group, bone_terms,
+                       check_pose_shapes, twist_signs)
 
 _TWIST_EPS = 1e-12
 
@@ -157,17 +157,6 @@ def _chain_of(skeleton, a):
     return out
 
 
-def _group_state(terms, group):
-    """Blended twist dual quaternions ``bq (N, V_a, 8)`` and swing∘chain maps ``L (N, V_a, 3, 4)`` of
-    one anchor group for all frames."""
-    a, kids, start, stop, wt, ws = group
-    N = terms["Rm"].shape[0]
-    tw, sw = blend_group(terms, 0, N, a, kids, wt, ws)
-    bq = np.moveaxis(np.asarray(tw), 0, -1)                           # (N, V_a, 8)
-    L = np.moveaxis(np.asarray(sw), 0, -1).reshape(N, stop - start, 3, 4)
-    return bq, L
-
-
 def _skew_times(w, H):
     """``[w]× H`` for vectors w ``(..., 3)`` and matrices H ``(..., 3, 3)`` (broadcasting), without
     forming the cross-product matrix."""
@@ -183,14 +172,18 @@ def _per_frame_matmul(X, Y):
 
 
 def _group_posed(bt, groups, group):
-    """Twisted points v_t, the blended twist bq, the linear part L3 of the swing∘chain map and the
-    posed points of one anchor group: shapes (N, V_a, 3), (N, V_a, 8), (N, V_a, 3, 3), (N, V_a, 3)."""
-    _, _, start, stop, _, _ = group
-    x = groups.rest[:, start:stop].T
-    bq, L = _group_state(bt, group)
-    vt = dq_apply(bq, x)
-    L3 = L[..., :3]
-    return x, bq, vt, L3, np.einsum("nvij,nvj->nvi", L3, vt) + L[..., 3]
+    """Rest points ``x (V_a, 3)`` of one anchor group and, for all frames, the blended twist
+    ``bq (N, V_a, 8)``, the twisted points ``v_t (N, V_a, 3)``, the linear part ``L3 (N, V_a, 3, 3)`` of
+    the swing∘chain map (None for a group without children) and the posed points ``(N, V_a, 3)``, by the
+    component formulas of :func:`skinning.hybrid_skin`."""
+    a, kids, start, stop, wt, ws = group
+    N, Va = len(bt["Rm"]), stop - start
+    x = groups.rest[:, start:stop]
+    tw, sw = blend_group(bt, 0, N, a, kids, wt, ws)                  # (8, N, V_a), (12, N, V_a)
+    vt = _apply_dq_components(tw, x) if len(kids) else np.broadcast_to(x[:, None], (3, N, Va))
+    xp = _apply_affine_components(sw, vt)
+    L3 = np.moveaxis(sw, 0, -1).reshape(N, Va, 3, 4)[..., :3] if len(kids) else None
+    return x.T, np.moveaxis(tw, 0, -1), np.moveaxis(vt, 0, -1), L3, np.moveaxis(xp, 0, -1)
 
 
 def jacobian_terms(model, poses, heads=False, frame_basis=None):

@@ -218,10 +218,17 @@ class _Structure:
                 self.boundary.append(self._boundary(rows[edge], start + edge, bounds))
 
     def _boundary(self, rows, vertices, bounds):
-        """``(columns (U+1,), vertices, [(group, L rows × group vertices, positions in columns)])``."""
+        """``(columns (U+1,), vertices, sources)``: boundary rows ``rows`` (csr) of one group, the global
+        columns they touch (+ residual) and per touched group b ``(b, near, L_near, positions)``: its
+        vertices that the rows touch (indices in b), √α L rows × those vertices (csr) and the positions
+        of b's columns in U."""
         touched = np.unique(np.searchsorted(bounds, rows.indices, side="right") - 1)
         U = np.unique(np.concatenate([self.index[b][:-1] for b in touched]))
-        sources = [(b, rows[:, bounds[b]:bounds[b + 1]], np.searchsorted(U, self.index[b][:-1])) for b in touched]
+        sources = []
+        for b in touched:
+            L_b = rows[:, bounds[b]:bounds[b + 1]]
+            near = np.unique(L_b.indices)
+            sources.append((b, near, L_b[:, near].tocsr(), np.searchsorted(U, self.index[b][:-1])))
         return np.append(U, self.n), vertices, sources
 
 
@@ -250,15 +257,25 @@ def _chunk_system(st, model, poses, sl, own_only):
             G[m] += gram(P[None])[0]
         H[:, index[:, None], index] += expand_gram(G, T)
     for index, vertices, sources in st.boundary:
-        Z = np.zeros((N, len(vertices), 3, len(index)))
-        for b, L_b, pos in sources:
-            R, T = RT[b]
-            for m in range(N):
-                LR = (L_b @ R[m].reshape(len(R[m]), -1)).reshape(3 * len(vertices), -1)[:, :-1]
-                Z[m][..., pos] += (LR @ T[m]).reshape(len(vertices), 3, -1)
-        Z[..., -1] = rl[:, vertices]
-        H[:, index[:, None], index] += gram(Z)
+        H[:, index[:, None], index] += _boundary_gram(RT, sources, rl[:, vertices], len(index))
     return H
+
+
+def _boundary_gram(RT, sources, rl, width):
+    """Gram matrices ``(N, width, width)`` of one group's boundary Laplacian rows: ``Σ_b √α L_b R_b T_b``
+    in the union columns, the residual rl ``(N, n_B, 3)`` of the n_B rows (√α-weighted) last.  Built
+    columns-first, ``Z (width, N, 3 n_B)``, so that each touched group adds whole rows."""
+    N, nB = rl.shape[:2]
+    Z = np.zeros((width, N, 3 * nB))
+    for b, near, L_near, pos in sources:
+        R, T = RT[b]
+        r = T.shape[1]
+        X = R[:, near, :, :-1].transpose(1, 0, 2, 3).reshape(len(near), -1)     # (k, N 3 r)
+        LX = (L_near @ X).reshape(nB, N, 3 * r).transpose(1, 0, 2).reshape(N, 3 * nB, r)
+        Z[pos] += np.matmul(np.swapaxes(T, 1, 2), np.swapaxes(LX, 1, 2)).transpose(1, 0, 2)
+    Z[-1] = rl.reshape(N, -1)
+    Z = Z.transpose(1, 0, 2)
+    return np.matmul(Z, np.swapaxes(Z, 1, 2))
 
 
 SCAN_CHUNK = 8      # scans whose (compact) Jacobians are held in memory at once
