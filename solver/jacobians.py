@@ -30,6 +30,7 @@ Derivation (world axes; Rm_b = s·Rot_b is the chain of part b, p_b its posed jo
 """
 import contextlib
 import functools
+import threading
 
 import numpy as np
 
@@ -462,26 +463,37 @@ def _openblas_threads():
     return None
 
 
+_BLAS_STATE = {"lock": threading.Lock(), "depth": 0, "saved": 1}
+
+
 @contextlib.contextmanager
 def single_blas_thread():
-    """Run the block with numpy's OpenBLAS on one thread (the previous count is restored after).
+    """Run the block with numpy's OpenBLAS on one thread (the previous count is restored when the last
+    active block ends; nesting and several Python threads are fine).
 
     For the Gauss–Newton solvers, which make hundreds of mid-size BLAS calls between other numpy work:
     with several threads, every call waits for the worker threads and the workers spin between calls.
     Measured on the shared 2-core machine under load (numpy 2.x, OpenBLAS 0.3.34): ``X.T @ X`` for
     X (12,000 × 30) took 331 ms process CPU time with 2 threads and 1 ms with one.  Does nothing when
-    numpy's BLAS is not a bundled OpenBLAS.  Not for concurrent use from several Python threads."""
+    numpy's BLAS is not a bundled OpenBLAS."""
     threads = _openblas_threads()
     if threads is None:
         yield
         return
     get, put = threads
-    before = get()
-    put(1)
+    state = _BLAS_STATE
+    with state["lock"]:
+        if state["depth"] == 0:
+            state["saved"] = get()
+            put(1)
+        state["depth"] += 1
     try:
         yield
     finally:
-        put(before)
+        with state["lock"]:
+            state["depth"] -= 1
+            if state["depth"] == 0:
+                put(state["saved"])
 
 
 def to_sparse(J_frame):

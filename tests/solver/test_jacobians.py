@@ -225,3 +225,21 @@ def test_jacobians_carry_the_flipped_twist_hemisphere():
                 model.swing_weights), poses)
             fd.append((plus - minus) / (2 * H))
         assert rel_err(Jh[..., 3 * b:3 * b + 3], np.stack(fd, -1)) < 1e-6
+
+
+def test_single_blas_thread_restores_the_thread_count():
+    threads = jacobians._openblas_threads()
+    if threads is None:
+        pytest.skip("numpy's BLAS is not a bundled OpenBLAS")
+    get, _ = threads
+    before = get()
+    with jacobians.single_blas_thread():
+        assert get() == 1
+        with jacobians.single_blas_thread():
+            assert get() == 1
+        assert get() == 1
+    assert get() == before
+    with pytest.raises(ValueError):
+        with jacobians.single_blas_thread():
+            raise ValueError
+    assert get() == before
