@@ -5,7 +5,7 @@ With weights, joints and poses fixed every posed vertex is affine in its rest po
 ``Σ_m ‖A_m x + b_m − s_m‖² + α ‖(L⊗I)(A_m x + b_m − s_m)‖²``.  Its minimiser solves the normal equations
 ``Σ_m A_mᵀ (I + α (LᵀL)⊗I) A_m x = Σ_m A_mᵀ (I + α (LᵀL)⊗I)(s_m − b_m)``, a sparse SPD system of size
 3V assembled as ``Σ_m A_mᵀA_m + α PᵀP`` with ``P`` the vertically stacked ``(L⊗I) A_m`` and solved
-by sparse LU (scipy's SuperLU; no CHOLMOD).  Measured in bench/bench_learn.py.
+by sparse LU (scipy's SuperLU; no CHOLMOD).  Timed in bench/bench_learn_speed.py.
 """
 import numpy as np
 import scipy.sparse as sp
