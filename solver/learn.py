@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ArticulaInputError, Cancelled  # noqa: F401
+from .jacobians import single_blas_thread
 from .joint_pose_gn import SCAN_CHUNK, JointPoseProblem, optimise_joints_and_poses, sizes, symmetry_residuals
 from .laplacian import components, uniform_laplacian
 from .model import Model, Poses
@@ -187,6 +188,7 @@ def _sub_progress(progress, lo, hi, offset=0.0):
     return lambda f, stage, obj: progress(lo + (hi - lo) * f, stage, None if obj is None else obj + offset)
 
 
+@single_blas_thread()
 def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iterations=10, seed=0,
               initial_skeleton=None, progress=None, lam=1e10, gn_iterations=5, bcd_sweeps=5, tol=1e-4,
               k_max=20, joint_warmup_rounds=1, bcd_steps=(0.2, 0.1, 0.05, 0.02), rest_scan=None):
