@@ -82,11 +82,19 @@ def test_error_statistics_as_the_spec_defines_them():
     assert error_statistics([[2.0, 4.0], [6.0, 8.0]])["iqr"] == pytest.approx(7 - 3)
 
 
-@pytest.mark.parametrize("knn", [1, 3, 8])
-def test_distance_to_surface_equals_brute_force_on_mixed_triangle_sizes(knn):
-    """Tiny and huge triangles (several radius groups) and few nearest centroids per group (the
-    ball-query fallback): the pruned distance equals the brute-force minimum over all triangles."""
-    rng = np.random.default_rng(7)
+def _brute_force(points, verts, faces):
+    """Minimum over all triangles of the region-test closest-point distance ``(N,)``."""
+    P = np.repeat(points, len(faces), axis=0)
+    T = verts[np.tile(faces, (len(points), 1))]
+    d = np.linalg.norm(closest_points_on_triangles(P, T[:, 0], T[:, 1], T[:, 2]) - P, axis=1)
+    return d.reshape(len(points), -1).min(axis=1)
+
+
+@pytest.mark.parametrize("seed", [7, 8, 9])
+def test_distance_to_surface_equals_brute_force_on_mixed_triangle_sizes(seed):
+    """Tiny and huge triangles (several radius groups) and points at several distances (several bound
+    groups): the pruned distance equals the brute-force minimum over all triangles."""
+    rng = np.random.default_rng(seed)
     g = np.stack(np.meshgrid(np.linspace(0, 1, 9), np.linspace(0, 1, 9), indexing="ij"), -1).reshape(-1, 2)
     g = g ** 3                                              # cells from 0.002 to 0.3 wide
     verts = np.column_stack([g, 0.05 * rng.normal(size=len(g))])
@@ -94,8 +102,74 @@ def test_distance_to_surface_equals_brute_force_on_mixed_triangle_sizes(knn):
     a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
     faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
     points = rng.uniform(-0.2, 1.2, size=(400, 3)) * [1, 1, 0.3]
-    dist = distance_to_surface(points, verts, faces, knn=knn)
-    P = np.repeat(points, len(faces), axis=0)
-    T = verts[np.tile(faces, (len(points), 1))]
-    brute = np.linalg.norm(closest_points_on_triangles(P, T[:, 0], T[:, 1], T[:, 2]) - P, axis=1)
-    np.testing.assert_allclose(dist, brute.reshape(len(points), -1).min(axis=1), rtol=1e-12, atol=0)
+    dist = distance_to_surface(points, verts, faces)
+    np.testing.assert_allclose(dist, _brute_force(points, verts, faces), rtol=1e-12, atol=0)
+
+
+def _sliver_mesh(rng):
+    """A fan of long thin triangles (aspect up to 1e4), needles, one collinear (flat) triangle, a few
+    big and many tiny triangles, scattered in a 1 m box."""
+    tris = []
+    for _ in range(60):                                    # slivers: long edge 0.2-1, width 1e-4-1e-2
+        a = rng.uniform(0, 1, 3)
+        along = rng.normal(size=3)
+        along *= rng.uniform(0.2, 1.0) / np.linalg.norm(along)
+        side = np.cross(along, rng.normal(size=3))
+        side *= 10.0 ** rng.uniform(-4, -2) / np.linalg.norm(side)
+        tris.append([a, a + along, a + rng.uniform(0.2, 0.8) * along + side])
+    for _ in range(4):                                     # big
+        tris.append(rng.uniform(0, 1, (3, 3)))
+    for _ in range(200):                                   # tiny
+        tris.append(rng.uniform(0, 1, 3) + 1e-3 * rng.normal(size=(3, 3)))
+    a = rng.uniform(0, 1, 3)
+    tris.append([a, a + [0.1, 0.2, 0.0], a + [0.2, 0.4, 0.0]])        # flat: collinear
+    verts = np.asarray(tris, float).reshape(-1, 3)
+    return verts, np.arange(len(verts)).reshape(-1, 3)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_distance_to_surface_exact_on_long_thin_and_flat_triangles(seed):
+    """Slivers, needles, a flat triangle and mixed sizes, points near the surface and far away: equal to
+    the brute-force minimum (same closest-point definition) to rounding."""
+    rng = np.random.default_rng(seed)
+    verts, faces = _sliver_mesh(rng)
+    near = verts[rng.integers(0, len(verts), 300)] + 10.0 ** rng.uniform(-6, -1, (300, 1)) * rng.normal(size=(300, 3))
+    far = rng.uniform(-3, 4, size=(60, 3))
+    points = np.concatenate([near, far, verts[:5]])          # and points exactly on vertices
+    dist = distance_to_surface(points, verts, faces)
+    np.testing.assert_allclose(dist, _brute_force(points, verts, faces), rtol=1e-9, atol=1e-15)
+    assert np.all(dist[-5:] == 0.0)
+
+
+@pytest.mark.parametrize("setting", [("CHUNK_PAIRS", 50), ("FAR", 0.0)])
+def test_distance_to_surface_pruning_loses_nothing_in_the_other_paths(monkeypatch, setting):
+    """With a tiny pair budget every search runs in chunks of rows; with FAR = 0 every point group uses
+    per-point ball queries: same result as brute force."""
+    import articula.solver.surface_distance as sd
+    monkeypatch.setattr(sd, *setting)
+    rng = np.random.default_rng(4)
+    verts, faces = _sliver_mesh(rng)
+    points = rng.uniform(-1, 2, size=(150, 3))
+    np.testing.assert_allclose(sd.distance_to_surface(points, verts, faces), _brute_force(points, verts, faces),
+                               rtol=1e-9, atol=1e-15)
+
+
+def test_pair_kernel_matches_the_region_test():
+    """The frame-based pair distance equals |p − closest_points_on_triangles| (random and thin
+    triangles, points in all Voronoi regions) to rounding."""
+    from articula.solver.surface_distance import _pair_distances, _triangle_frames
+    rng = np.random.default_rng(5)
+    tri = rng.normal(size=(2000, 3, 3))
+    tri[:500, 2] = tri[:500, 0] + 0.5 * (tri[:500, 1] - tri[:500, 0]) + 1e-5 * rng.normal(size=(500, 3))
+    points = rng.normal(size=(2000, 3)) * 2
+    idx = np.arange(2000)
+    d = _pair_distances(points, tri, _triangle_frames(tri), idx, idx)
+    ref = np.linalg.norm(closest_points_on_triangles(points, tri[:, 0], tri[:, 1], tri[:, 2]) - points, axis=1)
+    np.testing.assert_allclose(d, ref, rtol=1e-10, atol=1e-14)
+
+
+def test_distance_to_surface_of_no_points_and_no_triangles():
+    verts = np.eye(3)
+    assert distance_to_surface(np.zeros((0, 3)), verts, [[0, 1, 2]]).shape == (0,)
+    with pytest.raises(ValueError):
+        distance_to_surface(np.zeros((2, 3)), verts, np.zeros((0, 3), int))
