@@ -2,6 +2,7 @@
 import copy
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 
 from articula.solver.laplacian import kron3, uniform_laplacian
@@ -25,20 +26,21 @@ def test_objective_zero_for_exact_model_and_matches_definition():
     assert np.isclose(obj.value(p), brute, rtol=1e-12)
 
 
-def test_normal_equations_equal_dense_least_squares():
+@pytest.mark.parametrize("alpha", [0.0, 7.0])
+def test_normal_equations_equal_dense_least_squares(alpha):
     model, poses, scans = hybrid_truth(3)
     V = 40                                                     # small dense check on a sub-problem
     A, b = affine_form(model, poses)
     L = uniform_laplacian(model.faces, model.num_vertices)[:V, :V]
     A, b, s = A[:, :V], b[:, :V], scans[:, :V] + 0.01
-    N, rhs = normal_equations(A, b, s, L, 7.0)
+    N, rhs = normal_equations(A, b, s, L, alpha)
     Lk = kron3(L).toarray()
     rows, tgt = [], []
     for m in range(len(A)):
         D = sp.block_diag(list(A[m])).toarray()
-        rows += [D, np.sqrt(7.0) * Lk @ D]
+        rows += [D, np.sqrt(alpha) * Lk @ D]
         e = (s[m] - b[m]).ravel()
-        tgt += [e, np.sqrt(7.0) * Lk @ e]
+        tgt += [e, np.sqrt(alpha) * Lk @ e]
     J, y = np.vstack(rows), np.concatenate(tgt)
     assert np.allclose(N.toarray(), J.T @ J, atol=1e-10)
     assert np.allclose(rhs, J.T @ y, atol=1e-10)
