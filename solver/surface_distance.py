@@ -153,19 +153,23 @@ def _groups(values, floor, ratio):
     return np.split(order, cuts)
 
 
-def _distances(points, tri, frames, pi, ti):
-    """:func:`_pair_distances`, or the distance to a corner of the triangle if smaller by rounding
-    (exactly 0 for a point on a vertex)."""
-    corner = np.take(tri, ti, axis=0) - np.take(points, pi, axis=0)[:, None]
-    corner = np.sqrt(np.einsum("nki,nki->nk", corner, corner).min(axis=1))
-    return np.minimum(_pair_distances(points, tri, frames, pi, ti), corner)
+def _distances(points, tri, frames, pi, ti, tol):
+    """:func:`_pair_distances`; below ``tol`` the distance to the nearest corner if smaller (rounding:
+    exactly 0 for a point on a vertex)."""
+    dist = _pair_distances(points, tri, frames, pi, ti)
+    near = np.flatnonzero(dist < tol)
+    if len(near):
+        corner = np.take(tri, ti[near], axis=0) - np.take(points, pi[near], axis=0)[:, None]
+        corner = np.sqrt(np.einsum("nki,nki->nk", corner, corner).min(axis=1))
+        dist[near] = np.minimum(dist[near], corner)
+    return dist
 
 
-def _nearest_centroid_bounds(points, tri, centre, frames):
+def _nearest_centroid_bounds(points, tri, centre, frames, tol):
     """Upper bounds ``u (N,)``: the exact distance to the triangle with the nearest centroid, and those
     triangles ``(N,)``."""
     _, nearest = _tree(centre).query(points)
-    return _distances(points, tri, frames, np.arange(len(points)), nearest), nearest
+    return _distances(points, tri, frames, np.arange(len(points)), nearest, tol), nearest
 
 
 def _pairs_within(points, rows, ptree, tree, radius):
@@ -251,12 +255,12 @@ def distance_to_surface(points, vertices, faces):
     off = tri - centre[:, None]
     radius = np.sqrt(np.einsum("fki,fki->fk", off, off).max(axis=1))
     frames = _triangle_frames(tri)
-    best, nearest = _nearest_centroid_bounds(points, tri, centre, frames)
     tol = SLACK * (np.abs(tri).max() + np.abs(points).max() + radius.max())
+    best, nearest = _nearest_centroid_bounds(points, tri, centre, frames, tol)
     pi, ti = _candidates(points, best + tol, centre, radius, frames[0][:, :, 0], tol)
     new = ti != np.take(nearest, pi)                                    # not evaluated yet
     pi, ti = pi[new], ti[new]
-    np.minimum.at(best, pi, _distances(points, tri, frames, pi, ti))
+    np.minimum.at(best, pi, _distances(points, tri, frames, pi, ti, tol))
     return best
 
 
