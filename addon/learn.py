@@ -230,9 +230,12 @@ def learn(inp: LearnInput, options: LearnOptions, progress=None) -> LearnOutcome
             progress(0.95 * float(fraction), f"{stage}{q}")
 
     result = mod.learn_rig(inp.scans, inp.faces, progress=report, **options.solver_kwargs())
-    if progress is not None:
-        progress(0.95, "measuring the error per vertex")
-    heat = vertex_error_mm(result.model, result.poses, inp.scans, inp.faces)
+    if result.scan_distances is not None:           # the solver's report measured them already
+        heat = 1000.0 * result.scan_distances.mean(axis=0)
+    else:
+        if progress is not None:
+            progress(0.95, "measuring the error per vertex")
+        heat = vertex_error_mm(result.model, result.poses, inp.scans, inp.faces)
     if progress is not None:
         progress(1.0, "done")
     return LearnOutcome(inp, result, heat, options)

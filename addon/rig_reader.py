@@ -69,8 +69,15 @@ def read_skeleton(arm) -> Skeleton:
         raise ArticulaInputError(f"rig {arm.name!r}: the control-bone hierarchy is broken")
     heads = np.array([b.head_local for b in bones], dtype=np.float64)
     tails = np.array([b.tail_local for b in bones], dtype=np.float64)
-    frames = np.array([np.array(b.matrix_local)[:3, :3] for b in bones], dtype=np.float64)
+    frames = _nearest_rotations(np.array([np.array(b.matrix_local)[:3, :3] for b in bones], dtype=np.float64))
     return Skeleton(names, np.array(parents, dtype=np.int32), heads, tails, frames)
+
+
+def _nearest_rotations(F):
+    """The rotations nearest to ``F (B,3,3)`` (polar factor by SVD): Blender keeps bone matrices in float32,
+    and for bones pointing close to −Y its roll computation leaves them orthonormal only to ~3e-6."""
+    U, _, Vt = np.linalg.svd(F)
+    return U @ Vt
 
 
 def read_model(arm) -> Model:

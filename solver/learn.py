@@ -26,7 +26,7 @@ import numpy as np
 
 from .errors import ArticulaInputError, Cancelled  # noqa: F401
 from .jacobians import single_blas_thread
-from .joint_pose_gn import SCAN_CHUNK, JointPoseProblem, optimise_joints_and_poses, sizes, symmetry_residuals
+from .joint_pose_gn import JointPoseProblem, optimise_joints_and_poses, sizes, symmetry_residuals
 from .laplacian import components, uniform_laplacian
 from .model import Model, Poses
 from .pose_init import poses_from_part_fits
@@ -37,28 +37,35 @@ from .rotations import quat_to_rotvec
 from .segmentation import choose_num_parts, segment
 from .skeleton_init import build_skeleton
 from .skinning import hybrid_skin
-from .surface_distance import distance_to_surface, error_statistics
+from .surface_distance import error_statistics, per_vertex_scan_distances
 from .weights_bcd import optimise_weights
 
-MAX_WORK_BYTES = 4e9            # refuse inputs whose Jacobian blocks would need more memory than this
+BYTES_PER_VERTEX_SCAN = 2600    # measured ~1,700 (see working_memory_bytes) x 1.5
+MAX_WORK_BYTES = 4e9            # refuse inputs whose estimated working memory exceeds this (bytes)
 MIN_JOINT_MOTION_DEG = 1.0      # a joint must rotate at least this much in some scan
 
 
 @dataclass
 class LearnResult:
+    """model, poses (one per scan, scan order), report (JSON-able dict, see :func:`learn_rig`) and
+    scan_distances ``(M, V)``: the distance (metres) of every scan vertex to the posed model surface of its
+    scan, the numbers the report's surface-error statistics summarise."""
     model: Model
     poses: Poses
     report: dict = field(default_factory=dict)
+    scan_distances: np.ndarray = None
 
 
 # ----------------------------------------------------------------------------- input checks
 
 def working_memory_bytes(num_scans, num_vertices, num_parts):
-    """Estimated peak memory (bytes): the joint/pose step holds the analytic Jacobians of SCAN_CHUNK scans
-    (pose, joint and frame Jacobians, their reordered copy and its Laplacian: ~4 copies of
-    ``8 · 3V · (5(B−1) + 3B + 3)`` per scan) plus ~12 arrays of all posed vertices ``8 · M · 3V``."""
+    """Estimated peak working memory (bytes) of :func:`learn_rig`, from measurement: MakeHuman, 13,380
+    vertices × 30 scans, 19 parts peaked at 1.01 GiB RSS of which 0.36 GiB were the interpreter and the
+    data, i.e. ~1.7 kB per vertex-scan (posed copies, Laplacian residuals, the BCD's candidate arrays;
+    the joint/pose step's compact Jacobians add only ~50 MB).  Taken with a safety factor of 1.5, plus
+    the Gram blocks of the joint/pose step ``8 · M · (n_s + n_o + 1)²``."""
     n_s, n_o = sizes(num_parts)
-    return 4 * 8 * SCAN_CHUNK * 3 * num_vertices * (n_s + n_o) + 12 * 8 * num_scans * 3 * num_vertices
+    return BYTES_PER_VERTEX_SCAN * num_scans * num_vertices + 8 * num_scans * (n_s + n_o + 1) ** 2
 
 
 def check_input(scans, faces, parts, k_max):
@@ -251,7 +258,8 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
     warm_start: rounds before the main alternation, one per value, with the Laplacian weight set to
     that fraction of ``alpha`` (a continuation: with the full shape term a vertex's weights can only move
     with its neighbours', so from binary weights the alternation crawls).  They are logged separately
-    (``report["warm_start_log"]``; ``report["initial_objective"]`` is E at ``alpha`` before them); the main log of E at ``alpha`` starts where they end and never
+    (``report["warm_start_log"]``; ``report["initial_objective"]`` is E at ``alpha`` before them) and
+    kept only if they lower E at ``alpha`` (else the run continues from the initialisation); the main log of E at ``alpha`` starts where they end and never
     increases.  None with ``max_iterations = 0`` (initialisation only).  Measured on skinning_gt's cylinder (4 parts, 8 scans; Dem Bones' RMSE 0.0174): 10 rounds
     at α = 100 end at E 25.9, RMSE 0.041; warm start (0.01, 0.1) + 8 rounds at E 11.7, RMSE 0.024, in
     less time.
@@ -276,20 +284,25 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
     def problem_for(a):
         return JointPoseProblem(RigObjective(scans, L, a), sym, lam if sym else 0.0)
 
-    E_initial = problem_for(alpha).value(model, poses)
+    problem = problem_for(alpha)
+    objective = problem.objective
+    E_initial = problem.value(model, poses)
+    if progress is not None:
+        progress(0.1, "initialised", E_initial)
+    start = (model, poses)
     warm_log = []
     for r, a in enumerate(warm):
         model, poses, steps = alternation_round(model, poses, problem_for(a), scans, settings,
                                                 r < joint_warmup_rounds, timings,
                                                 _quiet(progress, *span(r), f"warm start (alpha {a:g})"))
         warm_log += [(f"{name} (alpha {a:g})", e) for name, e in steps]
-
-    problem = problem_for(alpha)
-    objective = problem.objective
     E = problem.value(model, poses)
+    if E > E_initial:                       # the warm start is kept only if it lowers E at α
+        (model, poses), E = start, E_initial
+        warm_log.append(("warm start discarded", float(E)))
     log = [("initial", float(E))]
-    if progress is not None:
-        progress(span(len(warm))[0], "initialised", E)
+    if progress is not None and warm:
+        progress(span(len(warm))[0], "warm start done", E)
     converged = False
     it = -1
     for it in range(max_iterations):
@@ -307,7 +320,7 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
             break
 
     t0 = time.perf_counter()
-    report = make_report(model, poses, scans, objective, sym, problem.lam)
+    report, distances = make_report(model, poses, scans, objective, sym, problem.lam)
     timings["report"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_all
     report.update(info)
@@ -315,7 +328,7 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
                   timings_s=timings, alpha=alpha, symmetry_lambda=problem.lam)
     model.validate()
     poses.validate(model.skeleton.num_bones)
-    return LearnResult(model, poses, report)
+    return LearnResult(model, poses, report, distances)
 
 
 def _quiet(progress, lo, hi, stage):
@@ -326,9 +339,10 @@ def _quiet(progress, lo, hi, stage):
 
 
 def make_report(model, poses, scans, objective, sym, lam):
-    """Error statistics in mm: every scan vertex to the posed model surface (exact point-to-triangle)."""
+    """``(report, distances (M,V))``: error statistics in mm of every scan vertex to the posed model
+    surface (exact point-to-triangle), and those distances in metres."""
     posed = hybrid_skin(model, poses)
-    d = np.concatenate([distance_to_surface(scans[m], posed[m], model.faces) for m in range(len(scans))])
+    d = per_vertex_scan_distances(scans, posed, model.faces)
     stats = {k: (v if k == "count" else v * 1e3) for k, v in error_statistics(d).items()}
     report = dict(surface_error_mm=stats,
                   vertex_rms_mm=float(np.sqrt(np.mean(np.sum((posed - scans) ** 2, axis=2))) * 1e3),
@@ -336,4 +350,4 @@ def make_report(model, poses, scans, objective, sym, lam):
     if sym:
         r, _ = symmetry_residuals(model.skeleton, sym)
         report["symmetry_length_difference_mm"] = (np.abs(r) * 1e3).tolist()
-    return report
+    return report, d
