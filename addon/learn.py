@@ -76,7 +76,7 @@ class LearnOptions:
     parts: int = 0                  # 0: chosen from the motion
     alpha: float = 100.0
     symmetry: bool = True
-    max_iterations: int = 10        # outer rounds of the alternating optimisation; 0: initialisation only
+    max_iterations: int = 4         # outer rounds after the warm start (solver default); 0: initialisation only
     seed: int = 0
     initial_skeleton: Skeleton | None = None
 

@@ -103,8 +103,9 @@ def add_commands(sub):
     p.add_argument("--alpha", type=float, default=100.0,
                    help="weight of the local-shape (Laplacian) term, dimensionless (default 100)")
     p.add_argument("--no-symmetry", action="store_true", help="do not pair and symmetrise left/right parts")
-    p.add_argument("--iterations", type=int, default=10,
-                   help="outer rounds of the alternating optimisation (default 10; 0: initialisation only)")
+    p.add_argument("--iterations", type=int, default=4,
+                   help="outer rounds of the alternating optimisation after two warm-start rounds (default 4; "
+                        "0: initialisation only)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--out", required=True, help="model bundle to write (.npz)")
     p.add_argument("--report", help="write the error statistics, stage times and objective log as JSON")

@@ -43,8 +43,9 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
         name="Symmetry", default=True,
         description="Find the mirror plane, pair left/right parts (.L/.R names) and keep them symmetric")
     max_iterations: bpy.props.IntProperty(
-        name="Max Iterations", default=10, min=0, max=1000,
-        description="Outer rounds of the alternating optimisation (joints and poses, weights, rest mesh); "
+        name="Max Iterations", default=4, min=0, max=1000,
+        description="Outer rounds of the alternating optimisation (joints and poses, weights, rest mesh), after two "
+                    "warm-start rounds; "
                     "it stops earlier once the objective no longer decreases. 0: initialisation only")
     seed: bpy.props.IntProperty(name="Seed", default=0, min=0,
                                 description="Random seed of the segmentation (same seed, same result)")
