@@ -7,9 +7,9 @@ Pipeline (what ``articula.learn_rig``, the ``learn-rig`` batch command and the d
    cache) or :func:`input_from_files` (OBJ/PLY/STL/OFF files or a folder; no bpy), checked by
    :func:`check_scans` (at least 3 scans, finite coordinates, triangles);
 2. :func:`learn` (no bpy: runs in the worker thread) calls :func:`solver.learn.learn_rig`, turning its
-   ``progress(fraction, stage, objective)`` into the job's ``progress(fraction, text)``, then measures
-   the per-vertex error: the distance of every scan vertex to the posed model's surface, averaged over
-   the scans (:func:`vertex_error_mm`; the distances the solver's report summarises);
+   ``progress(fraction, stage, objective)`` into the job's ``progress(fraction, text)``; the per-vertex
+   error is the solver's distance of every scan vertex to the posed model's surface
+   (``LearnResult.scan_distances``), averaged over the scans (:func:`vertex_error_mm` recomputes it);
 3. :func:`build` (main thread, inside ``scene_guard``) builds the exact swing/twist rig with the rig
    builder from an in-memory bundle, bakes the poses on the scan-sequence object's frames (scan k on
    frame ``frame_start + k``, so scrubbing replays the scans with the learned rig), adds the heat map
@@ -230,12 +230,7 @@ def learn(inp: LearnInput, options: LearnOptions, progress=None) -> LearnOutcome
             progress(0.95 * float(fraction), f"{stage}{q}")
 
     result = mod.learn_rig(inp.scans, inp.faces, progress=report, **options.solver_kwargs())
-    if result.scan_distances is not None:           # the solver's report measured them already
-        heat = 1000.0 * result.scan_distances.mean(axis=0)
-    else:
-        if progress is not None:
-            progress(0.95, "measuring the error per vertex")
-        heat = vertex_error_mm(result.model, result.poses, inp.scans, inp.faces)
+    heat = 1000.0 * result.scan_distances.mean(axis=0)      # the distances the solver's report summarises
     if progress is not None:
         progress(1.0, "done")
     return LearnOutcome(inp, result, heat, options)
