@@ -7,10 +7,10 @@ from articula.solver.pose_init import poses_from_part_fits
 from articula.solver.procrustes import fit_parts
 from articula.solver.segmentation import segment
 from articula.solver.skeleton_init import (build_skeleton, mirror_pairs, part_adjacency, rotation_centre,
-                                           symmetry_planes)
+                                           symmetry_planes, unequal_pairs)
 from articula.solver.skinning import hybrid_skin
 
-from .learn_data import JOINTS, PARTS, TAILS, rigid_scans, rotvec_matrix
+from .learn_data import JOINTS, PARTS, TAILS, body, hybrid_truth, rigid_scans, rotvec_matrix
 
 
 def _learned(M=10, seed=0):
@@ -138,3 +138,47 @@ def test_consistent_pairs_keeps_only_structural_mirror_pairs():
              (0, 5): 1,            # root never pairs
              (3, 6): 1}            # parents 1 and 0 are not a pair -> rejected
     assert consistent_pairs(votes, parent, sizes) == [(1, 2), (3, 4)]
+
+
+def test_joint_local_fits_place_smoothly_skinned_joints():
+    """Blended skin near the joints biases whole-part rigid fits; the joint-local robust fits (scans given)
+    put every joint of the smoothly skinned tube body within 2 mm (whole parts: up to 7.5 mm)."""
+    for seed in range(2):
+        model, _, scans = hybrid_truth(M=12, seed=seed)
+        rest = model.rest_vertices
+        _, faces, labels = body()
+        R, t = fit_parts(rest, scans, labels, 8)
+        whole, order, _, _ = build_skeleton(rest, labels, faces, 8, R, t, symmetry=False)
+        local, order2, _, _ = build_skeleton(rest, labels, faces, 8, R, t, symmetry=False, scans=scans)
+        assert np.array_equal(order, order2)
+        e_whole = np.linalg.norm(whole.heads[1:] - JOINTS[order[1:]], axis=1)
+        e_local = np.linalg.norm(local.heads[1:] - JOINTS[order[1:]], axis=1)
+        assert e_local.max() < 2e-3 and e_whole.max() > 2.5e-3 and e_local.mean() < 0.5 * e_whole.mean()
+
+
+def test_joint_local_fits_match_whole_part_fits_on_rigid_parts():
+    """Rigid parts: every vertex fits its part exactly, so the weights change nothing."""
+    d = _learned()
+    sk, order, _, pairs = build_skeleton(d["rest"], d["lab"], d["faces"], 8, d["R"], d["t"], scans=d["scans"])
+    assert np.array_equal(order, d["order"]) and pairs == d["pairs"]
+    assert np.abs(sk.heads - d["sk"].heads).max() < 1e-9
+    assert np.abs(sk.heads[1:] - JOINTS[d["truth"][1:]]).max() < 1e-3
+
+
+def test_consistent_pairs_rejects_parts_cut_differently():
+    """Mirror parts whose vertex counts differ by more than MIRROR_SIZE_RATIO were cut at different places
+    (MakeHuman at 19 parts: a left shin part with the heel, 371 vertices, vs the right shin alone, 240)."""
+    from articula.solver.skeleton_init import consistent_pairs
+    parent = np.array([-1, 0, 0, 1, 2])
+    assert consistent_pairs({(1, 2): 2, (3, 4): 2}, parent, np.array([900, 342, 342, 371, 240])) == [(1, 2)]
+    assert consistent_pairs({(1, 2): 2, (3, 4): 2}, parent, np.array([900, 342, 342, 371, 340])) == [(1, 2), (3, 4)]
+
+
+def test_unequal_pairs_flags_mirror_bones_of_different_length():
+    #   0 root; 1 / 2 mirrored upper limbs continuing into 3 / 4
+    parents = np.array([-1, 0, 0, 1, 2])
+    heads = np.array([[0, 0, 1.0], [0.1, 0, 1], [-0.1, 0, 1], [0.1, 0, 0.6], [-0.1, 0, 0.62]])
+    tails = np.array([[0, 0, 1.5], heads[3], heads[4], [0.1, 0, 0.2], [-0.1, 0, 0.2]])
+    assert unequal_pairs(heads, tails, parents, [(1, 2), (3, 4)]) == []          # 0.40 vs 0.38 m: within 10 %
+    heads[4, 2] = tails[2, 2] = 0.7                                              # 0.40 vs 0.30 m
+    assert unequal_pairs(heads, tails, parents, [(1, 2), (3, 4)]) == [(1, 2)]    # end bones are not compared
