@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import ArticulaInputError
-from .surface_distance import distance_to_surface, error_statistics
+from .surface_distance import error_statistics, per_vertex_scan_distances
 
 
 def _points(name, x, ndim):
@@ -51,7 +51,7 @@ def scan_to_model_distances(scans, posed, faces):
         raise ArticulaInputError(f"faces: expected shape (F, 3) with F > 0, got {faces.shape}")
     if faces.min() < 0 or faces.max() >= posed.shape[1]:
         raise ArticulaInputError(f"faces: indices must lie in 0..{posed.shape[1] - 1}")
-    return np.stack([distance_to_surface(s, p, faces) for s, p in zip(scans, posed)])
+    return per_vertex_scan_distances(scans, posed, faces)
 
 
 def statistics_mm(values_m) -> dict:
