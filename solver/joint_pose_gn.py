@@ -278,17 +278,24 @@ def _boundary_gram(RT, sources, rl, width):
     return np.matmul(Z, np.swapaxes(Z, 1, 2))
 
 
-SCAN_CHUNK = 4      # scans whose (compact) Jacobians are held in memory at once (2: +35% CPU, 8: same as 4)
+CHUNK_VERTEX_SCANS = 54000   # vertex-scans whose compact Jacobians are held at once: 4 scans of 13,380 v
+                             # (2 scans: +35 % CPU, 8: the same); small meshes take many scans per chunk
 
 
-def gauss_newton_blocks(model, poses, objective, chunk=SCAN_CHUNK, own_only=False, structure=None):
+def scan_chunk(num_vertices):
+    """Scans per chunk of :func:`gauss_newton_blocks` for meshes of ``num_vertices`` vertices (≥ 1)."""
+    return max(1, CHUNK_VERTEX_SCANS // max(int(num_vertices), 1))
+
+
+def gauss_newton_blocks(model, poses, objective, chunk=None, own_only=False, structure=None):
     """Gauss–Newton blocks (those of :func:`normal_blocks`) at ``(model, poses)`` for ``objective``,
-    accumulated over chunks of scans from compact per-anchor-group Jacobians (:class:`_Structure`; pass
+    accumulated over chunks of scans (default :func:`scan_chunk`) from compact per-anchor-group Jacobians (:class:`_Structure`; pass
     ``structure`` to reuse one built for this model's anchors and weights), so that only ``chunk`` scans'
     blocks are in memory at once.  Returns ``H_ss, H_so (M,..), H_oo (M,..), g_s, g_o (M,..)``; with
     own_only (poses only) the shared blocks have size 0."""
     st = _Structure(model, objective, own_only) if structure is None else structure
     M = len(poses)
+    chunk = scan_chunk(model.num_vertices) if chunk is None else int(chunk)
     H = np.empty((M, st.n + 1, st.n + 1))
     with single_blas_thread():
         for m0 in range(0, M, chunk):

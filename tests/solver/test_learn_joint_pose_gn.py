@@ -134,7 +134,7 @@ def _einsum_blocks(Js, Jo, rd, rl, L, alpha):
 def test_compact_blocks_equal_the_einsum_reference():
     """gauss_newton_blocks (per-anchor-group Gram matrices of factored Jacobians, Laplacian rows split at
     the group borders, chunks of scans) = the einsum formulation on the dense Jacobian."""
-    from articula.solver.joint_pose_gn import gauss_newton_blocks
+    from articula.solver.joint_pose_gn import gauss_newton_blocks, scan_chunk
     model, poses, scans = hybrid_truth(3)
     L = uniform_laplacian(model.faces, model.num_vertices)
     obj = RigObjective(scans, L, 5.0)
@@ -147,6 +147,7 @@ def test_compact_blocks_equal_the_einsum_reference():
         for want, have in zip(ref, got):
             assert have.shape == want.shape
             assert np.abs(have - want).max() < 1e-11 * np.abs(want).max()
+    assert scan_chunk(13380) == 4 and scan_chunk(754) == 71 and scan_chunk(10 ** 6) == 1
     own = gauss_newton_blocks(start, p0, obj, own_only=True)
     assert np.abs(own[2] - ref[2]).max() < 1e-11 * np.abs(ref[2]).max()
     assert np.abs(own[4] - ref[4]).max() < 1e-11 * np.abs(ref[4]).max()
@@ -204,11 +205,12 @@ def test_symmetry_term_equalises_bone_lengths():
 
 def test_pose_only_blocks_equal_the_full_blocks():
     """The warm-up rounds (joints fixed) build only the per-scan blocks: the same as in the full system."""
-    from articula.solver.joint_pose_gn import gauss_newton_blocks
+    from articula.solver.joint_pose_gn import gauss_newton_blocks, scan_chunk
     model, poses, scans = hybrid_truth(3)
     obj = RigObjective(scans, uniform_laplacian(model.faces, model.num_vertices), 100.0)
     start, p0 = _perturbed(model, poses)
     full = gauss_newton_blocks(start, p0, obj)
+    assert scan_chunk(13380) == 4 and scan_chunk(754) == 71 and scan_chunk(10 ** 6) == 1
     own = gauss_newton_blocks(start, p0, obj, own_only=True)
     assert own[0].shape == (0, 0) and own[3].shape == (0,) and own[1].shape[1] == 0
     assert np.array_equal(own[2], full[2]) and np.array_equal(own[4], full[4])
