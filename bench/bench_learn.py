@@ -27,6 +27,9 @@ Sections (every number with its unit; the output is also written to ``bench/resu
    Articula) with its default parameters, on its own example ``Bone_Anim`` (400 frames x 754 vertices, rest
    ``Bone_Geom_rest.obj``, whose vertex order equals the frames') at 5, 10 and 20 bones and on the first
    MakeHuman training sequence at our part count, next to ``learn_rig`` with parts = 5 / 10 / 20 / ours.
+   On Bone_Anim ours runs twice per count: with the default α = 100 and with α = 1.  RMSE measures the data
+   term alone, which is all Dem Bones minimises; our objective adds α × the Laplacian (local shape) term,
+   so α = 1 is the setting that optimises what the RMSE measures (the shape term still regularises).
    Dem Bones runs with its OpenMP threads (all cores) and OMP_WAIT_POLICY=PASSIVE (spinning threads made it
    ~10x slower on the shared machine).
    RMSE exactly as Dem Bones defines it (``DemBones::rmse``): sqrt(Σ_frames Σ_vertices ‖x̂ − x‖² / (N·V)),
@@ -148,7 +151,9 @@ def _child_learn(src, dst):
     from articula.solver.learn import learn_rig
     data = np.load(src)
     parts, rounds = int(data["parts"]), int(data["rounds"])
-    options = {"max_iterations": rounds} if rounds > 0 else {}
+    options = json.loads(str(data["options"]))
+    if rounds > 0:
+        options["max_iterations"] = rounds
     base = peak_rss_kb()
     t0, c0 = time.perf_counter(), time.process_time()
     result = learn_rig(np.asarray(data["scans"]), np.asarray(data["faces"]), parts=parts if parts > 0 else None,
@@ -163,19 +168,21 @@ def _child_learn(src, dst):
                 {"wall_s": wall, "cpu_s": cpu, "rss_base_kb": base, "rss_peak_kb": peak, "report": report})
 
 
+BONE_ANIM_ALPHAS = (100.0, 1.0)   # learn_rig's default α, and a small α: RMSE measures the data term only
 LEARN_TIMEOUT = [None]        # seconds per learn_rig run (--learn-timeout)
 LEARN_ROUNDS = [0]            # learn_rig max_iterations (--learn-iterations; 0 = its default)
 
 
-def run_learner(scans, faces, parts, tmp):
-    """learn_rig in a child process.  Returns ``(model, poses, measurements)``; raises RuntimeError with the
-    child's last error line if it fails or does not finish within ``LEARN_TIMEOUT``."""
+def run_learner(scans, faces, parts, tmp, options=None):
+    """learn_rig in a child process (``options``: further keyword arguments of learn_rig, JSON-able).
+    Returns ``(model, poses, measurements)``; raises RuntimeError with the child's last error line if it
+    fails or does not finish within ``LEARN_TIMEOUT``."""
     from articula.solver.bundle import load_bundle
     src, dst = os.path.join(tmp, "learn_in.npz"), os.path.join(tmp, "learn_out.npz")
     if os.path.exists(dst):
         os.remove(dst)
     np.savez(src, scans=np.asarray(scans, dtype=np.float64), faces=np.asarray(faces, dtype=np.int32),
-             parts=int(parts or 0), rounds=int(LEARN_ROUNDS[0]))
+             parts=int(parts or 0), rounds=int(LEARN_ROUNDS[0]), options=json.dumps(options or {}))
     try:
         proc = subprocess.run([sys.executable, os.path.join(HERE, "bench_learn.py"), "--child-learn", src, dst],
                               capture_output=True, text=True, timeout=LEARN_TIMEOUT[0])
@@ -187,6 +194,20 @@ def run_learner(scans, faces, parts, tmp):
         raise RuntimeError(f"learn_rig failed in the child process: {last}")
     b = load_bundle(dst)
     return b.model, b.poses, b.provenance
+
+
+def learn_or_fail(status, label, prefix, scans, faces, parts, tmp, options=None):
+    """:func:`run_learner`, or print ``<prefix>: FAILED - <reason>`` (no numbers) and add ``label`` to the
+    failures.  status: ``(have_learner, why, failures)``.  Returns ``(model, poses, measurements)`` or None."""
+    have_learner, why, failures = status
+    try:
+        if not have_learner:
+            raise RuntimeError(f"solver.learn.learn_rig is not available ({why}); no numbers")
+        return run_learner(scans, faces, parts, tmp, options)
+    except RuntimeError as e:
+        line(f"{prefix}: FAILED - {e}")
+        failures.append(label)
+        return None
 
 
 # ------------------------------------------------------------------------------------------ Dem Bones
@@ -375,16 +396,11 @@ def section_makehuman(args, tmp, have_learner, why, failures, ours):
             line(f"   reference: generating rig's hybrid model, held-out poses by pose_fit ({what}): "
                  f"{stats_text(stats)}; {sec / TEST_POSES:.2f} s/frame, {fit.iterations.mean():.1f} LM iterations, "
                  f"{int(fit.converged.sum())}/{TEST_POSES} converged")
-        if not have_learner:
-            line(f"   ours: FAILED - solver.learn.learn_rig is not available ({why}); no numbers")
-            failures.append(f"makehuman {rig}/{shape}/{skin}")
+        got = learn_or_fail((have_learner, why, failures), f"makehuman {rig}/{shape}/{skin}", "   ours",
+                            train, faces, args.parts, tmp)
+        if got is None:
             continue
-        try:
-            model, poses, meas = run_learner(train, faces, args.parts, tmp)
-        except RuntimeError as e:
-            line(f"   ours: FAILED - {e}")
-            failures.append(f"makehuman {rig}/{shape}/{skin}")
-            continue
+        model, poses, meas = got
         k = model.skeleton.num_bones
         tr, tr_rmse = surface_stats(train, model, poses)
         ours.setdefault("makehuman", (k, tr_rmse, meas["wall_s"]))
@@ -429,16 +445,11 @@ def section_skinning_gt(args, tmp, have_learner, why, failures, db_py):
                      f"({float(out['rmse']) / diag:.2e} of diag), {float(out['seconds']):.2f} s")
             except RuntimeError as e:
                 line(f"   Dem Bones: FAILED - {e}")
-        if not have_learner:
-            line(f"   ours: FAILED - solver.learn.learn_rig is not available ({why}); no numbers")
-            failures.append(f"skinning_gt {name}")
+        got = learn_or_fail((have_learner, why, failures), f"skinning_gt {name}", "   ours", g["scans"], g["faces"],
+                            B, tmp)
+        if got is None:
             continue
-        try:
-            model, poses, meas = run_learner(g["scans"], g["faces"], B, tmp)
-        except RuntimeError as e:
-            line(f"   ours: FAILED - {e}")
-            failures.append(f"skinning_gt {name}")
-            continue
+        model, poses, meas = got
         stats, rmse = surface_stats(g["scans"], model, poses)
         je = joint_errors(posed_joints(model, poses), ref_joints)
         mean, worst = stats["mean"] / 1000, stats["max"] / 1000                  # back to file units
@@ -476,18 +487,15 @@ def section_dembones(args, tmp, have_learner, why, failures, db_py, first_mh, ou
                      f"peak RSS {float(out['rss_kb']) / 1024:.0f} MB")
             except RuntimeError as e:
                 line(f"   {bones:2d} bones  Dem Bones: FAILED - {e}")
-        if not have_learner:
-            line(f"   {bones:2d} parts  ours: FAILED - solver.learn.learn_rig is not available ({why}); no numbers")
-            failures.append(f"dem_bones {bones}")
-            continue
-        try:
-            model, poses, meas = run_learner(frames, tris, bones, tmp)
-            _, rmse = surface_stats(frames, model, poses)
-            line(f"   {bones:2d} parts  ours RMSE {rmse:.4f}, {model.skeleton.num_bones} parts, {meas['wall_s']:.1f} s wall, "
-                 f"peak RSS {meas['rss_peak_kb'] / 1024:.0f} MB")
-        except RuntimeError as e:
-            line(f"   {bones:2d} parts  ours: FAILED - {e}")
-            failures.append(f"dem_bones {bones}")
+        for alpha in BONE_ANIM_ALPHAS:
+            what = f"ours, alpha {alpha:g}" + (" (default)" if alpha == 100 else " (data-fit setting)")
+            got = learn_or_fail((have_learner, why, failures), f"dem_bones {bones} alpha {alpha:g}",
+                                f"   {bones:2d} parts  {what}", frames, tris, bones, tmp, {"alpha": alpha})
+            if got is not None:
+                model, poses, meas = got
+                _, rmse = surface_stats(frames, model, poses)
+                line(f"   {bones:2d} parts  {what}: RMSE {rmse:.4f}, {model.skeleton.num_bones} parts, "
+                     f"{meas['wall_s']:.1f} s wall, peak RSS {meas['rss_peak_kb'] / 1024:.0f} MB")
     if first_mh is None:                                     # section 1 not run (yet): its first sequence
         from articula.sample_scenes.registered import posed_sequence
         rig, shape, skin = makehuman_cases(args.quick)[0]

@@ -12,7 +12,8 @@ Parameters (all increments, applied by :func:`apply_increment`):
 
 Residuals: data ``p − s`` and ``√α (L p − L s)`` of every scan, and the left/right bone-length symmetry
 residuals ``√λ (‖h_suc(l) − h_l‖ − ‖h_suc(r) − h_r‖)`` (spec Eq. 3.23 with the recommended
-length-difference form).  The Jacobian has the arrow-head structure ``[S_m | O_m]`` per scan; the normal
+length-difference form), and the weak joint prior ``√κ (h_b − h⁰_b)`` (not in the spec: a proposal of
+ours, see :class:`JointPoseProblem`).  The Jacobian has the arrow-head structure ``[S_m | O_m]`` per scan; the normal
 equations are reduced to the shared block by the Schur complement
 ``(H_ss − Σ_m H_so,m H_oo,m⁻¹ H_os,m) δs = −g_s + Σ_m H_so,m H_oo,m⁻¹ g_o,m`` and back-substituted.
 Damping: Levenberg–Marquardt ``μ (diag H_data + ε)`` (the diagonal of the data part: the symmetry
@@ -308,20 +309,60 @@ def gauss_newton_blocks(model, poses, objective, chunk=None, own_only=False, str
 
 
 class JointPoseProblem:
-    """Objective ``Q + λ Q_sym`` as a function of (skeleton, poses) for a fixed model skin and rest mesh."""
+    """Objective ``Q + λ Q_sym + κ Q_prior`` as a function of (skeleton, poses) for a fixed model skin and
+    rest mesh.  ``Q_sym`` = Σ squared left/right bone-length differences (m², :func:`symmetry_residuals`);
+    ``κ Q_prior = Σ_b≥1 κ_b ‖h_b − h⁰_b‖²`` (m²) ties the joint centres weakly to ``prior_heads (B,3)`` (the
+    initial rotation-centre estimates): near-hinge joints are poorly determined along their axis, and the
+    data and Laplacian terms let them slide there.  kappa: κ_b, a scalar or ``(B−1,)`` per non-root joint,
+    dimensionless (one joint displacement costs as much as κ_b vertex-scan residuals of the same length);
+    :func:`relative_joint_prior` scales it to the data's curvature."""
 
-    def __init__(self, objective, sym_pairs=(), lam=1e10):
+    def __init__(self, objective, sym_pairs=(), lam=1e10, prior_heads=None, kappa=0.0):
         self.objective = objective
         self.sym_pairs = list(sym_pairs)
         self.lam = float(lam)
+        self.prior_heads = None if prior_heads is None else np.asarray(prior_heads, dtype=np.float64)
+        self.kappa = (np.zeros(0) if prior_heads is None else
+                      np.broadcast_to(np.asarray(kappa, dtype=np.float64), (len(self.prior_heads) - 1,)).copy())
+
+    def shared_value(self, skeleton):
+        """``λ Q_sym + κ Q_prior`` (m²): the terms that depend on the skeleton only."""
+        q = 0.0
+        if self.sym_pairs and self.lam > 0:
+            r, _ = symmetry_residuals(skeleton, self.sym_pairs)
+            q += self.lam * float(r @ r)
+        if np.any(self.kappa > 0):
+            d = skeleton.heads[1:] - self.prior_heads[1:]
+            q += float(self.kappa @ np.sum(d * d, axis=1))
+        return q
+
+    def add_shared_terms(self, skeleton, H_ss, g_s):
+        """Gauss–Newton ``(H_ss, g_s)`` of the shared block with the symmetry and prior terms added."""
+        H_ss, g_s = H_ss.copy(), g_s.copy()
+        if self.sym_pairs and self.lam > 0:
+            r, J = symmetry_residuals(skeleton, self.sym_pairs)
+            H_ss += self.lam * J.T @ J
+            g_s += self.lam * J.T @ r
+        if np.any(self.kappa > 0):
+            heads = (5 * np.arange(skeleton.num_bones - 1)[:, None] + np.arange(3)).ravel()
+            H_ss[heads, heads] += np.repeat(self.kappa, 3)
+            g_s[heads] += (self.kappa[:, None] * (skeleton.heads[1:] - self.prior_heads[1:])).ravel()
+        return H_ss, g_s
 
     def value(self, model, poses, groups=None):
-        """``Q + λ Q_sym`` (m²); groups: optional :class:`AnchorGroups` of the model."""
-        q = self.objective.value(hybrid_skin(model, poses, groups))
-        if self.sym_pairs and self.lam > 0:
-            r, _ = symmetry_residuals(model.skeleton, self.sym_pairs)
-            q += self.lam * float(r @ r)
-        return q
+        """``Q + λ Q_sym + κ Q_prior`` (m²); groups: optional :class:`AnchorGroups` of the model."""
+        return self.objective.value(hybrid_skin(model, poses, groups)) + self.shared_value(model.skeleton)
+
+
+def relative_joint_prior(model, poses, objective, rho):
+    """Per-joint prior weights ``κ_b = ρ · tr(H_hh,b) / 3`` ``(B−1,)``: ρ times the mean Gauss–Newton
+    curvature of Q in joint b's centre at ``(model, poses)``.  Directions the data determine (curvature
+    ~ tr/3) feel the prior as a ρ-fraction; a near-hinge joint's axis direction (curvature ≈ 0) is held
+    by it.  Scale-free: the same ρ suits any scan count, vertex count and unit."""
+    B = model.skeleton.num_bones
+    H_ss = gauss_newton_blocks(model, poses, objective)[0]
+    heads = 5 * np.arange(B - 1)[:, None] + np.arange(3)
+    return rho * np.diag(H_ss)[heads].sum(axis=1) / 3.0
 
 
 def optimise_joints_and_poses(model, poses, problem, iterations=10, mu=1e-3, step_tol=1e-9, progress=None,
@@ -348,10 +389,8 @@ def _levenberg_marquardt(model, poses, problem, iterations, mu, step_tol, progre
                                                          structure=st)
         # damping from the data part only: the huge symmetry weight must not freeze the joints it couples
         diag_s = np.diag(H_ss).copy()
-        if problem.sym_pairs and problem.lam > 0 and not fix_joints:
-            r, J = symmetry_residuals(model.skeleton, problem.sym_pairs)
-            H_ss = H_ss + problem.lam * J.T @ J
-            g_s = g_s + problem.lam * J.T @ r
+        if not fix_joints:
+            H_ss, g_s = problem.add_shared_terms(model.skeleton, H_ss, g_s)
         scale_s = diag_s.mean() if diag_s.size else 1.0
         scale_o = np.diagonal(H_oo, axis1=1, axis2=2).mean()
         accepted = False

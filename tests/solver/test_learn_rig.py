@@ -75,6 +75,21 @@ def test_learned_joints_stay_close_to_truth(learned):
     assert _joint_errors(truth, poses, res).max() < 0.05
 
 
+def test_stiff_joint_prior_keeps_the_initial_joints():
+    """joint_prior (ρ) enters E: with a huge ρ the joints stay at their initial estimates, E stays monotone."""
+    truth, poses, scans = hybrid_truth(4, seed=2)
+    kw = dict(parts=8, seed=0, rest_scan=0, symmetry=False)     # λ = 1e10 would outweigh any prior
+    start = learn_rig(scans, truth.faces, max_iterations=0, **kw).model.skeleton.heads
+    res = learn_rig(scans, truth.faces, max_iterations=2, bcd_sweeps=1, gn_iterations=2, joint_warmup_rounds=0,
+                    warm_start=(), joint_prior=1e9, **kw)
+    log = [e for _, e in res.report["objective_log"]]
+    assert all(b <= a * (1 + 1e-12) for a, b in zip(log, log[1:]))
+    assert np.abs(res.model.skeleton.heads - start).max() < 1e-6
+    free = learn_rig(scans, truth.faces, max_iterations=2, bcd_sweeps=1, gn_iterations=2, joint_warmup_rounds=0,
+                     warm_start=(), **kw)
+    assert np.abs(free.model.skeleton.heads - start).max() > 1e-4
+
+
 def test_deterministic_under_seed():
     model, poses, scans = hybrid_truth(4, seed=2)
     kw = dict(parts=8, max_iterations=1, bcd_sweeps=1, gn_iterations=1, bcd_steps=(0.2,), seed=3)
