@@ -252,10 +252,12 @@ def _chunk_system(st, model, poses, sl, own_only):
     for (R, T), group, index, (L_in, inner) in zip(RT, groups, st.index, st.interior):
         R[..., -1] = posed[:, group[2]:group[3]] - st.scans[sl, group[2]:group[3]]
         G = gram(R)
-        for m in range(N if len(inner) else 0):
-            P = (L_in @ R[m].reshape(len(R[m]), -1)).reshape(len(inner), 3, R.shape[-1])
-            P[..., -1] = rl[m, inner]
-            G[m] += gram(P[None])[0]
+        if len(inner):                                   # interior Laplacian rows of all N scans at once
+            Vg, c = R.shape[1], R.shape[-1]
+            P = (L_in @ R.transpose(1, 0, 2, 3).reshape(Vg, -1)).reshape(len(inner), N, 3, c)
+            P = P.transpose(1, 0, 2, 3)
+            P[..., -1] = rl[:, inner]
+            G += gram(P)
         H[:, index[:, None], index] += expand_gram(G, T)
     for index, vertices, sources in st.boundary:
         H[:, index[:, None], index] += _boundary_gram(RT, sources, rl[:, vertices], len(index))
