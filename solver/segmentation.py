@@ -73,6 +73,10 @@ POLISH_ROUNDS = 10          # at most this many full-resolution rounds of steps 
 CONNECT_ROUNDS = 3          # at most this many alternations of full-resolution refinement and step 5
 RESIDUAL_FRACTION = 0.03    # choose_num_parts: smallest k with E(k) <= this fraction of E(1) ...
 PLATEAU = 0.10              # ... or within this fraction of the curve's best error
+MIRROR_SCANS = 6            # mirror map: at most this many scans (rest first, then evenly spaced) searched
+MIRROR_SEEDS = 3            # ... and at most this many seed faces tried per scan
+MIRROR_MATCH = 0.5          # mirror parts: most (this fraction) of a part's mirrored vertices in the other
+MIRROR_GEOMETRIC_TOL = 0.25  # geometric fallback map: reflected vertex within this × median edge length
 
 
 # ----------------------------------------------------------------------------- moments and fits
@@ -435,9 +439,47 @@ def make_parts_connected(mesh, labels, A):
             n[j] += n_i[0]
 
 
-def finish(rest, scans, faces, R, t):
+def mirror_partners(labels, mirror, k, match=MIRROR_MATCH):
+    """Mirror image of every part under the vertex map ``mirror (V,)`` (-1: unknown): ``partner (k,)``
+    with partner[a] = b when most (``match``) of a's mapped vertices map into b and most of b's into a
+    (b = a: a part symmetric in itself, such as the trunk), else -1.  Also needs most of the part's
+    vertices mapped."""
+    ok = mirror >= 0
+    C = np.zeros((k, k))
+    np.add.at(C, (labels[ok], labels[mirror[ok]]), 1.0)
+    size = np.bincount(labels, minlength=k)
+    rows = C.sum(axis=1)
+    best = np.argmax(C, axis=1)
+    good = (rows >= match * size) & (C[np.arange(k), best] >= match * np.maximum(rows, 1))
+    partner = np.where(good, best, -1)
+    mutual = good & (partner[np.where(good, best, 0)] == np.arange(k))
+    return np.where(mutual, partner, -1)
+
+
+def mirrored_labels(cl, mirror, partner):
+    """Step 3 with mirror symmetry: a vertex v whose part and whose mirror vertex m(v)'s part both have
+    mirror partners (:func:`mirror_partners`) goes, with m(v), to the part c (and m(v) to partner[c])
+    minimising the summed squared error ``err[v, c] + err[m(v), partner[c]]`` of both sides under the
+    parts' own rigid motions; the cost is the same for the pair seen from either side, so v and m(v) get
+    mirrored labels.  The other vertices go to their best part as in :meth:`Clustering.best_labels`."""
+    new = np.argmin(cl.err, axis=1)
+    cols = np.flatnonzero(partner >= 0)
+    has = partner >= 0
+    v = np.flatnonzero((mirror >= 0) & has[cl.labels])
+    v = v[has[cl.labels[mirror[v]]]]
+    if len(v) and len(cols):
+        cost = cl.err[v][:, cols] + cl.err[mirror[v]][:, partner[cols]]
+        new[v] = cols[np.argmin(cost, axis=1)]
+    if np.bincount(new, minlength=cl.k).min() == 0:
+        new = _reseed_empty(new, cl.err[np.arange(len(new)), new], cl.k)
+    return new
+
+
+def finish(rest, scans, faces, R, t, mirror=None):
     """Steps 2-5 at full resolution from the sample's part transforms ``R (M,k,3,3)``, ``t (M,k,3)``
-    (centred ``rest``, ``scans``).  Returns ``(labels (V,), rms metres)``."""
+    (centred ``rest``, ``scans``).  With a vertex ``mirror (V,)`` map (:func:`mirror_map`), the parts
+    that are mirror images of each other are then re-cut alike (:func:`mirrored_labels` in place of
+    step 3, alternating with step 5 as before).  Returns ``(labels (V,), rms metres)``."""
     mesh, k = Mesh(rest, scans), t.shape[1]
     err = rigid_fit_errors(rest, scans, R, t)
     labels = np.argmin(err, axis=1)
@@ -447,6 +489,15 @@ def finish(rest, scans, faces, R, t):
         labels = make_parts_connected(mesh, cl.refine(POLISH_ROUNDS).labels, A)
         if not cl.relabel(labels):
             break
+    partner = mirror_partners(labels, mirror, k) if mirror is not None else np.full(k, -1)
+    if np.any((partner >= 0) & (partner != np.arange(k))):
+        for _ in range(CONNECT_ROUNDS):
+            for _ in range(POLISH_ROUNDS):
+                if not cl.relabel(mirrored_labels(cl, mirror, partner)):
+                    break
+            labels = make_parts_connected(mesh, cl.labels, A)
+            if not cl.relabel(labels):
+                break
     counts = np.bincount(labels, minlength=k)
     if counts.min() < MIN_PART_VERTICES:
         raise ArticulaInputError(
@@ -456,13 +507,21 @@ def finish(rest, scans, faces, R, t):
     return labels, float(np.sqrt(final.total() / (len(rest) * len(scans))))
 
 
-def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES):
+def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES, mirror=True):
     """Segment into exactly ``k`` connected rigid parts (each with at least MIN_PART_VERTICES vertices).
 
     rest (V,3), scans (M,V,3) metres, faces (F,3); seed: k-means++ draws of the splits; iterations: at
     most this many rounds of steps 2-3 per split; samples: size of the cell subsample.  Returns
     ``(labels (V,) int64 in [0,k), rms)`` where rms is the RMS distance (metres) of the scans from the
-    per-part rigid fits.  Raises :class:`ArticulaInputError` when a part ends up with too few vertices."""
+    per-part rigid fits.  Raises :class:`ArticulaInputError` when a part ends up with too few vertices.
+    mirror: True finds the mesh's vertex mirror map (:func:`mirror_map`) and cuts mirror-image parts
+    alike (:func:`finish`); False does not; or a map ``(V,)`` (-1: no mirror vertex) to use."""
+    if mirror is True:
+        mirror = mirror_map(rest, scans, faces) if k > 1 else None
+    elif mirror is False:
+        mirror = None
+    else:
+        mirror = np.asarray(mirror, dtype=np.int64)
     rest, scans = centred(rest, scans)
     V = len(rest)
     if k < 1 or k > V:
@@ -472,7 +531,7 @@ def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES):
         pass
     if kk < k:
         raise ArticulaInputError(f"parts: {k} parts requested for a mesh of {V} vertices; use fewer parts")
-    return finish(rest, scans, faces, cl.R, cl.t)
+    return finish(rest, scans, faces, cl.R, cl.t, mirror)
 
 
 def parts_from_curve(errors, floor=0.0):
@@ -499,3 +558,173 @@ def choose_num_parts(rest, scans, faces, k_max=20, seed=0, progress=None):
     errors = np.array(errors + errors[-1:] * (k_max - len(errors)))
     size = np.linalg.norm(np.ptp(rest, axis=0))
     return parts_from_curve(errors, 1e-6 * size) + 1, errors
+
+
+# ----------------------------------------------------------------------------- mirror symmetry
+
+
+def _paired_quads(f):
+    """Quads ``(Q,4)`` when every two consecutive triangles of ``f (F,3)`` share an edge (in opposite
+    directions): how a quad mesh is usually triangulated and written.  Otherwise None."""
+    if len(f) == 0 or len(f) % 2:
+        return None
+    a, b = f[0::2], f[1::2]
+    for r in range(3):                              # rotate the first triangle: (x0, x1, x2), x2 -> x0 shared
+        x = np.roll(a, -r, axis=1)
+        for s in range(3):
+            y = np.roll(b, -s, axis=1)               # (x0, x2, y) is the second triangle
+            hit = (y[:, 0] == x[:, 0]) & (y[:, 1] == x[:, 2])
+            if r == 0 and s == 0:
+                quads, found = np.zeros((len(a), 4), dtype=np.int64), np.zeros(len(a), dtype=bool)
+            new = hit & ~found
+            quads[new] = np.concatenate([x[new], y[new, 2:]], axis=1)
+            found |= new
+    return quads if found.all() else None
+
+
+def polygons_of(faces, points):
+    """Triangles merged back into the quads they were split from: consecutive triangle pairs when every
+    pair shares an edge (:func:`_paired_quads`; MakeHuman), else two triangles sharing an edge that is
+    the longest of both (the quad's diagonal; lengths averaged over ``points (M,V,3)``).  A triangulated
+    quad mesh splits mirror-image quads along either diagonal, so only its quads are mirror symmetric.
+    Returns a list of vertex tuples (3 or 4 vertices, orientation kept)."""
+    f = np.asarray(faces, dtype=np.int64)
+    quads = _paired_quads(f)
+    if quads is not None:
+        return [tuple(q) for q in quads.tolist()]
+    pts = np.asarray(points, dtype=np.float64)
+    pts = pts if pts.ndim == 3 else pts[None]
+    nxt = f[:, [1, 2, 0]]
+    length = np.mean(np.linalg.norm(pts[:, nxt] - pts[:, f], axis=3), axis=0)      # edge (f_i, f_i+1)
+    r = np.argmax(length, axis=1)                                                  # longest: f_r -> f_r+1
+    tri = np.take_along_axis(f, (r[:, None] + np.array([2, 0, 1])) % 3, axis=1)   # (x0, x1, x2), x2 -> x0 longest
+    V = int(f.max()) + 1 if len(f) else 0
+    owner = {}
+    for i, (x0, x1, x2) in enumerate(tri.tolist()):
+        owner.setdefault(x2 * V + x0, []).append(i)
+    done = np.zeros(len(f), dtype=bool)
+    polys = []
+    for i, (x0, x1, x2) in enumerate(tri.tolist()):
+        if done[i]:
+            continue
+        other = owner.get(x0 * V + x2, [])
+        j = other[0] if len(other) == 1 and len(owner[x2 * V + x0]) == 1 else -1
+        if j >= 0 and not done[j]:
+            polys.append((x0, x1, x2, int(tri[j, 1])))                             # j is (x2, y, x0)
+            done[j] = True
+        else:
+            polys.append((x0, x1, x2))
+        done[i] = True
+    return polys
+
+
+def _halfedges(polys, V):
+    """``{p·V + q: (the polygon's other vertices after q, in order)}`` for every directed edge (p, q) of
+    the polygons; directed edges used by more than one polygon (non-manifold or inconsistently oriented
+    meshes) are left out."""
+    H, bad = {}, set()
+    for poly in polys:
+        n = len(poly)
+        for i in range(n):
+            key = poly[i] * V + poly[(i + 1) % n]
+            if key in H:
+                bad.add(key)
+            H[key] = tuple(poly[(i + 2 + j) % n] for j in range(n - 2))
+    for key in bad:
+        del H[key]
+    return H
+
+
+def propagate_mirror(H, V, seed):
+    """Extend a mirror correspondence of one polygon over the mesh.  A reflection reverses orientation,
+    so polygon (p, q, x1..xj) maps to (m(p), m(xj), .., m(x1), m(q)): the vertices after directed edge
+    (m(q), m(p)) are m(xj), .., m(x1).  From ``seed`` = ((vertices), (their images)) every polygon
+    reachable over manifold edges is mapped, depth first (``H``: :func:`_halfedges`).  Returns the map
+    ``(V,)`` int64, or None when two polygons disagree on a vertex's image (or a polygon's image has
+    another vertex count), some vertex is not reached, or the map is not an involution (m(m(v)) = v):
+    the mesh topology is not mirror symmetric, or the seed was wrong."""
+    m = [-1] * V
+    for v, w in zip(*seed):
+        if m[v] not in (-1, w):
+            return None
+        m[v] = w
+    src = list(seed[0])
+    stack = [(p, q) for p in src for q in src if p != q]
+    seen = set()
+    while stack:
+        p, q = stack.pop()
+        key = p * V + q
+        if key in seen:
+            continue
+        seen.add(key)
+        xs = H.get(key)
+        ys = H.get(m[q] * V + m[p])
+        if xs is None or ys is None:
+            continue
+        if len(xs) != len(ys):
+            return None
+        for x, y in zip(xs, reversed(ys)):
+            if m[x] < 0:
+                m[x] = y
+            elif m[x] != y:
+                return None
+        ring = (p, q) + xs
+        n = len(ring)
+        stack += [(ring[(i + 1) % n], ring[i]) for i in range(n)] + [(ring[i], ring[(i + 1) % n]) for i in range(n)]
+    m = np.array(m, dtype=np.int64)
+    if m.min() < 0 or not np.array_equal(m[m], np.arange(V)):
+        return None
+    return m
+
+
+def mirror_map(rest, scans, faces, max_scans=MIRROR_SCANS, seeds=MIRROR_SEEDS):
+    """Vertex mirror map ``(V,)`` int64 (each vertex → its mirror image; -1: none known) or None.
+
+    A posed scan is symmetric only in parts (the trunk, the head), so its symmetry plane
+    (:func:`solver.skeleton_init.symmetry_planes`) gives reliable reflected matches only there.  Two
+    ways to the whole map:
+
+    * topological (meshes whose topology is mirror symmetric, as MakeHuman's): a face whose reflected
+      nearest-neighbour matches (m(v) = nearest vertex to v's reflection, mutual) form a reversed face
+      seeds :func:`propagate_mirror`, which maps the whole mesh from it or proves the seed wrong; seeds
+      are tried best match first, up to ``seeds`` per scan, in the rest scan and then up to
+      ``max_scans`` − 1 evenly spaced scans;
+    * geometric (no topological map): in the most symmetric of those scans, the mutual reflected matches
+      within MIRROR_GEOMETRIC_TOL of the median edge length (exact mirror geometry only; elsewhere -1).
+    Returns None when neither finds anything (no symmetry plane, or no vertex matched)."""
+    from .laplacian import edges_of
+    from .skeleton_init import _nn_tree, _reflect, symmetry_planes
+    rest = np.asarray(rest, dtype=np.float64)
+    scans = np.asarray(scans, dtype=np.float64)
+    V = len(rest)
+    faces = np.asarray(faces, dtype=np.int64)
+    step = max(1, int(np.ceil(len(scans) / max(1, max_scans - 1))))
+    shapes = [rest] + list(scans[::step][:max_scans - 1])
+    polys = polygons_of(faces, np.asarray(shapes))
+    H = _halfedges(polys, V)
+    e = edges_of(faces)
+    edge = float(np.median(np.linalg.norm(rest[e[:, 0]] - rest[e[:, 1]], axis=1))) if len(e) else 0.0
+    best = None
+    for pts in shapes:
+        planes = symmetry_planes(pts)
+        if not planes:
+            continue
+        n, d, score = planes[0]
+        dist, idx = _nn_tree(pts).query(_reflect(pts, n, d))
+        mutual = idx[idx] == np.arange(V)
+        if best is None or score < best[0]:
+            best = (score, np.where(mutual & (dist <= MIRROR_GEOMETRIC_TOL * edge), idx, -1))
+        cand = []
+        for poly in polys:
+            if all(mutual[v] for v in poly):
+                img = [int(idx[v]) for v in poly]
+                if H.get(img[1] * V + img[0]) == tuple(img[:1:-1]):
+                    cand.append((max(dist[v] for v in poly), poly, img))
+        cand.sort(key=lambda c: c[0])
+        for _, poly, img in cand[:seeds]:
+            m = propagate_mirror(H, V, (list(poly), img))
+            if m is not None:
+                return m
+    if best is None or best[1].max() < 0:
+        return None
+    return best[1]
