@@ -73,10 +73,14 @@ POLISH_ROUNDS = 10          # at most this many full-resolution rounds of steps 
 CONNECT_ROUNDS = 3          # at most this many alternations of full-resolution refinement and step 5
 RESIDUAL_FRACTION = 0.03    # choose_num_parts: smallest k with E(k) <= this fraction of E(1) ...
 PLATEAU = 0.10              # ... or within this fraction of the curve's best error
-MIRROR_SCANS = 6            # mirror map: at most this many scans (rest first, then evenly spaced) searched
-MIRROR_SEEDS = 3            # ... and at most this many seed faces tried per scan
+MIRROR_SCANS = 6            # mirror map: at most this many scans (rest first, then evenly spaced) used
 MIRROR_MATCH = 0.5          # mirror parts: most (this fraction) of a part's mirrored vertices in the other
+MIRROR_CONTAIN = 0.7        # compatible parts: this fraction of one part's mirrored vertices in the other
 MIRROR_GEOMETRIC_TOL = 0.25  # geometric fallback map: reflected vertex within this × median edge length
+MIRROR_SEED_POLYGONS = 8    # topological mirror map: seed quads (their mirror images found by lengths) ...
+MIRROR_SIGNATURE_TOL = 0.01  # ... whose image quads have lengths within this fraction
+MIRROR_TRIES = 200          # ... and at most this many propagations in all
+MIRROR_EDGE_TOL = 0.05      # topological map: median relative difference of mirrored edges' mean lengths
 
 
 # ----------------------------------------------------------------------------- moments and fits
@@ -456,20 +460,43 @@ def mirror_partners(labels, mirror, k, match=MIRROR_MATCH):
     return np.where(mutual, partner, -1)
 
 
-def mirrored_labels(cl, mirror, partner):
-    """Step 3 with mirror symmetry: a vertex v whose part and whose mirror vertex m(v)'s part both have
-    mirror partners (:func:`mirror_partners`) goes, with m(v), to the part c (and m(v) to partner[c])
-    minimising the summed squared error ``err[v, c] + err[m(v), partner[c]]`` of both sides under the
-    parts' own rigid motions; the cost is the same for the pair seen from either side, so v and m(v) get
-    mirrored labels.  The other vertices go to their best part as in :meth:`Clustering.best_labels`."""
+def mirror_compatible(labels, mirror, k, contain=MIRROR_CONTAIN, match=MIRROR_MATCH):
+    """Which parts may hold a vertex and its mirror image: ``(k,k)`` bool, symmetric.  Parts a and b are
+    compatible when they are mirror partners (:func:`mirror_partners`, a = b for a part symmetric in
+    itself) or when one of them lies mostly (``contain`` of its mapped vertices) in the other's mirror
+    image — a limb end split in two on one side only (hand and fingers) is then compatible with the one
+    part on the other side.  Parts with no compatible part, or with fewer than ``match`` of their vertices
+    mapped, are compatible with every part (no constraint)."""
+    ok = mirror >= 0
+    C = np.zeros((k, k))
+    np.add.at(C, (labels[ok], labels[mirror[ok]]), 1.0)
+    rows = C.sum(axis=1)
+    inside = C >= contain * np.maximum(rows, 1)[:, None]
+    P = inside | inside.T
+    partner = mirror_partners(labels, mirror, k, match)
+    a = np.flatnonzero(partner >= 0)
+    P[a, partner[a]] = P[partner[a], a] = True
+    free = ~P.any(axis=1) | (rows < match * np.bincount(labels, minlength=k))
+    P[free, :] = True
+    P[:, free] = True
+    return P
+
+
+def mirrored_labels(cl, mirror, compatible):
+    """Step 3 with mirror symmetry: every vertex v with a mirror vertex m(v) goes to the part c of the
+    compatible pair (c, d) (:func:`mirror_compatible`) that minimises the summed squared error
+    ``err[v, c] + err[m(v), d]`` of both sides under the parts' own rigid motions.  The pair minimises
+    the same sum seen from m(v), so m(v) goes to d: mirror-image parts are cut at mirrored places, where
+    the motion of both sides together puts the boundary.  Vertices without a mirror vertex go to their
+    best part as in :meth:`Clustering.best_labels`."""
     new = np.argmin(cl.err, axis=1)
-    cols = np.flatnonzero(partner >= 0)
-    has = partner >= 0
-    v = np.flatnonzero((mirror >= 0) & has[cl.labels])
-    v = v[has[cl.labels[mirror[v]]]]
-    if len(v) and len(cols):
-        cost = cl.err[v][:, cols] + cl.err[mirror[v]][:, partner[cols]]
-        new[v] = cols[np.argmin(cost, axis=1)]
+    v = np.flatnonzero(mirror >= 0)
+    if len(v):
+        own, other = cl.err[v], cl.err[mirror[v]]
+        cost = np.empty_like(own)
+        for c in range(cl.k):
+            cost[:, c] = own[:, c] + other[:, compatible[c]].min(axis=1)
+        new[v] = np.argmin(cost, axis=1)
     if np.bincount(new, minlength=cl.k).min() == 0:
         new = _reseed_empty(new, cl.err[np.arange(len(new)), new], cl.k)
     return new
@@ -489,11 +516,11 @@ def finish(rest, scans, faces, R, t, mirror=None):
         labels = make_parts_connected(mesh, cl.refine(POLISH_ROUNDS).labels, A)
         if not cl.relabel(labels):
             break
-    partner = mirror_partners(labels, mirror, k) if mirror is not None else np.full(k, -1)
-    if np.any((partner >= 0) & (partner != np.arange(k))):
+    compatible = mirror_compatible(labels, mirror, k) if mirror is not None else np.ones((k, k), dtype=bool)
+    if not compatible.all():
         for _ in range(CONNECT_ROUNDS):
             for _ in range(POLISH_ROUNDS):
-                if not cl.relabel(mirrored_labels(cl, mirror, partner)):
+                if not cl.relabel(mirrored_labels(cl, mirror, compatible)):
                     break
             labels = make_parts_connected(mesh, cl.labels, A)
             if not cl.relabel(labels):
@@ -677,7 +704,38 @@ def propagate_mirror(H, V, seed):
     return m
 
 
-def mirror_map(rest, scans, faces, max_scans=MIRROR_SCANS, seeds=MIRROR_SEEDS):
+def _length_seeds(polys, shapes, count=MIRROR_SEED_POLYGONS, tol=MIRROR_SIGNATURE_TOL):
+    """Pose-independent seed correspondences for :func:`propagate_mirror`: a mirror map keeps lengths, so a
+    quad's image is a quad with the same side and diagonal lengths in reversed order.  Lengths are
+    medians over ``shapes (S,V,3)`` (far from joints they do not change with the pose).  For ``count``
+    quads with the least length variation over the shapes (spread over the mesh), every quad and
+    orientation-reversing rotation whose 6 lengths agree within ``tol`` (relative, largest difference) is
+    a hypothesis.  Yields ``(quad, images of its vertices)``, best agreement first within each quad."""
+    quads = np.array([q for q in polys if len(q) == 4], dtype=np.int64)
+    if len(quads) < 2:
+        return
+    pairs = [(0, 1), (1, 2), (2, 3), (3, 0), (0, 2), (1, 3)]
+    L = np.stack([np.linalg.norm(shapes[:, quads[:, i]] - shapes[:, quads[:, j]], axis=2) for i, j in pairs], 2)
+    med = np.median(L, axis=0)                                             # (Q, 6)
+    spread = np.max((L.max(axis=0) - L.min(axis=0)) / np.maximum(med, 1e-300), axis=1)
+    order = np.argsort(spread, kind="stable")
+    picks = order[np.linspace(0, max(len(order) // 4 - 1, 0), count).astype(np.int64)]
+    # lengths of every quad re-listed as the image of quad p under rotation r: side i of p = side
+    # (r - i - 1) mod 4 of q, diagonal (0, 2) of p = diagonal r mod 2 of q, (1, 3) -> (r - 1) mod 2
+    images = []
+    for r in range(4):
+        idx = [(r - i - 1) % 4 for i in range(4)] + [4 + r % 2, 4 + (r - 1) % 2]
+        images.append(med[:, idx])
+    images = np.stack(images, 1)                                           # (Q, 4, 6)
+    for p in picks:
+        diff = np.max(np.abs(images - med[p]) / np.maximum(med[p], 1e-300), axis=2)     # (Q, 4)
+        qs, rs = np.nonzero(diff <= tol)
+        for j in np.argsort(diff[qs, rs], kind="stable"):
+            q, r = quads[qs[j]], rs[j]
+            yield quads[p].tolist(), [int(q[(r - i) % 4]) for i in range(4)]
+
+
+def mirror_map(rest, scans, faces, max_scans=MIRROR_SCANS):
     """Vertex mirror map ``(V,)`` int64 (each vertex → its mirror image; -1: none known) or None.
 
     A posed scan is symmetric only in parts (the trunk, the head), so its symmetry plane
@@ -689,6 +747,8 @@ def mirror_map(rest, scans, faces, max_scans=MIRROR_SCANS, seeds=MIRROR_SEEDS):
       seeds :func:`propagate_mirror`, which maps the whole mesh from it or proves the seed wrong; seeds
       are tried best match first, up to ``seeds`` per scan, in the rest scan and then up to
       ``max_scans`` − 1 evenly spaced scans;
+      (a found map must also keep the edges' mean lengths over the scans, within MIRROR_EDGE_TOL in the
+      median: regular meshes have other automorphisms, e.g. a grid flipped along the wrong axis);
     * geometric (no topological map): in the most symmetric of those scans, the mutual reflected matches
       within MIRROR_GEOMETRIC_TOL of the median edge length (exact mirror geometry only; elsewhere -1).
     Returns None when neither finds anything (no symmetry plane, or no vertex matched)."""
@@ -704,6 +764,24 @@ def mirror_map(rest, scans, faces, max_scans=MIRROR_SCANS, seeds=MIRROR_SEEDS):
     H = _halfedges(polys, V)
     e = edges_of(faces)
     edge = float(np.median(np.linalg.norm(rest[e[:, 0]] - rest[e[:, 1]], axis=1))) if len(e) else 0.0
+    shape_arr = np.asarray(shapes)
+    mean_length = np.mean(np.linalg.norm(shape_arr[:, e[:, 0]] - shape_arr[:, e[:, 1]], axis=2), axis=0)
+
+    def isometric(m):
+        """The map keeps the edges' lengths (mean over the shapes): not some other automorphism of a
+        regular mesh (a grid flipped along the wrong axis)."""
+        other = np.mean(np.linalg.norm(shape_arr[:, m[e[:, 0]]] - shape_arr[:, m[e[:, 1]]], axis=2), axis=0)
+        return np.median(np.abs(mean_length - other) / np.maximum(np.maximum(mean_length, other), 1e-300)) \
+            <= MIRROR_EDGE_TOL
+
+    tries = 0
+    for poly, img in _length_seeds(polys, shape_arr):
+        m = propagate_mirror(H, V, (poly, img))
+        if m is not None and isometric(m):
+            return m
+        tries += 1
+        if tries >= MIRROR_TRIES:
+            break
     best = None
     for pts in shapes:
         planes = symmetry_planes(pts)
@@ -714,17 +792,6 @@ def mirror_map(rest, scans, faces, max_scans=MIRROR_SCANS, seeds=MIRROR_SEEDS):
         mutual = idx[idx] == np.arange(V)
         if best is None or score < best[0]:
             best = (score, np.where(mutual & (dist <= MIRROR_GEOMETRIC_TOL * edge), idx, -1))
-        cand = []
-        for poly in polys:
-            if all(mutual[v] for v in poly):
-                img = [int(idx[v]) for v in poly]
-                if H.get(img[1] * V + img[0]) == tuple(img[:1:-1]):
-                    cand.append((max(dist[v] for v in poly), poly, img))
-        cand.sort(key=lambda c: c[0])
-        for _, poly, img in cand[:seeds]:
-            m = propagate_mirror(H, V, (list(poly), img))
-            if m is not None:
-                return m
     if best is None or best[1].max() < 0:
         return None
     return best[1]
