@@ -27,7 +27,9 @@
 * Frames: Y from the joint towards the main child's joint (the child continuing the incoming direction;
   for the root the largest unpaired child), or for end parts towards the part's mean vertex, with the
   tail at the part's far extent along it; X/Z completed by :func:`solver.model.frames_from_bones`.
-* Mirror pairs: the mesh's symmetry plane (best of principal/world axes, refined by iterated
+* Mirror pairs: from the mesh's vertex mirror map when it has one (:func:`map_pair_votes`,
+  :func:`solver.segmentation.mirror_map`: pose-independent, from the mesh topology), else from the mesh's
+  symmetry plane (best of principal/world axes, refined by iterated
   reflect-and-match of a fixed 1,000-point subsample against all points, then scored once on all points;
   every plane of the rest scan and up to 12 other scans votes for the pairs it matches by reflection;
   pairs are kept by votes if structurally plausible (:func:`consistent_pairs`: vertex counts within
