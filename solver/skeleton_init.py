@@ -27,9 +27,7 @@
 * Frames: Y from the joint towards the main child's joint (the child continuing the incoming direction;
   for the root the largest unpaired child), or for end parts towards the part's mean vertex, with the
   tail at the part's far extent along it; X/Z completed by :func:`solver.model.frames_from_bones`.
-* Mirror pairs: from the mesh's vertex mirror map when it has one (:func:`map_pair_votes`,
-  :func:`solver.segmentation.mirror_map`: pose-independent, from the mesh topology), else from the mesh's
-  symmetry plane (best of principal/world axes, refined by iterated
+* Mirror pairs: the mesh's symmetry plane (best of principal/world axes, refined by iterated
   reflect-and-match of a fixed 1,000-point subsample against all points, then scored once on all points;
   every plane of the rest scan and up to 12 other scans votes for the pairs it matches by reflection;
   pairs are kept by votes if structurally plausible (:func:`consistent_pairs`: vertex counts within
@@ -296,37 +294,6 @@ def pair_votes(shapes, labels, k):
     return votes
 
 
-MAP_VOTES = 100                 # votes of a pair found by the vertex mirror map (a plane gives 1 per shape)
-
-
-def map_pair_votes(rest, scans, labels, faces, k):
-    """Mirror-pair votes from the vertex mirror map (:func:`solver.segmentation.mirror_map`): every mutual
-    pair of :func:`solver.segmentation.mirror_partners` gets MAP_VOTES for its (left, right) order, left
-    on the positive side of the mirror plane fitted to the vertex pairs (normal along the summed
-    vertex-to-mirror differences, its largest component made positive, as for :func:`symmetry_planes`).
-    The map comes from the mesh topology and holds in every pose, where a posed scan's symmetry plane
-    often pairs nothing (a bent spine: MakeHuman game_engine range-of-motion scans gave no pair at all).
-    Returns None when the map is missing or covers less than half of the vertices (then planes vote)."""
-    from .segmentation import mirror_map, mirror_partners
-    shapes = rest[None] if scans is None else np.asarray(scans, dtype=np.float64)
-    m = mirror_map(rest, shapes, faces)
-    if m is None or np.mean(m >= 0) < 0.5:
-        return None
-    ok = np.flatnonzero(m >= 0)
-    diff = rest[ok] - rest[m[ok]]
-    n = np.linalg.svd(diff, full_matrices=False)[2][0]
-    if n[int(np.argmax(np.abs(n)))] < 0:
-        n = -n
-    partner = mirror_partners(labels, m, k)
-    votes = {}
-    for a in range(k):
-        b = int(partner[a])
-        if b > a:
-            side = (rest[labels == a] @ n).mean() - (rest[labels == b] @ n).mean()
-            votes[(a, b) if side > 0 else (b, a)] = MAP_VOTES
-    return votes
-
-
 def consistent_pairs(votes, parent_part, sizes, min_size_ratio=MIRROR_SIZE_RATIO):
     """The mirror pairs to keep, ``[(left, right), ...]`` (part indices), from ``votes`` of
     :func:`pair_votes`.  A pair is kept only if it is structurally a mirror pair: neither part is the
@@ -435,9 +402,7 @@ def build_skeleton(rest, labels, faces, k, part_R=None, part_t=None, symmetry=Tr
         if symmetry_scans is not None:
             step = max(1, int(np.ceil(len(symmetry_scans) / max_symmetry_scans)))
             shapes += list(np.asarray(symmetry_scans)[::step])
-        votes = map_pair_votes(rest, symmetry_scans, labels, faces, k)
-        if votes is None:
-            votes = pair_votes(shapes, labels, k)
+        votes = pair_votes(shapes, labels, k)
         while True:
             part_pairs = consistent_pairs(votes, parent_part, sizes)
             pairs = [(int(bone_of_part[a]), int(bone_of_part[b])) for a, b in part_pairs]
