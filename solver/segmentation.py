@@ -25,10 +25,14 @@ from the spec's description):
    pieces of its mirror image when one side is split in more parts (:func:`mirror_compatible`) — that
    minimises ``err[v, c] + err[m(v), d]``, the fit cost of both sides under their own rigid motions.
    Each boundary then lies where the motion of both sides together puts it, instead of wherever each
-   side's noise and skin blending put it: MakeHuman cmu_mb (19 parts) cut the left foot inside the Foot
-   bone and the right one at the ankle, which left the learned knee and ankle joints 40-90 mm off.
-   The fit error rises a little (segmentation RMS 7.11 → 7.29 mm on MakeHuman cmu_mb female,heavy, lbs).
-   The map (0.3 s on 13,380 vertices) comes from the mesh topology: MakeHuman's quad mesh is mirror
+   side's noise and skin blending put it (MakeHuman cmu_mb at 16-19 parts cut the left foot inside the
+   Foot bone and the right one at the ankle).  learn_rig, MakeHuman, 19 parts, the 8 cases of
+   ``bench/bench_learn.py --order makehuman`` (means over the cases, mm): joint-centre error mean 15.0 →
+   14.1, median 9.9 → 9.7, max 57.5 → 52.7 (cmu_mb female,heavy hybrid: max 51.7 → 25.8; male,thin lbs
+   34.9 → 26.7; game_engine cases within ±1 mm); training / held-out surface error 1.942 / 2.039 →
+   1.925 / 2.023.  The segmentation's own fit error rises a little (RMS 7.11 → 7.29 mm, cmu_mb
+   female,heavy lbs); segment(k=19) costs 0.5-0.8 s more CPU (0.4 s of it the map).
+   The map comes from the mesh topology: MakeHuman's quad mesh is mirror
    symmetric (its triangulation is not: mirror-image quads are split along either diagonal), and a map
    propagated from one quad over the whole mesh either is consistent or proves the seed wrong; seeds are
    quads paired by their side and diagonal lengths, which do not depend on the pose.  Posed scans are
@@ -74,8 +78,6 @@ deformation that no number of rigid parts removes).  Curves (E in mm, k = 1, 2, 
 
 Units: positions in metres, errors in metres (squared errors in m²).
 """
-import hashlib
-
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
@@ -770,30 +772,14 @@ def mirror_map(rest, scans, faces, max_scans=MIRROR_SCANS):
       (:func:`solver.skeleton_init.symmetry_planes`), the mutual reflected nearest-vertex matches within
       MIRROR_GEOMETRIC_TOL of the median edge length (exactly symmetric geometry only; elsewhere -1).
     Returns None when neither finds anything (no symmetry plane, or no vertex matched)."""
+    from .laplacian import edges_of
+    from .skeleton_init import _nn_tree, _reflect, symmetry_planes
     rest = np.asarray(rest, dtype=np.float64)
     scans = np.asarray(scans, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
+    V = len(rest)
     step = max(1, int(np.ceil(len(scans) / max(1, max_scans - 1))))
     shapes = [rest] + list(scans[::step][:max_scans - 1])
-    key = hashlib.blake2b(digest_size=16)
-    for a in [faces] + shapes:
-        key.update(np.ascontiguousarray(a).tobytes())
-    key = key.hexdigest()
-    if key not in _MIRROR_CACHE:                  # learning asks twice (segment, then build_skeleton)
-        _MIRROR_CACHE.clear()
-        _MIRROR_CACHE[key] = _mirror_map(rest, shapes, faces)
-    m = _MIRROR_CACHE[key]
-    return None if m is None else m.copy()
-
-
-_MIRROR_CACHE = {}
-
-
-def _mirror_map(rest, shapes, faces):
-    """:func:`mirror_map` of ``rest (V,3)`` with the ``shapes`` (rest first) and ``faces (F,3)`` int64."""
-    from .laplacian import edges_of
-    from .skeleton_init import _nn_tree, _reflect, symmetry_planes
-    V = len(rest)
     polys = polygons_of(faces, np.asarray(shapes))
     H = _halfedges(polys, V)
     e = edges_of(faces)
