@@ -173,7 +173,7 @@ def initialise(scans, faces, parts, seed, symmetry, initial_skeleton, k_max, pro
         else:
             k = int(parts)
             info["k_curve_mm"] = None
-        labels, rms = segment(rest, scans, faces, k, seed=seed)
+        labels, rms = segment(rest, scans, faces, k, seed=seed, mirror=symmetry)
         info.update(parts=k, segmentation_rms_mm=rms * 1e3)
         R, t = fit_parts(rest, scans, labels, k)
         skeleton, order, bone_of_part, pairs = build_skeleton(rest, labels, faces, k, R, t, symmetry=symmetry,
@@ -246,8 +246,9 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
 
     scans ``(M,V,3)`` metres (M ≥ 3, one topology), faces ``(F,3)`` int.  parts: number of parts k (= bones;
     None = chosen from the motion, up to k_max).  alpha: shape-conformance weight of the Laplacian term
-    (dimensionless, see :mod:`solver.rig_objective`).  symmetry: detect mirror pairs and equalise their
-    bone lengths with weight lam (m⁻²).  max_iterations: outer rounds of (a)-(c) (stopping earlier when a
+    (dimensionless, see :mod:`solver.rig_objective`).  symmetry: cut mirror-image parts alike
+    (:func:`solver.segmentation.segment`), detect mirror pairs and equalise their bone lengths with
+    weight lam (m⁻²).  max_iterations: outer rounds of (a)-(c) (stopping earlier when a
     round lowers E by less than ``tol`` relative).  seed: rest-scan choice
     and segmentation seeding.  rest_scan: index of the scan used as initial rest mesh (default: chosen by
     the seed).  initial_skeleton: a :class:`Skeleton` in the coordinates of the rest scan to start from
