@@ -248,7 +248,7 @@ def _chunk_system(st, model, poses, sl, own_only):
         posed[:, group[2]:group[3]] = xp
         RT.append((R, T))
     rl = (st.L @ posed.transpose(1, 0, 2).reshape(V, -1)).reshape(V, N, 3).transpose(1, 0, 2) - st.scan_lap[sl]
-    H = np.zeros((N, st.n + 1, st.n + 1))
+    H = np.zeros((st.n + 1, st.n + 1, N))        # scans last: each scatter moves whole N-vectors (4-5x faster)
     for (R, T), group, index, (L_in, inner) in zip(RT, groups, st.index, st.interior):
         R[..., -1] = posed[:, group[2]:group[3]] - st.scans[sl, group[2]:group[3]]
         G = gram(R)
@@ -258,10 +258,10 @@ def _chunk_system(st, model, poses, sl, own_only):
             P = P.transpose(1, 0, 2, 3)
             P[..., -1] = rl[:, inner]
             G += gram(P)
-        H[:, index[:, None], index] += expand_gram(G, T)
+        H[index[:, None], index] += expand_gram(G, T).transpose(1, 2, 0)
     for index, vertices, sources in st.boundary:
-        H[:, index[:, None], index] += _boundary_gram(RT, sources, rl[:, vertices], len(index))
-    return H
+        H[index[:, None], index] += _boundary_gram(RT, sources, rl[:, vertices], len(index)).transpose(1, 2, 0)
+    return H.transpose(2, 0, 1)
 
 
 def _boundary_gram(RT, sources, rl, width):
