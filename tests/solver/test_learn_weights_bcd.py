@@ -6,8 +6,8 @@ from articula.solver.laplacian import uniform_laplacian
 from articula.solver.model import Model
 from articula.solver.rig_objective import RigObjective
 from articula.solver.skinning import hybrid_skin
-from articula.solver.weights_bcd import (CandidateSkin, _children_table, _qp_group, _qp_group_enumerate, box_simplex_qp,
-                                         candidates, optimise_weights)
+from articula.solver.weights_bcd import (ACTIVE_SET_MIN_K, CandidateSkin, _children_table, _qp_group,
+                                         _qp_group_enumerate, box_simplex_qp, candidates, optimise_weights)
 
 from .learn_data import body, hybrid_truth
 
@@ -63,10 +63,12 @@ def _random_qps(rng, k, N, kind):
 
 
 def test_qp_certified_active_set_equals_enumeration():
-    """The certified active-set solver (k ≥ 4) against the enumeration of every face (the reference):
+    """The certified active-set solver (k ≥ ACTIVE_SET_MIN_K = 3) against the enumeration of every face
+    (the reference, the solver before the active sets):
     the same objective to 1e-12 (relative to the problem's scale) everywhere, the same minimiser where it
     is unique (well-conditioned H); also with every problem sent to the fallback (guesses=0) and with
     problems that need several active-set steps."""
+    assert ACTIVE_SET_MIN_K <= 4                                 # so that k = 4..6 below use it
     rng = np.random.default_rng(3)
     for k in range(1, 7):
         for kind in ("full", "singular", "tie", "scaled"):
@@ -79,7 +81,8 @@ def test_qp_certified_active_set_equals_enumeration():
                 w, f = _qp_group(H, b, guesses=guesses)
                 assert np.all(w >= 0) and np.all(w.sum(1) <= 1 + 1e-12)
                 assert np.all(np.abs(f - f0) <= 1e-12 * scale), (k, kind, guesses)
-                assert np.allclose(f, np.einsum("ni,nij,nj->n", w, H, w) - 2 * np.sum(b * w, 1), atol=1e-12 * scale.max())
+                value = np.einsum("ni,nij,nj->n", w, H, w) - 2 * np.sum(b * w, 1)
+                assert np.allclose(f, value, atol=1e-12 * scale.max())
                 assert np.all(np.abs(w - w0)[unique] <= 1e-9), (k, kind, guesses)
                 if kind == "full":
                     assert np.abs(w - w0)[unique].max() <= 1e-12, (k, guesses)
@@ -94,8 +97,8 @@ def test_qp_faces_of_every_kind():
     for k in (4, 5):
         cases = []
         H0 = np.eye(k) + 0.3
-        for target in (np.full(k, 0.1), np.full(k, 0.5), np.eye(k)[1] * 3, -np.ones(k), np.r_[0.9, -1, 0.5, np.zeros(k - 3)],
-                       np.r_[2.0, 2.0, -1.0, np.zeros(k - 3)], np.zeros(k)):
+        for target in (np.full(k, 0.1), np.full(k, 0.5), np.eye(k)[1] * 3, -np.ones(k),
+                       np.r_[0.9, -1, 0.5, np.zeros(k - 3)], np.r_[2.0, 2.0, -1.0, np.zeros(k - 3)], np.zeros(k)):
             cases.append((H0, H0 @ target))
         H = np.array([c[0] for c in cases])
         b = np.array([c[1] for c in cases])
