@@ -6,8 +6,8 @@ from articula.solver.laplacian import uniform_laplacian
 from articula.solver.model import Model
 from articula.solver.rig_objective import RigObjective
 from articula.solver.skinning import hybrid_skin
-from articula.solver.weights_bcd import (CandidateSkin, _children_table, _qp_group, box_simplex_qp, candidates,
-                                         optimise_weights)
+from articula.solver.weights_bcd import (ACTIVE_SET_MIN_K, CandidateSkin, _children_table, _qp_group,
+                                         _qp_group_enumerate, box_simplex_qp, candidates, optimise_weights)
 
 from .learn_data import body, hybrid_truth
 
@@ -45,6 +45,69 @@ def test_qp_matches_brute_force_grid_and_slsqp():
         grid = np.linspace(0, 1, 100001)
         assert f[0] <= np.min(h * grid ** 2 - 2 * c * grid) + 1e-12 and 0 <= w[0, 0] <= 1
         assert np.isclose(f[0], h * w[0, 0] ** 2 - 2 * c * w[0, 0], atol=1e-15)
+
+
+def _random_qps(rng, k, N, kind):
+    """N random PSD problems with k variables: "full" rank, "singular" (rank k − 2, or 1), "tie" (two
+    equal columns: a line of minimisers when the optimum uses them), "scaled" (badly scaled columns)."""
+    r = k if kind in ("full", "scaled") else max(1, k - 2)
+    G = rng.normal(size=(N, 3 * k + 2, r)) @ rng.normal(size=(N, r, k)) if kind == "singular" else \
+        rng.normal(size=(N, 3 * k + 2, k)) + rng.normal(size=(N, 1, k))
+    if kind == "tie" and k > 1:
+        G[:, :, -1] = G[:, :, 0]
+    if kind == "scaled":
+        G *= 10.0 ** rng.uniform(-2, 2, (N, 1, k))
+    H = np.einsum("nrk,nrl->nkl", G, G)
+    b = np.einsum("nrk,nr->nk", G, rng.normal(size=(N, G.shape[1])) * rng.uniform(0.2, 3, (N, 1)) + 0.4)
+    return H, b
+
+
+def test_qp_certified_active_set_equals_enumeration():
+    """The certified active-set solver (k ≥ ACTIVE_SET_MIN_K = 3) against the enumeration of every face
+    (the reference, the solver before the active sets):
+    the same objective to 1e-12 (relative to the problem's scale) everywhere, the same minimiser where it
+    is unique (well-conditioned H); also with every problem sent to the fallback (guesses=0) and with
+    problems that need several active-set steps."""
+    assert ACTIVE_SET_MIN_K <= 4                                 # so that k = 4..6 below use it
+    rng = np.random.default_rng(3)
+    for k in range(1, 7):
+        for kind in ("full", "singular", "tie", "scaled"):
+            H, b = _random_qps(rng, k, 400, kind)
+            w0, f0 = _qp_group_enumerate(H, b)
+            scale = np.abs(b).max(1) + np.diagonal(H, axis1=1, axis2=2).max(1)
+            ev = np.linalg.eigvalsh(H)
+            unique = ev[:, 0] > 1e-6 * ev[:, -1]
+            for guesses in (6, 0, 1):
+                w, f = _qp_group(H, b, guesses=guesses)
+                assert np.all(w >= 0) and np.all(w.sum(1) <= 1 + 1e-12)
+                assert np.all(np.abs(f - f0) <= 1e-12 * scale), (k, kind, guesses)
+                value = np.einsum("ni,nij,nj->n", w, H, w) - 2 * np.sum(b * w, 1)
+                assert np.allclose(f, value, atol=1e-12 * scale.max())
+                assert np.all(np.abs(w - w0)[unique] <= 1e-9), (k, kind, guesses)
+                if kind == "full":
+                    assert np.abs(w - w0)[unique].max() <= 1e-12, (k, guesses)
+            if kind == "full":
+                assert unique.mean() > 0.9
+            assert box_simplex_qp(H, b, np.full(len(b), k)).shape == (len(b), k)
+
+
+def test_qp_faces_of_every_kind():
+    """Optima on every kind of face (interior, Σ w = 1, vertices e_j, 0, mixed) with k = 4 and 5: the
+    enumeration and the active-set solver agree, and the enumeration's result satisfies the KKT conditions."""
+    for k in (4, 5):
+        cases = []
+        H0 = np.eye(k) + 0.3
+        for target in (np.full(k, 0.1), np.full(k, 0.5), np.eye(k)[1] * 3, -np.ones(k),
+                       np.r_[0.9, -1, 0.5, np.zeros(k - 3)], np.r_[2.0, 2.0, -1.0, np.zeros(k - 3)], np.zeros(k)):
+            cases.append((H0, H0 @ target))
+        H = np.array([c[0] for c in cases])
+        b = np.array([c[1] for c in cases])
+        w0, f0 = _qp_group_enumerate(H, b)
+        w, f = _qp_group(H, b)
+        assert np.allclose(w, w0, atol=1e-12) and np.allclose(f, f0, atol=1e-12)
+        g = np.einsum("nij,nj->ni", H, w) - b
+        gap = np.sum(g * w, 1) - np.minimum(g.min(1), 0)
+        assert np.all(gap <= 1e-12)
 
 
 def test_qp_respects_number_of_variables():
