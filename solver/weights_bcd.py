@@ -79,7 +79,6 @@ certify).  Measured (MakeHuman game_engine female,heavy, hybrid, 13,380 vertices
 whole learn_rig, process CPU, old and new run side by side): weights stage 62.3 s -> 36.3 s, learn_rig
 93.1 s -> 69.0 s; the objective logs agree to 4e-14 relative.
 """
-import functools
 import itertools
 
 import numpy as np
@@ -235,18 +234,6 @@ def _solve_unpivoted(A, y):
         for p in range(s - 1, -1, -1):
             x[p] = (y[p] - np.einsum("qn,qn->n", A[p, p + 1:], x[p + 1:])) / A[p, p]
     return x
-
-
-@functools.lru_cache(maxsize=None)
-def _face_order(k):
-    """Faces of the k-variable polytope in the order :func:`_qp_group` tries them: ``((S (s,) int,
-    sum_active bool), ...)``, the sum-constrained ones for |S| ≥ 1 (|S| = 1: the vertex e_j)."""
-    faces = []
-    for size in range(k, 0, -1):
-        for S in itertools.combinations(range(k), size):
-            faces.append((np.array(S), False))
-            faces.append((np.array(S), True))
-    return tuple(faces)
 
 
 def _qp_group_enumerate(H, b):
