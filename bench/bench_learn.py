@@ -535,16 +535,10 @@ def section_tube(args, tmp, have_learner, why, failures):
         stats, fit, sec = held_out(truth, test)
         line(f"   reference: true model, held-out poses by pose_fit (expect 0): {stats_text(stats)}; "
              f"{int(fit.converged.sum())}/{len(test)} converged")
-    if not have_learner:
-        line(f"   ours: FAILED - solver.learn.learn_rig is not available ({why}); no numbers")
-        failures.append("tube")
+    got = learn_or_fail((have_learner, why, failures), "tube", "   ours", train, truth.faces, k, tmp)
+    if got is None:
         return
-    try:
-        model, poses, meas = run_learner(train, truth.faces, k, tmp)
-    except RuntimeError as e:
-        line(f"   ours: FAILED - {e}")
-        failures.append("tube")
-        return
+    model, poses, meas = got
     tr, _ = surface_stats(train, model, poses)
     ho, hfit, _ = held_out(model, test)
     ref = metrics.posed_joints(truth.skeleton, true_poses)[:, 1:]
