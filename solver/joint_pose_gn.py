@@ -12,9 +12,9 @@ Parameters (all increments, applied by :func:`apply_increment`):
 
 Residuals: data ``p − s`` and ``√α (L p − L s)`` of every scan, and the left/right bone-length symmetry
 residuals ``√λ (‖h_suc(l) − h_l‖ − ‖h_suc(r) − h_r‖)`` (spec Eq. 3.23 with the recommended
-length-difference form), and the weak joint prior ``√κ (h_b − h⁰_b)`` (not in the spec: a proposal of
-ours, see :class:`JointPoseProblem`).  The Jacobian has the arrow-head structure ``[S_m | O_m]`` per scan; the normal
-equations are reduced to the shared block by the Schur complement
+length-difference form), and an optional weak joint prior ``√κ (h_b − h⁰_b)`` (not in the spec: a
+proposal of ours, off by default, see :class:`JointPoseProblem`).  The Jacobian has the arrow-head
+structure ``[S_m | O_m]`` per scan; the normal equations are reduced to the shared block by the Schur complement
 ``(H_ss − Σ_m H_so,m H_oo,m⁻¹ H_os,m) δs = −g_s + Σ_m H_so,m H_oo,m⁻¹ g_o,m`` and back-substituted.
 Damping: Levenberg–Marquardt ``μ (diag H_data + ε)`` (the diagonal of the data part: the symmetry
 weight λ ≈ 1e10 would otherwise freeze the joints it couples); a step is accepted only if the objective
@@ -292,8 +292,8 @@ def scan_chunk(num_vertices):
 
 def gauss_newton_blocks(model, poses, objective, chunk=None, own_only=False, structure=None):
     """Gauss–Newton blocks (those of :func:`normal_blocks`) at ``(model, poses)`` for ``objective``,
-    accumulated over chunks of scans (default :func:`scan_chunk`) from compact per-anchor-group Jacobians (:class:`_Structure`; pass
-    ``structure`` to reuse one built for this model's anchors and weights), so that only ``chunk`` scans'
+    accumulated over chunks of scans (default :func:`scan_chunk`) from compact per-anchor-group Jacobians
+    (:class:`_Structure`; pass ``structure`` to reuse one built for this model's anchors and weights), so that only ``chunk`` scans'
     blocks are in memory at once.  Returns ``H_ss, H_so (M,..), H_oo (M,..), g_s, g_o (M,..)``; with
     own_only (poses only) the shared blocks have size 0."""
     st = _Structure(model, objective, own_only) if structure is None else structure
@@ -313,8 +313,8 @@ def gauss_newton_blocks(model, poses, objective, chunk=None, own_only=False, str
 class JointPoseProblem:
     """Objective ``Q + λ Q_sym + κ Q_prior`` as a function of (skeleton, poses) for a fixed model skin and
     rest mesh.  ``Q_sym`` = Σ squared left/right bone-length differences (m², :func:`symmetry_residuals`);
-    ``κ Q_prior = Σ_b≥1 κ_b ‖h_b − h⁰_b‖²`` (m²) ties the joint centres weakly to ``prior_heads (B,3)`` (the
-    initial rotation-centre estimates): near-hinge joints are poorly determined along their axis, and the
+    ``κ Q_prior = Σ_b≥1 κ_b ‖h_b − h⁰_b‖²`` (m²) ties the joint centres weakly to ``prior_heads (B,3)``
+    (the initial rotation-centre estimates): near-hinge joints are poorly determined along their axis, and the
     data and Laplacian terms let them slide there.  kappa: κ_b, a scalar or ``(B−1,)`` per non-root joint,
     dimensionless (one joint displacement costs as much as κ_b vertex-scan residuals of the same length);
     :func:`relative_joint_prior` scales it to the data's curvature."""

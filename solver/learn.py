@@ -8,8 +8,8 @@
 3. skeleton (:mod:`solver.skeleton_init`): tree, joints (LS rotation centres), frames, mirror pairs;
    every joint must move (else the motion cannot separate that many parts);
 4. per-scan poses from per-part Procrustes (:mod:`solver.pose_init`); binary (rigid) skin;
-5. alternating optimisation of ``E = Q + λ Q_sym + κ Q_prior`` (objective, bone-length symmetry, weak
-   prior on the joint centres) until its relative decrease over one round is below
+5. alternating optimisation of ``E = Q + λ Q_sym + κ Q_prior`` (objective, bone-length symmetry, an
+   optional weak prior on the joint centres, off by default) until its relative decrease over one round is below
    ``tol``: (a) joints + poses by Levenberg–Marquardt (:mod:`solver.joint_pose_gn`), (b) weights by BCD
    (:mod:`solver.weights_bcd`), (c) rest vertices by sparse least squares (:mod:`solver.rest_shape`),
    each step accepted only if E does not increase.
@@ -207,7 +207,8 @@ class Settings:
 
 def alternation_round(model, poses, problem, scans, settings, fix_joints, timings, progress=None):
     """One round of steps (a) joints + poses, (b) weights, (c) rest vertices for the objective of
-    ``problem`` (:class:`JointPoseProblem`); each step is kept only if ``E = Q + λ Q_sym + κ Q_prior`` does not increase.
+    ``problem`` (:class:`JointPoseProblem`); each step is kept only if ``E = Q + λ Q_sym + κ Q_prior`` does
+    not increase.
     Returns ``(model, poses, [(step, E), ...])``; ``timings`` (dict of seconds per step) is added to."""
     objective = problem.objective
     sub = (lambda lo, hi, off=0.0: _sub_progress(progress, lo, hi, off))
