@@ -779,12 +779,11 @@ def mirror_map(rest, scans, faces, max_scans=MIRROR_SCANS):
     faces = np.asarray(faces, dtype=np.int64)
     V = len(rest)
     step = max(1, int(np.ceil(len(scans) / max(1, max_scans - 1))))
-    shapes = [rest] + list(scans[::step][:max_scans - 1])
-    polys = polygons_of(faces, np.asarray(shapes))
+    shape_arr = np.concatenate([rest[None], scans[::step][:max_scans - 1]])       # (S, V, 3)
+    polys = polygons_of(faces, shape_arr)
     H = _halfedges(polys, V)
     e = edges_of(faces)
     edge = float(np.median(np.linalg.norm(rest[e[:, 0]] - rest[e[:, 1]], axis=1))) if len(e) else 0.0
-    shape_arr = np.asarray(shapes)
     mean_length = np.mean(np.linalg.norm(shape_arr[:, e[:, 0]] - shape_arr[:, e[:, 1]], axis=2), axis=0)
 
     def isometric(m):
@@ -803,7 +802,7 @@ def mirror_map(rest, scans, faces, max_scans=MIRROR_SCANS):
         if tries >= MIRROR_TRIES:
             break
     best = None
-    for pts in shapes:
+    for pts in shape_arr:
         planes = symmetry_planes(pts)
         if not planes:
             continue
