@@ -33,6 +33,7 @@ import numpy as np
 
 from ..solver.bundle import Bundle, save_bundle
 from ..solver.errors import ArticulaInputError
+from ..solver.key_scans import KEY_SCANS
 from ..solver.model import Skeleton
 from ..solver.scan_sequence import list_scan_files, natural_sorted, read_scan_files
 from ..solver.skinning import hybrid_skin
@@ -79,11 +80,12 @@ class LearnOptions:
     max_iterations: int = 4         # outer rounds after the warm start (solver default); 0: initialisation only
     seed: int = 0
     initial_skeleton: Skeleton | None = None
+    key_scans: int = KEY_SCANS      # learn from at most this many scans, fit the others' poses; 0: all
 
     def solver_kwargs(self) -> dict:
         return dict(parts=self.parts or None, alpha=float(self.alpha), symmetry=bool(self.symmetry),
                     max_iterations=int(self.max_iterations), seed=int(self.seed),
-                    initial_skeleton=self.initial_skeleton)
+                    initial_skeleton=self.initial_skeleton, key_scans=int(self.key_scans) or None)
 
 
 @dataclass
@@ -310,6 +312,7 @@ def report_json(outcome: LearnOutcome) -> dict:
                                 "faces": int(len(outcome.input.faces))},
                       "options": {"parts": opts.parts, "alpha": opts.alpha, "symmetry": opts.symmetry,
                                   "max_iterations": opts.max_iterations, "seed": opts.seed,
+                                  "key_scans": opts.key_scans,
                                   "initial_skeleton": opts.initial_skeleton is not None}})
 
 

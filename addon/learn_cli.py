@@ -17,6 +17,7 @@ import bpy
 import numpy as np
 
 from ..solver.errors import ArticulaInputError
+from ..solver.key_scans import KEY_SCANS
 from . import jobs, learn
 from .cli import call_operator, save_blend_again
 
@@ -79,7 +80,8 @@ def run(args) -> int:
     for path in (args.out, args.report, args.blend):
         learn.check_output_path(path or "")
     paths = _scan_paths(args.scans)
-    options = learn.LearnOptions(args.parts, args.alpha, not args.no_symmetry, args.iterations, args.seed)
+    options = learn.LearnOptions(args.parts, args.alpha, not args.no_symmetry, args.iterations, args.seed,
+                                 key_scans=args.key_scans)
     progress = jobs.Progress("learn-rig", echo=True)
     inp = learn.input_from_files(paths, progress)
     outcome = learn.learn(inp, options, progress)
@@ -107,6 +109,9 @@ def add_commands(sub):
                    help="outer rounds of the alternating optimisation after two warm-start rounds (default 4; "
                         "0: initialisation only)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--key-scans", type=int, default=KEY_SCANS,
+                   help=f"learn the rig from at most this many scans (the most different poses) and fit the "
+                        f"other scans' poses with it (default {KEY_SCANS}; 0: learn from every scan)")
     p.add_argument("--out", required=True, help="model bundle to write (.npz)")
     p.add_argument("--report", help="write the error statistics, stage times and objective log as JSON")
     p.add_argument("--blend", help="also save a .blend with the scans and the learned rig")

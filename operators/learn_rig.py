@@ -12,6 +12,7 @@ import bpy
 from ..addon import learn
 from ..addon.jobs import JobOperator
 from ..solver.errors import ArticulaInputError
+from ..solver.key_scans import KEY_SCANS
 
 
 class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
@@ -47,6 +48,11 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
         description="Outer rounds of the alternating optimisation (joints and poses, weights, rest mesh), after two "
                     "warm-start rounds; "
                     "it stops earlier once the objective no longer decreases. 0: initialisation only")
+    key_scans: bpy.props.IntProperty(
+        name="Key Scans", default=KEY_SCANS, min=0, max=100000,
+        description="Learn the skeleton, weights and rest mesh from at most this many scans (the most "
+                    "different poses) and fit the poses of the other scans with the learned rig: long "
+                    "sequences learn in a fraction of the time. 0: learn from every scan")
     seed: bpy.props.IntProperty(name="Seed", default=0, min=0,
                                 description="Random seed of the segmentation (same seed, same result)")
     initial_armature: bpy.props.StringProperty(
@@ -77,7 +83,7 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
 
     def draw(self, context):
         col = self.layout.column()
-        for prop in ("parts", "alpha", "symmetry", "max_iterations", "seed"):
+        for prop in ("parts", "alpha", "symmetry", "max_iterations", "key_scans", "seed"):
             col.prop(self, prop)
         col.prop_search(self, "initial_armature", bpy.data, "objects")
         col.prop(self, "output_bundle")
@@ -88,7 +94,8 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
 
     # -- job parts -----------------------------------------------------------------------------------
     def prepare(self, context):
-        options = learn.LearnOptions(self.parts, self.alpha, self.symmetry, self.max_iterations, self.seed)
+        options = learn.LearnOptions(self.parts, self.alpha, self.symmetry, self.max_iterations, self.seed,
+                                     key_scans=self.key_scans)
         if self.initial_armature:
             arm = bpy.data.objects.get(self.initial_armature)
             if arm is None:

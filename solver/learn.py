@@ -12,7 +12,10 @@
    optional weak prior on the joint centres, off by default) until its relative decrease over one round is below
    ``tol``: (a) joints + poses by Levenberg–Marquardt (:mod:`solver.joint_pose_gn`), (b) weights by BCD
    (:mod:`solver.weights_bcd`), (c) rest vertices by sparse least squares (:mod:`solver.rest_shape`),
-   each step accepted only if E does not increase.
+   each step accepted only if E does not increase;
+6. long sequences: steps 2-5 run on at most ``key_scans`` scans (:mod:`solver.key_scans`: the most different
+   poses, rest scan included), then every other scan gets its pose fitted with the learned model fixed
+   (:func:`poses_of_other_scans`).
 
 Output conventions: the model and poses are in the input coordinates and vertex order; poses are in
 scan order (one per scan), scale 1.  The report holds the vertex-to-surface error of every scan vertex
@@ -27,10 +30,12 @@ import numpy as np
 
 from .errors import ArticulaInputError, Cancelled  # noqa: F401
 from .jacobians import single_blas_thread
+from .key_scans import KEY_SCANS, select_key_scans
 from .joint_pose_gn import (JointPoseProblem, optimise_joints_and_poses, relative_joint_prior, sizes,
                             symmetry_residuals)
 from .laplacian import components, uniform_laplacian
 from .model import Model, Poses
+from .pose_fit import fit_poses
 from .pose_init import poses_from_part_fits
 from .procrustes import fit_parts
 from .rest_shape import solve_rest_vertices
@@ -45,6 +50,8 @@ from .weights_bcd import optimise_weights
 BYTES_PER_VERTEX_SCAN = 2600    # measured ~1,700 (see working_memory_bytes) x 1.5
 MAX_WORK_BYTES = 4e9            # refuse inputs whose estimated working memory exceeds this (bytes)
 MIN_JOINT_MOTION_DEG = 1.0      # a joint must rotate at least this much in some scan
+OTHER_SCAN_ITERATIONS = 10      # LM iterations of the pose fit of each other scan
+OTHER_SCAN_TOL = 1e-6           # ... stopping at this relative decrease
 
 
 @dataclass
@@ -70,8 +77,9 @@ def working_memory_bytes(num_scans, num_vertices, num_parts):
     return BYTES_PER_VERTEX_SCAN * num_scans * num_vertices + 8 * num_scans * (n_s + n_o + 1) ** 2
 
 
-def check_input(scans, faces, parts, k_max):
-    """Validate and convert; raises :class:`ArticulaInputError` naming the problem."""
+def check_input(scans, faces, parts, k_max, key_scans=None):
+    """Validate and convert; raises :class:`ArticulaInputError` naming the problem.  The memory estimate
+    is for the scans learned from (at most ``key_scans`` of them) plus the array of all scans."""
     scans = np.asarray(scans, dtype=np.float64)
     faces = np.asarray(faces)
     if scans.ndim != 3 or scans.shape[2] != 3:
@@ -94,11 +102,12 @@ def check_input(scans, faces, parts, k_max):
     if len(unused):
         raise ArticulaInputError(f"faces: vertex {unused[0]} (and {len(unused) - 1} more) is in no triangle")
     k_est = parts if parts is not None else k_max
-    need = working_memory_bytes(M, V, k_est)
+    learned = M if not key_scans else min(M, int(key_scans))
+    need = working_memory_bytes(learned, V, k_est) + 24 * M * V
     if need > MAX_WORK_BYTES:
         raise ArticulaInputError(
             f"scans: {M} scans x {V} vertices with {k_est} parts needs about {need / 1e9:.1f} GB of working memory "
-            f"(limit {MAX_WORK_BYTES / 1e9:.0f} GB); decimate the meshes or use fewer scans")
+            f"(limit {MAX_WORK_BYTES / 1e9:.0f} GB); decimate the meshes or learn from fewer (key) scans")
     n, lab = components(faces, V)
     if n > 1:
         sizes_ = np.sort(np.bincount(lab))[::-1]
@@ -149,13 +158,17 @@ def _labels_from_skeleton(rest, skeleton):
     return np.argmin(dist, axis=1)
 
 
-def initialise(scans, faces, parts, seed, symmetry, initial_skeleton, k_max, progress, rest_scan=None):
-    """Steps 2-4.  Returns (model, poses, info dict)."""
-    M = len(scans)
-    rng = np.random.default_rng(seed)
-    rest_index = int(rng.integers(M)) if rest_scan is None else int(rest_scan)
-    if not 0 <= rest_index < M:
-        raise ArticulaInputError(f"rest_scan: {rest_index} is not a scan index (0..{M - 1})")
+def choose_rest_scan(num_scans, seed, rest_scan=None):
+    """Index of the scan that gives the initial rest mesh: ``rest_scan`` if given (checked), else drawn
+    from the seed."""
+    rest_index = int(np.random.default_rng(seed).integers(num_scans)) if rest_scan is None else int(rest_scan)
+    if not 0 <= rest_index < num_scans:
+        raise ArticulaInputError(f"rest_scan: {rest_index} is not a scan index (0..{num_scans - 1})")
+    return rest_index
+
+
+def initialise(scans, faces, parts, seed, symmetry, initial_skeleton, k_max, progress, rest_index):
+    """Steps 2-4 with scan ``rest_index`` as the initial rest mesh.  Returns (model, poses, info dict)."""
     rest = scans[rest_index].copy()
     check_motion(rest, scans, faces)
     info = dict(rest_scan=rest_index)
@@ -238,11 +251,30 @@ def alternation_round(model, poses, problem, scans, settings, fix_joints, timing
     return model, poses, log
 
 
+def poses_of_other_scans(model, key_poses, scans, keys, progress=None):
+    """Poses ``(M frames, scan order)`` of all ``scans (M, V, 3)``: the learned ``key_poses`` for the scans
+    ``keys`` and, for every other scan, a pose fitted with the model fixed (:func:`solver.pose_fit.fit_poses`
+    from per-part Procrustes, at most ``OTHER_SCAN_ITERATIONS`` LM iterations).  Returns
+    ``(poses, fit report dict)``."""
+    M = len(scans)
+    others = np.setdiff1d(np.arange(M), keys)
+    fit = fit_poses(model, scans[others], max_iterations=OTHER_SCAN_ITERATIONS, tol=OTHER_SCAN_TOL,
+                    progress=None if progress is None else (lambda f, text: progress(f, text, None)))
+    B = model.skeleton.num_bones
+    poses = Poses(np.zeros((M, B, 4)), np.zeros((M, 3)), np.ones(M))
+    for idx, src in ((keys, key_poses), (others, fit.poses)):
+        poses.rotations[idx], poses.translations[idx], poses.scales[idx] = (src.rotations, src.translations,
+                                                                           src.scales)
+    info = dict(scans=int(len(others)), mean_iterations=float(fit.iterations.mean()),
+                converged=int(fit.converged.sum()), rms_mm_max=float(fit.rms.max() * 1e3))
+    return poses, info
+
+
 @single_blas_thread()
 def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iterations=4, seed=0,
               initial_skeleton=None, progress=None, lam=1e10, gn_iterations=3, bcd_sweeps=3, tol=1e-4,
               k_max=20, joint_warmup_rounds=1, bcd_steps=(0.2, 0.1, 0.05, 0.02), rest_scan=None,
-              warm_start=(0.01, 0.1), joint_prior=0.0):
+              warm_start=(0.01, 0.1), joint_prior=0.0, key_scans=KEY_SCANS):
     """Learn a hybrid-skinned rig from registered scans.
 
     scans ``(M,V,3)`` metres (M ≥ 3, one topology), faces ``(F,3)`` int.  parts: number of parts k (= bones;
@@ -274,6 +306,11 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
     male lbs) mean joint error 12.8 / 12.0 mm without, 13.4 / 11.8 with ρ = 0.01 (medians 10.1 → 9.0,
     7.8 → 5.9), surface +0.01-0.04 mm; on Dem Bones' Bone_Anim (10 parts, α = 1) RMSE 0.0192 → 0.0203.
     No clear gain, hence off.
+    key_scans: learn the skeleton, weights and rest vertices from at most this many scans
+    (:func:`solver.key_scans.select_key_scans`, always including the rest scan; None = all) and fit the
+    pose of every other scan with the learned model fixed (:func:`poses_of_other_scans`); the objective
+    log is then that of the key scans, the report covers all scans (``report["key_scans"]``: the indices).
+    Sequences of up to ``KEY_SCANS`` scans are learned from every scan.
     Runs with numpy's BLAS on one thread (:func:`solver.jacobians.single_blas_thread`): its many mid-size
     products lose more to thread hand-offs than they gain from a second core.
     Defaults (2 warm-start + 4 rounds of 3 LM iterations and 3 BCD sweeps) measured on MakeHuman, 13,380
@@ -282,15 +319,22 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
     Returns :class:`LearnResult`."""
     t_all = time.perf_counter()
     timings = {key: 0.0 for key in ("initialisation", "joints_and_poses", "weights", "rest_vertices")}
-    scans, faces = check_input(scans, faces, parts, k_max)
+    all_scans, faces = check_input(scans, faces, parts, k_max, key_scans)
+    rest_index = choose_rest_scan(len(all_scans), seed, rest_scan)
+    keys = (select_key_scans(all_scans, int(key_scans), first=rest_index) if key_scans
+            else np.arange(len(all_scans)))
+    scans = all_scans[keys] if len(keys) < len(all_scans) else all_scans
     settings = Settings(gn_iterations, bcd_sweeps, tuple(bcd_steps))
     warm = [float(f) * alpha for f in warm_start] if max_iterations > 0 else []
     rounds = len(warm) + max_iterations
-    span = lambda r: (0.1 + 0.9 * r / max(rounds, 1), 0.1 + 0.9 * (r + 1) / max(rounds, 1))   # noqa: E731
+    end = 1.0 if len(keys) == len(all_scans) else 0.9          # the rest: poses of the other scans
+    span = lambda r: (0.1 + (end - 0.1) * r / max(rounds, 1),   # noqa: E731
+                      0.1 + (end - 0.1) * (r + 1) / max(rounds, 1))
 
     t0 = time.perf_counter()
     model, poses, info, pairs = initialise(scans, faces, parts, seed, symmetry, initial_skeleton, k_max,
-                                           _sub_progress(progress, 0.0, 0.1), rest_scan)
+                                           _sub_progress(progress, 0.0, 0.1), int(np.searchsorted(keys, rest_index)))
+    info["rest_scan"] = rest_index
     timings["initialisation"] = time.perf_counter() - t0
     L = uniform_laplacian(faces, len(scans[0]))
     sym = _sym_pairs(model.skeleton, pairs) if symmetry else []
@@ -338,8 +382,15 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
             converged = True
             break
 
+    info["key_scans"] = keys.tolist()
+    if len(keys) < len(all_scans):
+        t0 = time.perf_counter()
+        poses, info["other_scans"] = poses_of_other_scans(model, poses, all_scans, keys,
+                                                          _sub_progress(progress, end, 1.0))
+        timings["other_scans"] = time.perf_counter() - t0
+        objective = RigObjective(all_scans, L, alpha)
     t0 = time.perf_counter()
-    report, distances = make_report(model, poses, scans, objective, sym, problem.lam)
+    report, distances = make_report(model, poses, all_scans, objective, sym, problem.lam)
     timings["report"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_all
     report.update(info)
