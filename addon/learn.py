@@ -81,11 +81,13 @@ class LearnOptions:
     seed: int = 0
     initial_skeleton: Skeleton | None = None
     key_scans: int = KEY_SCANS      # learn from at most this many scans, fit the others' poses; 0: all
+    workers: int = 0                # solver threads; 0: one per CPU core (the preferences' Threads)
 
     def solver_kwargs(self) -> dict:
         return dict(parts=self.parts or None, alpha=float(self.alpha), symmetry=bool(self.symmetry),
                     max_iterations=int(self.max_iterations), seed=int(self.seed),
-                    initial_skeleton=self.initial_skeleton, key_scans=int(self.key_scans) or None)
+                    initial_skeleton=self.initial_skeleton, key_scans=int(self.key_scans) or None,
+                    workers=int(self.workers))
 
 
 @dataclass
@@ -312,7 +314,7 @@ def report_json(outcome: LearnOutcome) -> dict:
                                 "faces": int(len(outcome.input.faces))},
                       "options": {"parts": opts.parts, "alpha": opts.alpha, "symmetry": opts.symmetry,
                                   "max_iterations": opts.max_iterations, "seed": opts.seed,
-                                  "key_scans": opts.key_scans,
+                                  "key_scans": opts.key_scans, "workers": opts.workers,
                                   "initial_skeleton": opts.initial_skeleton is not None}})
 
 

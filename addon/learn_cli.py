@@ -81,7 +81,7 @@ def run(args) -> int:
         learn.check_output_path(path or "")
     paths = _scan_paths(args.scans)
     options = learn.LearnOptions(args.parts, args.alpha, not args.no_symmetry, args.iterations, args.seed,
-                                 key_scans=args.key_scans)
+                                 key_scans=args.key_scans, workers=args.threads)
     progress = jobs.Progress("learn-rig", echo=True)
     inp = learn.input_from_files(paths, progress)
     outcome = learn.learn(inp, options, progress)
@@ -112,6 +112,7 @@ def add_commands(sub):
     p.add_argument("--key-scans", type=int, default=KEY_SCANS,
                    help=f"learn the rig from at most this many scans (the most different poses) and fit the "
                         f"other scans' poses with it (default {KEY_SCANS}; 0: learn from every scan)")
+    p.add_argument("--threads", type=int, default=0, help="solver threads (default 0: one per CPU core)")
     p.add_argument("--out", required=True, help="model bundle to write (.npz)")
     p.add_argument("--report", help="write the error statistics, stage times and objective log as JSON")
     p.add_argument("--blend", help="also save a .blend with the scans and the learned rig")

@@ -9,7 +9,7 @@ import os
 
 import bpy
 
-from ..addon import learn
+from ..addon import learn, preferences
 from ..addon.jobs import JobOperator
 from ..solver.errors import ArticulaInputError
 from ..solver.key_scans import KEY_SCANS
@@ -95,7 +95,7 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
     # -- job parts -----------------------------------------------------------------------------------
     def prepare(self, context):
         options = learn.LearnOptions(self.parts, self.alpha, self.symmetry, self.max_iterations, self.seed,
-                                     key_scans=self.key_scans)
+                                     key_scans=self.key_scans, workers=preferences.threads(context))
         if self.initial_armature:
             arm = bpy.data.objects.get(self.initial_armature)
             if arm is None:

@@ -32,6 +32,7 @@ import copy
 
 import numpy as np
 
+from . import parallel
 from .errors import Cancelled  # noqa: F401  (raised by progress callbacks)
 from .model import Poses, Skeleton
 from .rotations import matrix_to_quat, quat_conj, quat_mul, quat_normalize, rotvec_to_matrix, rotvec_to_quat
@@ -298,13 +299,18 @@ def gauss_newton_blocks(model, poses, objective, chunk=None, own_only=False, str
     own_only (poses only) the shared blocks have size 0."""
     st = _Structure(model, objective, own_only) if structure is None else structure
     M = len(poses)
-    chunk = scan_chunk(model.num_vertices) if chunk is None else int(chunk)
+    if chunk is None:                                   # at least one chunk per thread
+        chunk = min(scan_chunk(model.num_vertices), -(-M // parallel.workers()))
+    chunk = int(chunk)
     H = np.empty((M, st.n + 1, st.n + 1))
+
+    def system(m0):
+        sl = slice(m0, min(M, m0 + chunk))
+        sub = Poses(poses.rotations[sl], poses.translations[sl], poses.scales[sl])
+        H[sl] = _chunk_system(st, model, sub, sl, own_only)
+
     with single_blas_thread():
-        for m0 in range(0, M, chunk):
-            sl = slice(m0, min(M, m0 + chunk))
-            sub = Poses(poses.rotations[sl], poses.translations[sl], poses.scales[sl])
-            H[sl] = _chunk_system(st, model, sub, sl, own_only)
+        parallel.map_pieces(system, range(0, M, chunk))         # chunks on the solver's threads
     n_s, n = st.n_s, st.n
     return (H[:, :n_s, :n_s].sum(axis=0), H[:, :n_s, n_s:n].copy(), H[:, n_s:n, n_s:n].copy(),
             H[:, :n_s, n].sum(axis=0), H[:, n_s:n, n].copy())

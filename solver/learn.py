@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import parallel
 from .errors import ArticulaInputError, Cancelled  # noqa: F401
 from .jacobians import single_blas_thread
 from .key_scans import KEY_SCANS, select_key_scans
@@ -274,7 +275,7 @@ def poses_of_other_scans(model, key_poses, scans, keys, progress=None):
 def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iterations=4, seed=0,
               initial_skeleton=None, progress=None, lam=1e10, gn_iterations=3, bcd_sweeps=3, tol=1e-4,
               k_max=20, joint_warmup_rounds=1, bcd_steps=(0.2, 0.1, 0.05, 0.02), rest_scan=None,
-              warm_start=(0.01, 0.1), joint_prior=0.0, key_scans=KEY_SCANS):
+              warm_start=(0.01, 0.1), joint_prior=0.0, key_scans=KEY_SCANS, workers=None):
     """Learn a hybrid-skinned rig from registered scans.
 
     scans ``(M,V,3)`` metres (M ≥ 3, one topology), faces ``(F,3)`` int.  parts: number of parts k (= bones;
@@ -311,12 +312,25 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
     pose of every other scan with the learned model fixed (:func:`poses_of_other_scans`); the objective
     log is then that of the key scans, the report covers all scans (``report["key_scans"]``: the indices).
     Sequences of up to ``KEY_SCANS`` scans are learned from every scan.
+    workers: solver threads (:mod:`solver.parallel`; None or 0 = one per CPU core, 1 = serial); the result
+    depends on it only to rounding.
     Runs with numpy's BLAS on one thread (:func:`solver.jacobians.single_blas_thread`): its many mid-size
     products lose more to thread hand-offs than they gain from a second core.
     Defaults (2 warm-start + 4 rounds of 3 LM iterations and 3 BCD sweeps) measured on MakeHuman, 13,380
     v x 30 scans, 19 parts (``./run bench learn_speed``): 2 + 5 rounds 64 s CPU, 1.44 mm mean surface error,
     vertex RMS 4.45 mm; 2 + 10 rounds with 5 + 5 inner steps 177 s CPU, 1.42 mm, 4.38 mm.
     Returns :class:`LearnResult`."""
+    options = {k: v for k, v in locals().items() if k not in ("scans", "faces", "workers")}
+    with parallel.using(workers) as threads:
+        result = _learn_rig(scans, faces, **options)
+    result.report["workers"] = threads
+    return result
+
+
+def _learn_rig(scans, faces, parts, alpha, symmetry, max_iterations, seed, initial_skeleton, progress, lam,
+               gn_iterations, bcd_sweeps, tol, k_max, joint_warmup_rounds, bcd_steps, rest_scan, warm_start,
+               joint_prior, key_scans):
+    """The body of :func:`learn_rig` (same arguments)."""
     t_all = time.perf_counter()
     timings = {key: 0.0 for key in ("initialisation", "joints_and_poses", "weights", "rest_vertices")}
     all_scans, faces = check_input(scans, faces, parts, k_max, key_scans)

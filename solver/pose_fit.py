@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import parallel
 from .errors import ArticulaInputError
 from .jacobians import apply_pose_increment, factored_gram, group_jacobian, jacobian_terms, single_blas_thread
 from .model import Poses
@@ -262,10 +263,13 @@ def _fit_poses(model, targets, init, fit_scale, vertex_weights, max_iterations, 
     conv = np.zeros(N, dtype=bool)
     if init == "previous":
         blocks = [np.array([n]) for n in range(N)]
+        threads = 1
     else:
-        size = _block_size(V)
+        threads = parallel.workers()
+        size = max(1, min(_block_size(V), -(-N // threads)))
         blocks = [np.arange(s, min(N, s + size)) for s in range(0, N, size)]
-    for k, idx in enumerate(blocks):
+
+    def fit(idx):
         block = _take(poses, idx)
         if init == "previous" and idx[0] > 0:
             prev = _take(poses, idx - 1)
@@ -273,8 +277,12 @@ def _fit_poses(model, targets, init, fit_scale, vertex_weights, max_iterations, 
                 block = prev
         block, E[idx], iters[idx], conv[idx] = _lm_block(prob, block, idx, max_iterations, tol)
         _put(poses, idx, block)
+
+    for k in range(0, len(blocks), threads):              # independent blocks, one per solver thread
+        batch = blocks[k:k + threads]
+        parallel.map_pieces(fit, batch)
         if progress is not None:
-            progress((k + 1) / len(blocks), f"fitting poses: frame {idx[-1] + 1} of {N}")
+            progress((k + len(batch)) / len(blocks), f"fitting poses: frame {batch[-1][-1] + 1} of {N}")
     poses.rotations = quat_canonical(quat_normalize(poses.rotations))
     posed = hybrid_skin(model, poses, groups)
     err = np.linalg.norm(posed - y, axis=2)

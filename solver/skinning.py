@@ -21,6 +21,7 @@ children of one vertex turn by more than 180° together; the rule is antipodally
 """
 import numpy as np
 
+from . import parallel
 from .errors import ArticulaInputError
 from .dualquat import IDENTITY as DQ_IDENTITY
 from .dualquat import dq_apply, dq_from_rigid, align_hemisphere
@@ -28,6 +29,7 @@ from .kinematics import chain_from_world, to_world
 from .rotations import quat_canonical, quat_normalize, quat_to_matrix, swing_twist_y
 
 FRAME_CHUNK = 32
+PARALLEL_VERTEX_FRAMES = 50_000    # hybrid_skin splits its frames over the solver's threads from this size
 
 
 # ----------------------------------------------------------------------------- plain LBS and DQS
@@ -301,8 +303,12 @@ def hybrid_skin(model, poses, groups=None):
     terms = bone_terms(model.skeleton, poses)
     N, V = len(poses), model.num_vertices
     out = np.empty((N, V, 3))
-    for n0 in range(0, N, FRAME_CHUNK):
-        n1 = min(N, n0 + FRAME_CHUNK)
+    step = FRAME_CHUNK
+    if N * V >= PARALLEL_VERTEX_FRAMES:                # frame chunks on the solver's threads
+        step = max(1, min(FRAME_CHUNK, -(-N // parallel.workers())))
+
+    def frames(n0):
+        n1 = min(N, n0 + step)
         chunk = np.empty((3, n1 - n0, V))
         for a, kids, start, stop, wt, ws in groups.groups:
             tw, sw = blend_group(terms, n0, n1, a, kids, wt, ws)
@@ -310,6 +316,8 @@ def hybrid_skin(model, poses, groups=None):
             vt = _apply_dq_components(tw, x) if len(kids) else x[:, None]
             chunk[:, :, start:stop] = _apply_affine_components(sw, vt)
         out[n0:n1] = chunk[:, :, groups.inverse].transpose(1, 2, 0)
+
+    parallel.map_pieces(frames, range(0, N, step))
     return out
 
 

@@ -30,6 +30,8 @@ Units: those of the input (metres in Articula); :func:`error_statistics` only su
 import numpy as np
 from scipy.spatial import cKDTree
 
+from . import parallel
+
 RADIUS_RATIO = 1.5      # triangle radii within one centroid tree differ by at most this factor
 BOUND_RATIO = 2.0       # upper bounds within one point tree differ by at most this factor
 SLACK = 1e-9            # pruning margin, relative to the coordinate scale (absorbs rounding)
@@ -270,7 +272,14 @@ def per_vertex_scan_distances(points, surfaces, faces):
     the scans: scan vertices to the posed model (what the learned rig's report and heat map use) or posed
     vertices to the scans."""
     points = np.asarray(points, dtype=np.float64)
-    return np.stack([distance_to_surface(points[m], surfaces[m], faces) for m in range(len(points))])
+    out = np.empty(points.shape[:2])
+
+    def frames(idx):                                    # a piece of frames per solver thread
+        for m in idx:
+            out[m] = distance_to_surface(points[m], surfaces[m], faces)
+
+    parallel.map_pieces(frames, parallel.split(len(points)))
+    return out
 
 
 def _median(x):

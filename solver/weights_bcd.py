@@ -83,12 +83,15 @@ import itertools
 
 import numpy as np
 
+from . import parallel
 from .errors import Cancelled  # noqa: F401  (raised by progress callbacks)
 from .model import Model
 from .skinning import bone_terms, hybrid_skin
 
 STEPS = (0.2, 0.1, 0.05, 0.02)
 ACTIVE_SET_MIN_K = 3   # swing QPs with fewer variables enumerate their faces (closed forms, ≤ 7 faces)
+PARALLEL_MIN_WORK = 60_000    # vertex-scans per thread of one evaluation (less: one thread; smaller pieces
+                              # lose more to the interpreter lock than the second thread gains)
 MIN_GAIN = 1e-15       # a move is applied only if it gains more than this fraction of Q
 BLOCK = 2 ** 16        # scan-candidates (M · candidates) per skinning block: each (M, n) temporary is at
                        # most 512 KiB and stays in cache; 2184 candidates at M = 30, 163 at M = 400
@@ -736,6 +739,17 @@ def evaluate(model, skin, state, idx, steps=STEPS):
     return best
 
 
+def evaluate_parallel(model, skin, state, idx, steps=STEPS):
+    """:func:`evaluate` with ``idx`` cut into one piece per solver thread (:mod:`solver.parallel`; pieces
+    of at least ``PARALLEL_MIN_WORK`` vertex-scans): a vertex's evaluation does not depend on the others
+    in idx, so the result is that of one call (to rounding: the batched products see other shapes)."""
+    pieces = [idx[p] for p in parallel.split(len(idx), -(-PARALLEL_MIN_WORK // state.Pv.shape[1]))]
+    if len(pieces) == 1:
+        return evaluate(model, skin, state, idx, steps)
+    parts = parallel.map_pieces(lambda part: evaluate(model, skin, state, part, steps), pieces)
+    return tuple(np.concatenate(arrays) for arrays in zip(*parts))
+
+
 # ----------------------------------------------------------------------------- active set and joint move
 
 class _Tracker:
@@ -777,7 +791,7 @@ def joint_move(model, skin, state, objective, Q, steps=STEPS, chunk=4000, tracke
     todo = np.flatnonzero(tracker.stale)
     for c0 in range(0, len(todo), chunk):
         idx = todo[c0:c0 + chunk]
-        g, a, tw, sw, p = evaluate(model, skin, proxy, idx, steps)
+        g, a, tw, sw, p = evaluate_parallel(model, skin, proxy, idx, steps)
         gain[idx], prop[0][idx], prop[1][idx], prop[2][idx], prop[3][idx] = g, a, tw, sw, p
     tracker.stale[todo] = False
     movers = np.flatnonzero(gain > 0)
@@ -825,7 +839,7 @@ def _sweep(model, skin, state, objective, classes, tracker, Q, steps=STEPS, jaco
         idx = idx[tracker.dirty[idx]]
         if len(idx) == 0:
             continue
-        gain, a, tw, sw, p = evaluate(model, skin, state, idx, steps)
+        gain, a, tw, sw, p = evaluate_parallel(model, skin, state, idx, steps)
         tracker.dirty[idx] = False
         ok = gain > MIN_GAIN * max(Q, 1e-300)
         if not ok.any():

@@ -240,4 +240,6 @@ def test_pose_only_blocks_equal_the_full_blocks():
     full = gauss_newton_blocks(start, p0, obj)
     own = gauss_newton_blocks(start, p0, obj, own_only=True)
     assert own[0].shape == (0, 0) and own[3].shape == (0,) and own[1].shape[1] == 0
-    assert np.array_equal(own[2], full[2]) and np.array_equal(own[4], full[4])
+    # the same sums over differently sized blocks: equal to rounding (BLAS kernels differ between CPUs)
+    for x, y in ((own[2], full[2]), (own[4], full[4])):
+        assert np.allclose(x, y, rtol=1e-13, atol=1e-13 * np.abs(y).max())

@@ -1,0 +1,107 @@
+"""solver.parallel and the solver pieces that use it: two threads give the serial results (to rounding)."""
+import threading
+
+import numpy as np
+import pytest
+
+from articula.solver import parallel
+from articula.solver.joint_pose_gn import gauss_newton_blocks
+from articula.solver.laplacian import uniform_laplacian
+from articula.solver.learn import learn_rig
+from articula.solver.model import Poses
+from articula.solver.pose_fit import fit_poses
+from articula.solver.rig_objective import RigObjective
+from articula.solver.skinning import hybrid_skin
+from articula.solver.surface_distance import distance_to_surface, per_vertex_scan_distances
+from articula.solver.weights_bcd import optimise_weights
+
+from .learn_data import hybrid_truth
+
+
+def test_map_keeps_order_runs_on_threads_and_never_nests():
+    seen = set()
+
+    def square(x):
+        seen.add(threading.current_thread().name)
+        inner = parallel.map_pieces(lambda y: (y, threading.current_thread().name), range(3))
+        assert {name for _, name in inner} == {threading.current_thread().name}     # serial inside a worker
+        return x * x
+
+    assert parallel.workers() == 1
+    assert parallel.map_pieces(square, range(7)) == [x * x for x in range(7)]
+    assert seen == {threading.current_thread().name}                    # outside `using`: serial
+    with parallel.using(2) as n:
+        assert n == 2 and parallel.workers() == 2
+        seen.clear()
+        assert parallel.map_pieces(square, range(7)) == [x * x for x in range(7)]
+        assert all(name.startswith("articula-solver") for name in seen)
+    assert parallel.workers() == 1
+    assert parallel.resolve(None) >= 1 and parallel.resolve(0) == parallel.resolve(None)
+
+
+def test_map_propagates_exceptions_and_restores_the_setting():
+    def boom(x):
+        if x == 3:
+            raise ValueError("piece 3")
+        return x
+    with pytest.raises(ValueError, match="piece 3"):
+        with parallel.using(2):
+            parallel.map_pieces(boom, range(6))
+    assert parallel.workers() == 1
+
+
+def test_split_covers_the_range_in_order():
+    with parallel.using(2):
+        pieces = parallel.split(11)
+        assert len(pieces) == 2 and np.array_equal(np.concatenate(pieces), np.arange(11))
+        assert len(parallel.split(11, min_size=6)) == 1
+    assert len(parallel.split(11)) == 1
+
+
+@pytest.fixture(scope="module")
+def sequence():
+    model, poses, scans = hybrid_truth(120, seed=3)        # 120 x 509 vertex-frames: above every threshold
+    noisy = scans + np.random.default_rng(0).normal(scale=2e-3, size=scans.shape)
+    return model, poses, noisy
+
+
+def _twice(fn):
+    serial = fn()
+    with parallel.using(2):
+        threaded = fn()
+    return serial, threaded
+
+
+def test_skin_blocks_fits_and_distances_equal_serial(sequence):
+    model, poses, scans = sequence
+    a, b = _twice(lambda: hybrid_skin(model, poses))
+    assert np.abs(a - b).max() < 1e-14
+    objective = RigObjective(scans, uniform_laplacian(model.faces, model.num_vertices), 100.0)
+    a, b = _twice(lambda: gauss_newton_blocks(model, poses, objective))
+    for x, y in zip(a, b):
+        assert np.allclose(x, y, rtol=1e-11, atol=1e-12 * np.abs(x).max())
+    a, b = _twice(lambda: fit_poses(model, scans, max_iterations=3))
+    assert np.abs(a.poses.rotations - b.poses.rotations).max() < 1e-10
+    assert np.allclose(a.energy, b.energy, rtol=1e-10)
+    a, b = _twice(lambda: per_vertex_scan_distances(scans, hybrid_skin(model, poses), model.faces))
+    assert np.array_equal(a, b)
+    posed = hybrid_skin(model, poses)
+    assert np.array_equal(a[7], distance_to_surface(scans[7], posed[7], model.faces))
+
+
+def test_weights_and_whole_learning_equal_serial(sequence, monkeypatch):
+    from articula.solver import weights_bcd
+    monkeypatch.setattr(weights_bcd, "PARALLEL_MIN_WORK", 2000)       # split every colour class as well
+    model, poses, scans = sequence
+    objective = RigObjective(scans, uniform_laplacian(model.faces, model.num_vertices), 100.0)
+    start = Poses(poses.rotations.copy(), poses.translations.copy(), poses.scales.copy())
+    a, b = _twice(lambda: optimise_weights(model, start, objective, max_sweeps=2))
+    assert np.allclose(a[1], b[1], rtol=1e-12)
+    assert np.abs(a[0].swing_weights - b[0].swing_weights).max() < 1e-6
+    kw = dict(parts=8, max_iterations=1, bcd_sweeps=1, gn_iterations=2, bcd_steps=(0.2,), key_scans=12)
+    one = learn_rig(scans[:40], model.faces, workers=1, **kw)
+    two = learn_rig(scans[:40], model.faces, workers=2, **kw)
+    assert one.report["workers"] == 1 and two.report["workers"] == 2
+    assert np.allclose([e for _, e in one.report["objective_log"]], [e for _, e in two.report["objective_log"]],
+                       rtol=1e-9)
+    assert np.abs(one.model.rest_vertices - two.model.rest_vertices).max() < 1e-8
