@@ -27,8 +27,11 @@ Sections (every number with its unit; the output is also written to ``bench/resu
    Articula) with its default parameters, on its own example ``Bone_Anim`` (400 frames x 754 vertices, rest
    ``Bone_Geom_rest.obj``, whose vertex order equals the frames') at 5, 10 and 20 bones and on the first
    MakeHuman training sequence at our part count, next to ``learn_rig`` with parts = 5 / 10 / 20 / ours.
-   On Bone_Anim ours runs twice per count: with the default α = 100 and with α = 1.  RMSE measures the data
-   term alone, which is all Dem Bones minimises; our objective adds α × the Laplacian (local shape) term,
+   On Bone_Anim ours runs three times per count: with the default α = 100 and with α = 1 (both with the
+   default key scans: learned from 40 of the 400 frames, the other frames' poses fitted with the learned
+   model), and with α = 1 learned from all 400 frames (``key_scans=None``).  Every "ours" row gives wall
+   time, process CPU time and the solver's thread count (its default: one per core, as Dem Bones' OpenMP).
+   RMSE measures the data term alone, which is all Dem Bones minimises; our objective adds α × the Laplacian (local shape) term,
    so α = 1 is the setting that optimises what the RMSE measures (the shape term still regularises).
    Dem Bones runs with its OpenMP threads (all cores) and OMP_WAIT_POLICY=PASSIVE (spinning threads made it
    ~10x slower on the shared machine).
@@ -168,7 +171,8 @@ def _child_learn(src, dst):
                 {"wall_s": wall, "cpu_s": cpu, "rss_base_kb": base, "rss_peak_kb": peak, "report": report})
 
 
-BONE_ANIM_ALPHAS = (100.0, 1.0)   # learn_rig's default α, and a small α: RMSE measures the data term only
+# learn_rig's default α, and a small α (RMSE measures the data term only); True: from every scan, not key scans
+BONE_ANIM_RUNS = ((100.0, False), (1.0, False), (1.0, True))
 LEARN_TIMEOUT = [None]        # seconds per learn_rig run (--learn-timeout)
 LEARN_ROUNDS = [0]            # learn_rig max_iterations (--learn-iterations; 0 = its default)
 
@@ -194,6 +198,16 @@ def run_learner(scans, faces, parts, tmp, options=None):
         raise RuntimeError(f"learn_rig failed in the child process: {last}")
     b = load_bundle(dst)
     return b.model, b.poses, b.provenance
+
+
+def learn_detail(meas, num_scans):
+    """``learned from K of M scans (the others' poses fitted), CPU c s on n threads`` from a child's
+    measurements (its learn_rig report)."""
+    rep = meas.get("report", {})
+    keys = len(rep.get("key_scans", [])) or num_scans
+    fitted = "" if keys >= num_scans else " (the others' poses fitted)"
+    return (f"learned from {keys} of {num_scans} scans{fitted}, {meas['cpu_s']:.1f} s CPU on "
+            f"{rep.get('workers', '?')} threads")
 
 
 def learn_or_fail(status, label, prefix, scans, faces, parts, tmp, options=None):
@@ -408,7 +422,7 @@ def section_makehuman(args, tmp, have_learner, why, failures, ours):
         ref_heads = gt["posed_heads"][:, 1:]
         je = joint_errors(posed_joints(model, poses), ref_heads) * 1000
         how = "chosen by learn_rig" if not args.parts else "given with --parts"
-        line(f"   ours: {k} parts ({how}), {meas['wall_s']:.1f} s wall, {meas['cpu_s']:.1f} s CPU, "
+        line(f"   ours: {k} parts ({how}), {meas['wall_s']:.1f} s wall, {learn_detail(meas, len(train))}, "
              f"peak RSS {meas['rss_peak_kb'] / 1024:.0f} MB (baseline after imports {meas['rss_base_kb'] / 1024:.0f} MB)")
         line(f"   ours training error (scan vertex -> learned surface): {stats_text(tr)}")
         line(f"   ours held-out error ({TEST_POSES} poses fitted by pose_fit, model fixed): {stats_text(ho)}; "
@@ -487,15 +501,20 @@ def section_dembones(args, tmp, have_learner, why, failures, db_py, first_mh, ou
                      f"peak RSS {float(out['rss_kb']) / 1024:.0f} MB")
             except RuntimeError as e:
                 line(f"   {bones:2d} bones  Dem Bones: FAILED - {e}")
-        for alpha in BONE_ANIM_ALPHAS:
+        for alpha, every_scan in BONE_ANIM_RUNS:
             what = f"ours, alpha {alpha:g}" + (" (default)" if alpha == 100 else " (data-fit setting)")
+            options = {"alpha": alpha}
+            if every_scan:
+                what += ", learned from every scan"
+                options["key_scans"] = None
             got = learn_or_fail((have_learner, why, failures), f"dem_bones {bones} alpha {alpha:g}",
-                                f"   {bones:2d} parts  {what}", frames, tris, bones, tmp, {"alpha": alpha})
+                                f"   {bones:2d} parts  {what}", frames, tris, bones, tmp, options)
             if got is not None:
                 model, poses, meas = got
                 _, rmse = surface_stats(frames, model, poses)
                 line(f"   {bones:2d} parts  {what}: RMSE {rmse:.4f}, {model.skeleton.num_bones} parts, "
-                     f"{meas['wall_s']:.1f} s wall, peak RSS {meas['rss_peak_kb'] / 1024:.0f} MB")
+                     f"{meas['wall_s']:.1f} s wall, {learn_detail(meas, len(frames))}, "
+                     f"peak RSS {meas['rss_peak_kb'] / 1024:.0f} MB")
     if first_mh is None:                                     # section 1 not run (yet): its first sequence
         from articula.sample_scenes.registered import posed_sequence
         rig, shape, skin = makehuman_cases(args.quick)[0]

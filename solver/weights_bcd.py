@@ -830,11 +830,14 @@ def two_ring_colouring(ring2):
 
 
 def _sweep(model, skin, state, objective, classes, tracker, Q, steps=STEPS, jacobi=True):
-    """One sweep: the joint move, then every colour class in turn, evaluating only the class's dirty
-    vertices (all of them when every vertex is dirty).  Updates model, state and tracker in place;
-    returns the new Q (the old one minus the exact gains applied)."""
+    """One sweep: the joint move (if ``jacobi``), then every colour class in turn, evaluating only the
+    class's dirty vertices (all of them when every vertex is dirty).  Updates model, state and tracker in
+    place; returns ``(Q, moved)``: the new Q (the old one minus the exact gains applied) and whether the
+    joint move was applied."""
+    moved = False
     if jacobi:
-        Q = joint_move(model, skin, state, objective, Q, steps, tracker=tracker)
+        Q_joint = joint_move(model, skin, state, objective, Q, steps, tracker=tracker)
+        moved, Q = Q_joint < Q, Q_joint
     for idx in classes:
         idx = idx[tracker.dirty[idx]]
         if len(idx) == 0:
@@ -851,7 +854,7 @@ def _sweep(model, skin, state, objective, classes, tracker, Q, steps=STEPS, jaco
         state.update(chosen, p[ok])
         tracker.changed(chosen)
         Q -= gain[ok].sum()
-    return Q
+    return Q, moved
 
 
 def _setup(model, poses, objective):
@@ -887,7 +890,8 @@ def optimise_weights(model, poses, objective, max_sweeps=20, steps=STEPS, rel_to
         Q_start = Q
         if not active_set:
             tracker.dirty[:] = tracker.stale[:] = True
-        Q = _sweep(model, skin, state, objective, classes, tracker, Q, steps, jacobi)
+        Q, moved = _sweep(model, skin, state, objective, classes, tracker, Q, steps, jacobi)
+        jacobi = jacobi and moved           # a rejected joint move is not tried again in this call
         if Q >= Q_start:
             break
         log.append(Q)

@@ -324,7 +324,7 @@ def test_tracker_skips_only_vertices_without_improving_candidates():
     start, poses, obj = _noisy_problem()
     model, state, skin, Q, classes, tracker = _setup(start, poses, obj)
     for _ in range(3):
-        Q = _sweep(model, skin, state, obj, classes, tracker, Q, steps=(0.2, 0.05))
+        Q, _ = _sweep(model, skin, state, obj, classes, tracker, Q, steps=(0.2, 0.05))
     fresh = _State(model, poses, obj)
     assert np.isclose(obj.value(fresh.P), Q, rtol=1e-9, atol=0)
     assert np.allclose(fresh.R, state.R, atol=1e-12) and np.allclose(fresh.P, state.P, atol=1e-12)
