@@ -13,9 +13,11 @@ distance of the aligned subsample; starting from the first key, the scan farthes
 is added until there are K.  This picks the extreme poses first (the ones that pin joints and weights) and
 never two near-identical frames.  Deterministic; units are those of the input (metres).
 
-Measured on Dem Bones' Bone_Anim (400 frames × 754 vertices, 10 parts, α = 1): learning from all 400 scans
-RMSE 0.0203 in 75 s; from 40 key scans and fitting the other 360: RMSE 0.0191 (the fit minimises the data
-term alone) in 19 s; 20 keys 0.0195 in 14 s (same machine, same run).
+Measured on Dem Bones' Bone_Anim (400 frames × 754 vertices, α = 1, 2 threads; ``./run bench learn --order
+dembones``, bench/results/learn-dembones.txt): at 5 / 10 / 20 parts, from 40 key scans with the other 360
+poses fitted, RMSE over all 400 frames 0.0279 / 0.0181 / 0.0139 in 12.9 / 18.8 / 28.9 s; from every scan
+0.0277 / 0.0203 / 0.0134 in 40.7 / 50.9 / 68.1 s.  (Fitting a frame's pose alone minimises its data term
+without the Laplacian's pull, which is why 10 parts even gains.)  20 keys at 10 parts: 0.0195-0.0201.
 """
 import numpy as np
 

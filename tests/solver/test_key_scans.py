@@ -4,6 +4,8 @@ import pytest
 
 from articula.solver.key_scans import aligned_features, select_key_scans
 from articula.solver.learn import learn_rig
+from articula.solver.model import Poses
+from articula.solver.pose_fit import fit_poses
 from articula.solver.skinning import hybrid_skin
 
 from .learn_data import hybrid_truth, random_rigid_poses
@@ -78,6 +80,10 @@ def test_other_scans_get_fitted_poses_as_good_as_the_keys(from_keys):
     res.poses.validate(8)
     err = np.linalg.norm(hybrid_skin(res.model, res.poses) - scans, axis=2)
     rms = np.sqrt((err ** 2).mean(axis=1))
-    assert rms[others].max() < 2.0 * rms[keys].max() + 1e-4          # metres: as good as the training scans
+    assert rms[others].max() < 1e-3          # metres, on a 1.7 m body: close to the training scans' 0.3 mm
+    # near the fixed model's optimum: a fully converged fit from there gains little
+    sub = Poses(res.poses.rotations[others], res.poses.translations[others], res.poses.scales[others])
+    full = fit_poses(res.model, scans[others], init=sub, max_iterations=50, tol=1e-14)
+    assert np.all(np.sqrt(full.energy / scans.shape[1]) > 0.95 * rms[others])
     assert res.report["surface_error_mm"]["count"] == scans.shape[0] * scans.shape[1]
     assert "other_scans" in res.report["timings_s"]
