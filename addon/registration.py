@@ -7,6 +7,8 @@ import importlib
 
 import bpy
 
+from ..solver import parallel
+
 # Relative to the extension package.  Order matters: property groups before what uses them,
 # operators before the panels that draw their buttons.
 MODULES = (
@@ -34,6 +36,7 @@ def register():
 
 
 def unregister():
+    parallel.shutdown()                       # the solver's idle worker threads
     for mod in reversed(_modules()):
         if hasattr(mod, "unregister_extra"):
             mod.unregister_extra()

@@ -76,6 +76,15 @@ def map_pieces(fn, pieces):
     return list(_pool(n).map(fn, pieces))
 
 
+def shutdown():
+    """Stop the pool's idle threads (a later :func:`map_pieces` starts a new pool); e.g. when the add-on
+    is disabled."""
+    with _LOCK:
+        pool, _STATE["pool"], _STATE["pool_size"] = _STATE["pool"], None, 0
+    if pool is not None:
+        pool.shutdown(wait=True)
+
+
 def split(count, min_size=1):
     """Index arrays that cut ``range(count)`` into :func:`workers` nearly equal consecutive pieces, each at
     least ``min_size`` long (fewer pieces if needed; one piece when serial)."""

@@ -105,3 +105,12 @@ def test_weights_and_whole_learning_equal_serial(sequence, monkeypatch):
     assert np.allclose([e for _, e in one.report["objective_log"]], [e for _, e in two.report["objective_log"]],
                        rtol=1e-9)
     assert np.abs(one.model.rest_vertices - two.model.rest_vertices).max() < 1e-8
+
+
+def test_shutdown_stops_the_pool_and_a_new_one_starts_on_demand():
+    with parallel.using(2):
+        parallel.map_pieces(abs, [-1, -2])
+        parallel.shutdown()
+        assert not [t for t in threading.enumerate() if t.name.startswith("articula-solver")]
+        assert parallel.map_pieces(abs, [-1, -2]) == [1, 2]
+    parallel.shutdown()
