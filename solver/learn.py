@@ -102,6 +102,9 @@ def check_input(scans, faces, parts, k_max, key_scans=None):
     unused = np.setdiff1d(np.arange(V), faces)
     if len(unused):
         raise ArticulaInputError(f"faces: vertex {unused[0]} (and {len(unused) - 1} more) is in no triangle")
+    if key_scans and int(key_scans) < 3:
+        raise ArticulaInputError(f"key_scans: {key_scans} given; learning a rig needs at least 3 scans "
+                                 f"(0 or None: learn from every scan)")
     k_est = parts if parts is not None else k_max
     learned = M if not key_scans else min(M, int(key_scans))
     need = working_memory_bytes(learned, V, k_est) + 24 * M * V

@@ -72,6 +72,14 @@ def test_key_scan_learning_equals_learning_on_the_keys(from_keys):
     assert res.report["objective_log"] == alone.report["objective_log"]
 
 
+def test_too_few_key_scans_refused(from_keys):
+    from articula.solver.errors import ArticulaInputError
+    scans, res, _ = from_keys
+    for bad in (2, -1):
+        with pytest.raises(ArticulaInputError, match="key_scans"):
+            learn_rig(scans, res.model.faces, parts=8, key_scans=bad)
+
+
 def test_other_scans_get_fitted_poses_as_good_as_the_keys(from_keys):
     scans, res, _ = from_keys
     keys = np.asarray(res.report["key_scans"])
