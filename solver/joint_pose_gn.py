@@ -300,7 +300,7 @@ def gauss_newton_blocks(model, poses, objective, chunk=None, own_only=False, str
     st = _Structure(model, objective, own_only) if structure is None else structure
     M = len(poses)
     if chunk is None:                                   # at least one chunk per thread
-        chunk = min(scan_chunk(model.num_vertices), -(-M // parallel.workers()))
+        chunk = parallel.piece_size(M, scan_chunk(model.num_vertices))
     chunk = int(chunk)
     H = np.empty((M, st.n + 1, st.n + 1))
 

@@ -85,6 +85,12 @@ def shutdown():
         pool.shutdown(wait=True)
 
 
+def piece_size(count, largest):
+    """Length of the consecutive pieces that cut ``count`` items into at least one piece per
+    :func:`workers` thread, none longer than ``largest`` (≥ 1)."""
+    return max(1, min(int(largest), -(-int(count) // workers())))
+
+
 def split(count, min_size=1):
     """Index arrays that cut ``range(count)`` into :func:`workers` nearly equal consecutive pieces, each at
     least ``min_size`` long (fewer pieces if needed; one piece when serial)."""

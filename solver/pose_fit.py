@@ -266,7 +266,7 @@ def _fit_poses(model, targets, init, fit_scale, vertex_weights, max_iterations, 
         threads = 1
     else:
         threads = parallel.workers()
-        size = max(1, min(_block_size(V), -(-N // threads)))
+        size = parallel.piece_size(N, _block_size(V))
         blocks = [np.arange(s, min(N, s + size)) for s in range(0, N, size)]
 
     def fit(idx):

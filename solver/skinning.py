@@ -305,7 +305,7 @@ def hybrid_skin(model, poses, groups=None):
     out = np.empty((N, V, 3))
     step = FRAME_CHUNK
     if N * V >= PARALLEL_VERTEX_FRAMES:                # frame chunks on the solver's threads
-        step = max(1, min(FRAME_CHUNK, -(-N // parallel.workers())))
+        step = parallel.piece_size(N, FRAME_CHUNK)
 
     def frames(n0):
         n1 = min(N, n0 + step)
