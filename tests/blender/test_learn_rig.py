@@ -184,6 +184,7 @@ def test_initial_skeleton_from_an_armature(pkg, truth):
     ("no_armature", "initial armature: no object named 'ghost'"),
     ("bad_folder", "no scan files"),
     ("bundle_folder", "does not exist"),
+    ("two_key_scans", "key_scans: 2 given; learning a rig needs at least 3 scans"),
 ])
 def test_bad_input_is_refused_and_leaves_scene_unchanged(pkg, tmp_path, truth, case, message):
     model, poses, scans = truth
@@ -216,6 +217,9 @@ def test_bad_input_is_refused_and_leaves_scene_unchanged(pkg, tmp_path, truth, c
     elif case == "bundle_folder":
         import_sequence(pkg, tmp_path, scans[:3], model.faces)
         kwargs["output_bundle"] = str(tmp_path / "no" / "such" / "model.npz")
+    elif case == "two_key_scans":
+        import_sequence(pkg, tmp_path, scans, model.faces)
+        kwargs.update(key_scans=2, parts=8)
     before = scene_state()
     with pytest.raises(RuntimeError, match=message):
         bpy.ops.articula.learn_rig(**kwargs)
