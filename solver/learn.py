@@ -39,14 +39,14 @@ from .model import Model, Poses
 from .pose_fit import fit_poses
 from .pose_init import poses_from_part_fits
 from .procrustes import fit_parts
-from .rest_shape import solve_rest_vertices
+from .rest_shape import ShapePreconditioner, solve_rest_vertices
 from .rig_objective import RigObjective
 from .rotations import quat_to_rotvec
 from .segmentation import choose_num_parts, segment
 from .skeleton_init import build_skeleton
 from .skinning import hybrid_skin
 from .surface_distance import error_statistics, per_vertex_scan_distances
-from .weights_bcd import optimise_weights
+from .weights_bcd import TwoRing, optimise_weights
 
 BYTES_PER_VERTEX_SCAN = 2600    # measured ~1,700 (see working_memory_bytes) x 1.5
 MAX_WORK_BYTES = 4e9            # refuse inputs whose estimated working memory exceeds this (bytes)
@@ -220,12 +220,23 @@ class Settings:
     gn_iterations: int = 3
     bcd_sweeps: int = 3
     bcd_steps: tuple = (0.2, 0.1, 0.05, 0.02)
+    graph: object = None        # the mesh's weights_bcd.TwoRing, built once
+    joint_move: dict = field(default_factory=dict)   # α -> False once the BCD's joint move was rejected
+    shape_solvers: dict = field(default_factory=dict)   # α -> rest_shape.ShapePreconditioner
+
+    def shape_solver(self, L, alpha):
+        """The rest-vertex preconditioner for this mesh's L and α (factored at the first use)."""
+        if alpha not in self.shape_solvers:
+            self.shape_solvers[alpha] = ShapePreconditioner(L, alpha)
+        return self.shape_solvers[alpha]
 
 
 def alternation_round(model, poses, problem, scans, settings, fix_joints, timings, progress=None):
     """One round of steps (a) joints + poses, (b) weights, (c) rest vertices for the objective of
     ``problem`` (:class:`JointPoseProblem`); each step is kept only if ``E = Q + λ Q_sym + κ Q_prior`` does
-    not increase.
+    not increase.  Once the BCD's joint move has been rejected at this α it is not tried again in later
+    rounds (``settings.joint_move``): late in the alternation it never gains (MakeHuman, 19 parts: rejected
+    at its first try in every round at α = 100, ~0.9 s each).
     Returns ``(model, poses, [(step, E), ...])``; ``timings`` (dict of seconds per step) is added to."""
     objective = problem.objective
     sub = (lambda lo, hi, off=0.0: _sub_progress(progress, lo, hi, off))
@@ -239,14 +250,17 @@ def alternation_round(model, poses, problem, scans, settings, fix_joints, timing
     log.append(("joints_and_poses", float(E)))
     sym_term = E - objective.value(hybrid_skin(model, poses))
     t0 = time.perf_counter()
-    model, w_log = optimise_weights(model, poses, objective, max_sweeps=settings.bcd_sweeps,
-                                    steps=settings.bcd_steps, progress=sub(1 / 3, 2 / 3, sym_term))
+    model, w_log, settings.joint_move[objective.alpha] = optimise_weights(
+        model, poses, objective, max_sweeps=settings.bcd_sweeps, steps=settings.bcd_steps,
+        progress=sub(1 / 3, 2 / 3, sym_term), jacobi=settings.joint_move.get(objective.alpha, True),
+        graph=settings.graph)
     timings["weights"] += time.perf_counter() - t0
     E = min(E, w_log[-1] + sym_term) if w_log else E
     log.append(("weights", float(E)))
     t0 = time.perf_counter()
     trial = copy.copy(model)
-    trial.rest_vertices = solve_rest_vertices(model, poses, scans, objective.L, objective.alpha)
+    trial.rest_vertices = solve_rest_vertices(model, poses, scans, objective.L, objective.alpha,
+                                              settings.shape_solver(objective.L, objective.alpha))
     E_trial = objective.value(hybrid_skin(trial, poses)) + sym_term
     if E_trial <= E:
         model, E = trial, E_trial
@@ -341,7 +355,6 @@ def _learn_rig(scans, faces, parts, alpha, symmetry, max_iterations, seed, initi
     keys = (select_key_scans(all_scans, int(key_scans), first=rest_index) if key_scans
             else np.arange(len(all_scans)))
     scans = all_scans[keys] if len(keys) < len(all_scans) else all_scans
-    settings = Settings(gn_iterations, bcd_sweeps, tuple(bcd_steps))
     warm = [float(f) * alpha for f in warm_start] if max_iterations > 0 else []
     rounds = len(warm) + max_iterations
     end = 1.0 if len(keys) == len(all_scans) else 0.9          # the rest: poses of the other scans
@@ -354,6 +367,7 @@ def _learn_rig(scans, faces, parts, alpha, symmetry, max_iterations, seed, initi
     info["rest_scan"] = rest_index
     timings["initialisation"] = time.perf_counter() - t0
     L = uniform_laplacian(faces, len(scans[0]))
+    settings = Settings(gn_iterations, bcd_sweeps, tuple(bcd_steps), TwoRing(L))
     sym = _sym_pairs(model.skeleton, pairs) if symmetry else []
 
     prior_heads = model.skeleton.heads.copy()          # the initial rotation-centre estimates

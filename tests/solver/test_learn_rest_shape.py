@@ -91,3 +91,43 @@ def test_alpha_trades_position_error_for_local_shape_error():
         terms.append((np.sum(d * d), np.sum(l * l)))
     (d0, l0), (d1, l1), (d2, l2) = terms
     assert d0 < d1 < d2 and l0 > l1 > l2
+
+
+def test_conjugate_gradients_reach_the_direct_solution():
+    """The preconditioned CG of repeated solves equals the direct sparse solve (and stops early when the
+    start already is the solution); with too few iterations it falls back to the direct solve."""
+    from articula.solver import rest_shape
+    model, poses, scans = hybrid_truth(6)
+    L = uniform_laplacian(model.faces, model.num_vertices)
+    rng = np.random.default_rng(4)
+    noisy = scans + 0.003 * rng.normal(size=scans.shape)
+    for alpha in (1.0, 100.0):
+        pre = rest_shape.ShapePreconditioner(L, alpha)
+        start = copy.deepcopy(model)
+        start.rest_vertices = model.rest_vertices + 0.02 * rng.normal(size=model.rest_vertices.shape)
+        direct = solve_rest_vertices(start, poses, noisy, L, alpha)
+        cg = solve_rest_vertices(start, poses, noisy, L, alpha, pre)
+        assert np.abs(cg - direct).max() < 1e-10, alpha
+        A, b = affine_form(start, poses)
+        N, rhs = normal_equations(A, b, noisy, L, alpha)
+        x, ok = rest_shape.conjugate_gradients(N, rhs, start.rest_vertices.ravel(), pre.inverse(N))
+        assert ok and np.linalg.norm(N @ x - rhs) <= rest_shape.CG_RTOL * np.linalg.norm(rhs)
+        _, ok = rest_shape.conjugate_gradients(N, rhs, direct.ravel(), pre.inverse(N), max_iterations=0)
+        assert ok                                                   # already converged: no iteration
+        _, ok = rest_shape.conjugate_gradients(N, rhs, start.rest_vertices.ravel(), pre.inverse(N),
+                                               max_iterations=1)
+        assert not ok
+
+
+def test_conjugate_gradients_fall_back_to_the_direct_solve(monkeypatch):
+    from articula.solver import rest_shape
+    model, poses, scans = hybrid_truth(4)
+    L = uniform_laplacian(model.faces, model.num_vertices)
+    start = copy.deepcopy(model)
+    start.rest_vertices = model.rest_vertices + 0.01
+    monkeypatch.setattr(rest_shape, "CG_MAX_ITERATIONS", 1)
+    calls = []
+    direct = rest_shape._solve_spd
+    monkeypatch.setattr(rest_shape, "_solve_spd", lambda N, rhs: calls.append(1) or direct(N, rhs))
+    x = solve_rest_vertices(start, poses, scans, L, 100.0, rest_shape.ShapePreconditioner(L, 100.0))
+    assert calls and np.abs(x - model.rest_vertices).max() < 1e-8

@@ -153,7 +153,7 @@ def test_bcd_decreases_q_exactly_by_the_incremental_gains():
     obj = RigObjective(scans, uniform_laplacian(model.faces, model.num_vertices), 100.0)
     start = _binary_start(model)
     q0 = obj.value(hybrid_skin(start, poses))
-    fitted, log = optimise_weights(start, poses, obj, max_sweeps=3, steps=(0.2, 0.05), jacobi=False)
+    fitted, log, _ = optimise_weights(start, poses, obj, max_sweeps=3, steps=(0.2, 0.05), jacobi=False)
     assert len(log) == 3 and log[0] < q0 and all(b < a for a, b in zip(log, log[1:]))
     q_full = obj.value(hybrid_skin(fitted, poses))
     assert abs(q_full - log[-1]) <= 1e-9 * q_full               # incremental gains = full recomputation
@@ -166,7 +166,7 @@ def test_bcd_recovers_smooth_weights_from_binary_start():
     model, poses, scans = hybrid_truth(6)
     obj = RigObjective(scans, uniform_laplacian(model.faces, model.num_vertices), 100.0)
     start = _binary_start(model)
-    fitted, log = optimise_weights(start, poses, obj, max_sweeps=3)
+    fitted, log, _ = optimise_weights(start, poses, obj, max_sweeps=3)
     e0 = np.linalg.norm(hybrid_skin(start, poses) - scans, axis=2).mean()
     e1 = np.linalg.norm(hybrid_skin(fitted, poses) - scans, axis=2).mean()
     assert e1 < 0.2 * e0
@@ -307,8 +307,8 @@ def test_active_set_gives_the_full_evaluation_result():
     proposals) changes nothing: same Q log as evaluating every vertex every sweep, strictly decreasing
     and equal to a full recomputation of Q from the returned model."""
     start, poses, obj = _noisy_problem()
-    fast, log_fast = optimise_weights(start, poses, obj, max_sweeps=4, steps=(0.2, 0.05))
-    full, log_full = optimise_weights(start, poses, obj, max_sweeps=4, steps=(0.2, 0.05), active_set=False)
+    fast, log_fast, _ = optimise_weights(start, poses, obj, max_sweeps=4, steps=(0.2, 0.05))
+    full, log_full, _ = optimise_weights(start, poses, obj, max_sweeps=4, steps=(0.2, 0.05), active_set=False)
     assert len(log_fast) == len(log_full) == 4
     assert np.allclose(log_fast, log_full, rtol=1e-9, atol=0)
     assert all(b < a for a, b in zip(log_fast, log_fast[1:]))
@@ -322,9 +322,9 @@ def test_tracker_skips_only_vertices_without_improving_candidates():
     joint-move proposal equals a fresh data-only evaluation, and the running Q is the recomputed Q."""
     from articula.solver.weights_bcd import MIN_GAIN, _DataTargets, _setup, _State, _sweep, evaluate
     start, poses, obj = _noisy_problem()
-    model, state, skin, Q, classes, tracker = _setup(start, poses, obj)
+    model, state, skin, Q, graph, tracker = _setup(start, poses, obj)
     for _ in range(3):
-        Q, _ = _sweep(model, skin, state, obj, classes, tracker, Q, steps=(0.2, 0.05))
+        Q, _ = _sweep(model, skin, state, obj, graph.classes, tracker, Q, steps=(0.2, 0.05))
     fresh = _State(model, poses, obj)
     assert np.isclose(obj.value(fresh.P), Q, rtol=1e-9, atol=0)
     assert np.allclose(fresh.R, state.R, atol=1e-12) and np.allclose(fresh.P, state.P, atol=1e-12)
