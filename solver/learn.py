@@ -32,7 +32,7 @@ from . import parallel
 from .errors import ArticulaInputError, Cancelled  # noqa: F401
 from .jacobians import single_blas_thread
 from .key_scans import KEY_SCANS, select_key_scans
-from .joint_pose_gn import (JointPoseProblem, optimise_joints_and_poses, relative_joint_prior, sizes,
+from .joint_pose_gn import (Damping, JointPoseProblem, optimise_joints_and_poses, relative_joint_prior, sizes,
                             symmetry_residuals)
 from .laplacian import components, uniform_laplacian
 from .model import Model, Poses
@@ -223,6 +223,7 @@ class Settings:
     graph: object = None        # the mesh's weights_bcd.TwoRing, built once
     joint_move: dict = field(default_factory=dict)   # α -> False once the BCD's joint move was rejected
     shape_solvers: dict = field(default_factory=dict)   # α -> rest_shape.ShapePreconditioner
+    damping: dict = field(default_factory=dict)         # α -> joint_pose_gn.Damping, carried across rounds
 
     def shape_solver(self, L, alpha):
         """The rest-vertex preconditioner for this mesh's L and α (factored at the first use)."""
@@ -243,8 +244,9 @@ def alternation_round(model, poses, problem, scans, settings, fix_joints, timing
     log = []
     t0 = time.perf_counter()
     E = problem.value(model, poses)
-    model, poses, gn_log = optimise_joints_and_poses(model, poses, problem, iterations=settings.gn_iterations,
-                                                     progress=sub(0.0, 1 / 3), fix_joints=fix_joints)
+    model, poses, gn_log = optimise_joints_and_poses(
+        model, poses, problem, iterations=settings.gn_iterations, progress=sub(0.0, 1 / 3),
+        fix_joints=fix_joints, damping=settings.damping.setdefault(objective.alpha, Damping()))
     timings["joints_and_poses"] += time.perf_counter() - t0
     E = gn_log[-1] if gn_log else E
     log.append(("joints_and_poses", float(E)))

@@ -243,3 +243,28 @@ def test_pose_only_blocks_equal_the_full_blocks():
     # the same sums over differently sized blocks: equal to rounding (BLAS kernels differ between CPUs)
     for x, y in ((own[2], full[2]), (own[4], full[4])):
         assert np.allclose(x, y, rtol=1e-13, atol=1e-13 * np.abs(y).max())
+
+
+def test_damping_rule_and_its_carry_over():
+    """μ: ÷3 after a step the quadratic model predicted exactly, unchanged at ρ = 1/2, ×2 as ρ → 0,
+    ×4 after a rejection; a Damping passed to the LM ends where the LM ended, and a second call started
+    from it continues to lower Q."""
+    from articula.solver.joint_pose_gn import Damping
+    d = Damping(1.0)
+    d.accepted(1.0)
+    assert np.isclose(d.mu, 1 / 3)
+    d.accepted(0.5)
+    assert np.isclose(d.mu, 1 / 3)
+    d.accepted(1e-12)
+    assert np.isclose(d.mu, 2 / 3)
+    d.rejected()
+    assert np.isclose(d.mu, 8 / 3)
+    model, poses, scans = hybrid_truth(6)
+    obj = RigObjective(scans, uniform_laplacian(model.faces, model.num_vertices), 100.0)
+    start, p0 = _perturbed(model, poses, seed=4)
+    damping = Damping()
+    problem = JointPoseProblem(obj)
+    mid, p1, log1 = optimise_joints_and_poses(start, p0, problem, iterations=2, damping=damping)
+    assert damping.mu != 1e-3 and log1
+    _, _, log2 = optimise_joints_and_poses(mid, p1, problem, iterations=2, damping=damping)
+    assert log2 and log2[-1] <= log1[-1]
