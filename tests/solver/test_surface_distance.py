@@ -173,3 +173,28 @@ def test_distance_to_surface_of_no_points_and_no_triangles():
     assert distance_to_surface(np.zeros((0, 3)), verts, [[0, 1, 2]]).shape == (0,)
     with pytest.raises(ValueError):
         distance_to_surface(np.zeros((2, 3)), verts, np.zeros((0, 3), int))
+
+
+def test_frames_measured_side_by_side_equal_frame_by_frame():
+    """Small frames are measured in batches laid side by side; every distance equals brute force over
+    the frame's own triangles, also for points far off the surface (other frames' triangles never
+    count)."""
+    from articula.solver import surface_distance as sd
+    rng = np.random.default_rng(5)
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 5), np.linspace(0, 1, 5), indexing="ij"), -1).reshape(-1, 2)
+    verts = np.column_stack([g, 0.2 * np.sin(3 * g[:, 0])])
+    idx = np.arange(25).reshape(5, 5)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+    M = 300                                                          # 25 points a frame: batches of 800
+    surfaces = verts[None] + rng.normal(scale=0.05, size=(M, 25, 3)) + rng.normal(scale=2.0, size=(M, 1, 3))
+    points = surfaces + rng.normal(scale=0.02, size=surfaces.shape)
+    points[::7, 3] += [0.0, 0.0, 5.0]                                 # far from the surface
+    dist = sd.per_vertex_scan_distances(points, surfaces, faces)
+    assert sd.BATCH_POINTS // 25 > 1
+    T = surfaces[:, faces]                                             # (M, F, 3, 3)
+    for m in (0, 1, 7, 150, 299):
+        P = np.repeat(points[m], len(faces), axis=0)
+        Tm = np.tile(T[m], (25, 1, 1))
+        brute = np.linalg.norm(closest_points_on_triangles(P, Tm[:, 0], Tm[:, 1], Tm[:, 2]) - P, axis=1)
+        np.testing.assert_allclose(dist[m], brute.reshape(25, -1).min(axis=1), rtol=0, atol=1e-11)
