@@ -391,14 +391,15 @@ class Damping:
 
 
 def optimise_joints_and_poses(model, poses, problem, iterations=10, mu=1e-3, step_tol=1e-9, progress=None,
-                              fix_joints=False, damping=None):
+                              fix_joints=False, damping=None, value=None):
     """Levenberg–Marquardt on joints (centres + twist axes) and all per-scan poses.
 
     model: current :class:`Model` (its skin and rest mesh are held fixed); poses: current poses;
     problem: :class:`JointPoseProblem`.  fix_joints: keep joint centres and axes (poses only).
     Returns ``(model, poses, log)`` with log the objective after every accepted step (never increasing).
     Damping ``μ (diag H_data + ε)`` (:class:`Damping`).  damping: a :class:`Damping` to start from
-    (μ = mu if None), updated in place.  Measured on MakeHuman (19 parts, 30 scans, the first two main
+    (μ = mu if None), updated in place.  value: the problem's value at (model, poses) if the caller
+    knows it (else computed).  Measured on MakeHuman (19 parts, 30 scans, the first two main
     rounds): every call starting at μ = 1e-3 with ÷3 / ×4 took 15 objective evaluations for 6 iterations
     (the first steps of a call overshooting to 2-3x E), ending at E 28.789 / 26.276; carrying μ over
     with ÷3 / ×4: 12, 28.789 / 26.238; with the gain-ratio decrease: 9, 28.815 / 26.210.  Nielsen's
@@ -408,7 +409,8 @@ def optimise_joints_and_poses(model, poses, problem, iterations=10, mu=1e-3, ste
     (:func:`jacobians.single_blas_thread`)."""
     damping = Damping(mu) if damping is None else damping
     with single_blas_thread():
-        return _levenberg_marquardt(model, poses, problem, iterations, damping, step_tol, progress, fix_joints)
+        return _levenberg_marquardt(model, poses, problem, iterations, damping, step_tol, progress, fix_joints,
+                                    value)
 
 
 def _predicted_decrease(H_ss, H_so, H_oo, g_s, g_o, x_s, x_o):
@@ -422,11 +424,11 @@ def _predicted_decrease(H_ss, H_so, H_oo, g_s, g_o, x_s, x_o):
     return -2.0 * linear - xHx
 
 
-def _levenberg_marquardt(model, poses, problem, iterations, damping, step_tol, progress, fix_joints):
-    """The iterations of :func:`optimise_joints_and_poses`."""
+def _levenberg_marquardt(model, poses, problem, iterations, damping, step_tol, progress, fix_joints, E):
+    """The iterations of :func:`optimise_joints_and_poses` (E: the value at the start, or None)."""
     st = _Structure(model, problem.objective, fix_joints)           # anchors and weights stay fixed
     n_s, _ = sizes(model.skeleton.num_bones)
-    E = problem.value(model, poses, st.groups)
+    E = problem.value(model, poses, st.groups) if E is None else float(E)
     log = []
     for it in range(iterations):
         H_ss, H_so, H_oo, g_s, g_o = gauss_newton_blocks(model, poses, problem.objective, own_only=fix_joints,

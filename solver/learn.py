@@ -232,25 +232,25 @@ class Settings:
         return self.shape_solvers[alpha]
 
 
-def alternation_round(model, poses, problem, scans, settings, fix_joints, timings, progress=None):
+def alternation_round(model, poses, problem, scans, settings, fix_joints, timings, progress=None, E=None):
     """One round of steps (a) joints + poses, (b) weights, (c) rest vertices for the objective of
     ``problem`` (:class:`JointPoseProblem`); each step is kept only if ``E = Q + λ Q_sym + κ Q_prior`` does
     not increase.  Once the BCD's joint move has been rejected at this α it is not tried again in later
     rounds (``settings.joint_move``): late in the alternation it never gains (MakeHuman, 19 parts: rejected
     at its first try in every round at α = 100, ~0.9 s each).
+    E: the problem's value at (model, poses) if known (computed otherwise).
     Returns ``(model, poses, [(step, E), ...])``; ``timings`` (dict of seconds per step) is added to."""
     objective = problem.objective
     sub = (lambda lo, hi, off=0.0: _sub_progress(progress, lo, hi, off))
     log = []
     t0 = time.perf_counter()
-    E = problem.value(model, poses)
     model, poses, gn_log = optimise_joints_and_poses(
         model, poses, problem, iterations=settings.gn_iterations, progress=sub(0.0, 1 / 3),
-        fix_joints=fix_joints, damping=settings.damping.setdefault(objective.alpha, Damping()))
+        fix_joints=fix_joints, damping=settings.damping.setdefault(objective.alpha, Damping()), value=E)
     timings["joints_and_poses"] += time.perf_counter() - t0
-    E = gn_log[-1] if gn_log else E
+    E = gn_log[-1] if gn_log else problem.value(model, poses) if E is None else E
     log.append(("joints_and_poses", float(E)))
-    sym_term = E - objective.value(hybrid_skin(model, poses))
+    sym_term = problem.shared_value(model.skeleton)           # E − Q: the terms of the skeleton alone
     t0 = time.perf_counter()
     model, w_log, settings.joint_move[objective.alpha] = optimise_weights(
         model, poses, objective, max_sweeps=settings.bcd_sweeps, steps=settings.bcd_steps,
@@ -406,7 +406,7 @@ def _learn_rig(scans, faces, parts, alpha, symmetry, max_iterations, seed, initi
         r = len(warm) + it
         model, poses, steps = alternation_round(model, poses, problem, scans, settings,
                                                 r < joint_warmup_rounds, timings,
-                                                _sub_progress(progress, *span(r)))
+                                                _sub_progress(progress, *span(r)), E)
         log += steps
         E = steps[-1][1]
         if progress is not None:

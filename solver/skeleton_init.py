@@ -49,6 +49,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import minimum_spanning_tree, shortest_path
 from scipy.spatial import cKDTree
 
+from . import parallel
 from .errors import ArticulaInputError
 from .laplacian import edges_of
 from .model import Skeleton, frames_from_bones
@@ -285,12 +286,14 @@ def pair_votes(shapes, labels, k):
     plane of every shape, each mutual pair of :func:`mirror_pairs` gets one vote for its (left, right)
     order.  Returns ``{(left, right): votes}`` (part indices).  A posed scan is symmetric only in parts
     (the trunk, a limb pair held alike), so different scans reveal different pairs."""
+    def pairs_of(pts):                     # one shape per solver thread (the k-d tree searches overlap)
+        return [pair for plane in symmetry_planes(pts) for pair in mirror_pairs(pts, labels, k, plane)]
+
     votes = {}
-    for pts in shapes:
-        for plane in symmetry_planes(pts):
-            for pair in mirror_pairs(pts, labels, k, plane):
-                key = (int(pair[0]), int(pair[1]))
-                votes[key] = votes.get(key, 0) + 1
+    for pairs in parallel.map_pieces(pairs_of, shapes):
+        for pair in pairs:
+            key = (int(pair[0]), int(pair[1]))
+            votes[key] = votes.get(key, 0) + 1
     return votes
 
 
