@@ -365,3 +365,30 @@ def test_pruned_steps_stay_close_to_all_steps():
     _, full, _ = optimise_weights(start, poses, obj, max_sweeps=4, prune_steps=False)
     assert all(b < a for a, b in zip(pruned, pruned[1:]))
     assert abs(pruned[-1] - full[-1]) <= 1e-3 * full[-1]
+
+
+def test_single_child_twists_at_forks_equal_hybrid_skin():
+    """At an anchor with several children, candidates with twist weight (0 … 1) on one child only equal
+    hybrid_skin, also for twists beyond 180° (canonical twist quaternions: a lone child is never
+    flipped by the running hemisphere rule)."""
+    from articula.solver import synthetic
+    from articula.solver.model import Poses
+    from articula.solver.rotations import rotvec_to_quat
+    sk = synthetic.human_skeleton()
+    model = synthetic.random_model(200, seed=4)
+    fork = next(a for a in range(sk.num_bones) if len(sk.children(a)) >= 2)
+    kids = sk.children(fork)
+    r = np.zeros((4, sk.num_bones, 3))
+    r[:, kids[0], 1] = np.radians([0.0, 150.0, 250.0, -300.0])
+    r[3] += 0.2 * np.random.default_rng(3).normal(size=(sk.num_bones, 3))
+    poses = Poses(rotvec_to_quat(r), np.zeros((4, 3)), np.ones(4))
+    sel = np.flatnonzero(model.anchor == fork)
+    wt = np.zeros_like(model.twist_weights)
+    wt[sel, kids[0]] = np.linspace(0.0, 1.0, len(sel))               # includes 0 and 1
+    model = Model(model.rest_vertices, model.faces, sk, model.anchor, wt, model.swing_weights)
+    table = _children_table(sk.parents)[model.anchor]
+    base, G = CandidateSkin(sk, poses).base_and_columns(model.rest_vertices, model.anchor,
+                                                        wt.astype(np.float64), table)
+    ws = np.where(table >= 0, model.swing_weights[np.arange(model.num_vertices)[:, None], np.maximum(table, 0)], 0)
+    ref = hybrid_skin(model, poses)
+    assert np.abs(base + np.einsum("mvik,vk->mvi", G, ws) - ref).max() <= 1e-12 * np.abs(ref).max()
