@@ -266,6 +266,17 @@ def test_solve_small_equals_lapack():
         assert np.abs(solve_small(A, B) - ref).max() <= 1e-9 * np.abs(ref).max()
 
 
+def _assert_candidate_skin_is_hybrid_skin(model, poses):
+    """The candidate skin of the model's own anchors, twist and swing weights equals hybrid_skin (1e-12)."""
+    sk = model.skeleton
+    table = _children_table(sk.parents)[model.anchor]
+    base, G = CandidateSkin(sk, poses).base_and_columns(model.rest_vertices, model.anchor,
+                                                        model.twist_weights.astype(np.float64), table)
+    ws = np.where(table >= 0, model.swing_weights[np.arange(model.num_vertices)[:, None], np.maximum(table, 0)], 0)
+    ref = hybrid_skin(model, poses)
+    assert np.abs(base + np.einsum("mvik,vk->mvi", G, ws) - ref).max() <= 1e-12 * np.abs(ref).max()
+
+
 def test_candidate_skin_follows_the_running_hemisphere_rule():
     """Opposing 170° twists of two children of one anchor (as in test_skinning): hybrid_skin flips one
     twist quaternion; the candidate skin (component-wise blend with the same rule) matches it to 1e-12.
@@ -288,12 +299,7 @@ def test_candidate_skin_follows_the_running_hemisphere_rule():
     wt[sel, kids[0]], wt[sel, kids[1]] = 0.4, np.linspace(0.1, 0.6, len(sel))
     model = Model(model.rest_vertices, model.faces, sk, model.anchor, wt, model.swing_weights)
     assert twist_flips(model, poses)[0, sel].any()
-    table = _children_table(sk.parents)[model.anchor]
-    base, G = CandidateSkin(sk, poses).base_and_columns(model.rest_vertices, model.anchor,
-                                                        wt.astype(np.float64), table)
-    ws = np.where(table >= 0, model.swing_weights[np.arange(model.num_vertices)[:, None], np.maximum(table, 0)], 0)
-    ref = hybrid_skin(model, poses)
-    assert np.abs(base + np.einsum("mvik,vk->mvi", G, ws) - ref).max() <= 1e-12 * np.abs(ref).max()
+    _assert_candidate_skin_is_hybrid_skin(model, poses)
 
 
 def _noisy_problem(M=5, seed=3):
@@ -386,9 +392,4 @@ def test_single_child_twists_at_forks_equal_hybrid_skin():
     wt = np.zeros_like(model.twist_weights)
     wt[sel, kids[0]] = np.linspace(0.0, 1.0, len(sel))               # includes 0 and 1
     model = Model(model.rest_vertices, model.faces, sk, model.anchor, wt, model.swing_weights)
-    table = _children_table(sk.parents)[model.anchor]
-    base, G = CandidateSkin(sk, poses).base_and_columns(model.rest_vertices, model.anchor,
-                                                        wt.astype(np.float64), table)
-    ws = np.where(table >= 0, model.swing_weights[np.arange(model.num_vertices)[:, None], np.maximum(table, 0)], 0)
-    ref = hybrid_skin(model, poses)
-    assert np.abs(base + np.einsum("mvik,vk->mvi", G, ws) - ref).max() <= 1e-12 * np.abs(ref).max()
+    _assert_candidate_skin_is_hybrid_skin(model, poses)
