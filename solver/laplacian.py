@@ -10,12 +10,17 @@ from scipy.sparse.csgraph import connected_components
 
 
 def edges_of(faces):
-    """Unique undirected edges ``(E,2)`` int64 (``i < j``) of triangles ``faces (F,3)``."""
+    """Unique undirected edges ``(E,2)`` int64 (``i < j``) of triangles ``faces (F,3)``, in lexicographic
+    order (unique codes ``i·n + j``: 1-D, several times faster than ``np.unique(axis=0)``)."""
     f = np.asarray(faces, dtype=np.int64)
     e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]], axis=0)
     e = np.sort(e, axis=1)
     e = e[e[:, 0] != e[:, 1]]
-    return np.unique(e, axis=0)
+    if len(e) == 0:
+        return e.reshape(0, 2)
+    n = int(e.max()) + 1
+    code = np.unique(e[:, 0] * n + e[:, 1])
+    return np.stack([code // n, code % n], axis=1)
 
 
 def adjacency(faces, n_vertices):
