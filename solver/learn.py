@@ -215,54 +215,62 @@ def _sub_progress(progress, lo, hi, offset=0.0):
 
 
 @dataclass
+class AlphaState:
+    """What the rounds at one α carry from round to round: the rest-vertex preconditioner (factored once),
+    the LM damping, and whether the BCD's joint move is still tried."""
+    shape: ShapePreconditioner
+    damping: Damping = field(default_factory=Damping)
+    joint_move: bool = True
+
+
+@dataclass
 class Settings:
-    """Inner-step settings of one alternation round (see :func:`learn_rig` for their meaning)."""
+    """Inner-step settings of one alternation round (see :func:`learn_rig` for their meaning), the mesh's
+    BCD graph and the per-α state (:meth:`at`)."""
     gn_iterations: int = 3
     bcd_sweeps: int = 3
     bcd_steps: tuple = (0.2, 0.1, 0.05, 0.02)
     graph: object = None        # the mesh's weights_bcd.TwoRing, built once
-    joint_move: dict = field(default_factory=dict)   # α -> False once the BCD's joint move was rejected
-    shape_solvers: dict = field(default_factory=dict)   # α -> rest_shape.ShapePreconditioner
-    damping: dict = field(default_factory=dict)         # α -> joint_pose_gn.Damping, carried across rounds
+    states: dict = field(default_factory=dict)          # α -> AlphaState
 
-    def shape_solver(self, L, alpha):
-        """The rest-vertex preconditioner for this mesh's L and α (factored at the first use)."""
-        if alpha not in self.shape_solvers:
-            self.shape_solvers[alpha] = ShapePreconditioner(L, alpha)
-        return self.shape_solvers[alpha]
+    def at(self, objective):
+        """The :class:`AlphaState` of ``objective``'s α (made at the first use)."""
+        if objective.alpha not in self.states:
+            self.states[objective.alpha] = AlphaState(ShapePreconditioner(objective.L, objective.alpha))
+        return self.states[objective.alpha]
 
 
 def alternation_round(model, poses, problem, scans, settings, fix_joints, timings, progress=None, E=None):
     """One round of steps (a) joints + poses, (b) weights, (c) rest vertices for the objective of
     ``problem`` (:class:`JointPoseProblem`); each step is kept only if ``E = Q + λ Q_sym + κ Q_prior`` does
     not increase.  Once the BCD's joint move has been rejected at this α it is not tried again in later
-    rounds (``settings.joint_move``): late in the alternation it never gains (MakeHuman, 19 parts: rejected
+    rounds (:class:`AlphaState`): late in the alternation it never gains (MakeHuman, 19 parts: rejected
     at its first try in every round at α = 100, ~0.9 s each).
     E: the problem's value at (model, poses) if known (computed otherwise).
     Returns ``(model, poses, [(step, E), ...])``; ``timings`` (dict of seconds per step) is added to."""
     objective = problem.objective
+    state = settings.at(objective)
     sub = (lambda lo, hi, off=0.0: _sub_progress(progress, lo, hi, off))
     log = []
     t0 = time.perf_counter()
+    E = problem.value(model, poses) if E is None else E
     model, poses, gn_log = optimise_joints_and_poses(
         model, poses, problem, iterations=settings.gn_iterations, progress=sub(0.0, 1 / 3),
-        fix_joints=fix_joints, damping=settings.damping.setdefault(objective.alpha, Damping()), value=E)
+        fix_joints=fix_joints, damping=state.damping, value=E)
     timings["joints_and_poses"] += time.perf_counter() - t0
-    E = gn_log[-1] if gn_log else problem.value(model, poses) if E is None else E
+    E = gn_log[-1] if gn_log else E
     log.append(("joints_and_poses", float(E)))
     sym_term = problem.shared_value(model.skeleton)           # E − Q: the terms of the skeleton alone
     t0 = time.perf_counter()
-    model, w_log, settings.joint_move[objective.alpha] = optimise_weights(
+    model, w_log, state.joint_move = optimise_weights(
         model, poses, objective, max_sweeps=settings.bcd_sweeps, steps=settings.bcd_steps,
-        progress=sub(1 / 3, 2 / 3, sym_term), jacobi=settings.joint_move.get(objective.alpha, True),
-        graph=settings.graph)
+        progress=sub(1 / 3, 2 / 3, sym_term), jacobi=state.joint_move, graph=settings.graph)
     timings["weights"] += time.perf_counter() - t0
     E = min(E, w_log[-1] + sym_term) if w_log else E
     log.append(("weights", float(E)))
     t0 = time.perf_counter()
     trial = copy.copy(model)
-    trial.rest_vertices = solve_rest_vertices(model, poses, scans, objective.L, objective.alpha,
-                                              settings.shape_solver(objective.L, objective.alpha))
+    trial.rest_vertices = solve_rest_vertices(model, poses, scans, objective.L, objective.alpha, state.shape)
     E_trial = objective.value(hybrid_skin(trial, poses)) + sym_term
     if E_trial <= E:
         model, E = trial, E_trial

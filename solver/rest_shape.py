@@ -115,7 +115,6 @@ class ShapePreconditioner:
     def __init__(self, L, alpha):
         L = sp.csr_matrix(L)
         K = (sp.identity(L.shape[0], format="csc") + float(alpha) * (L.T @ L)).tocsc()
-        self.alpha = float(alpha)
         self.K_diag = K.diagonal()
         self.lu = spla.splu(K, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                             options=dict(SymmetricMode=True))

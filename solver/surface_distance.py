@@ -287,11 +287,8 @@ def per_vertex_scan_distances(points, surfaces, faces):
     def batches(starts):                                # a piece of batches per solver thread
         for m0 in starts:
             sl = slice(m0, min(M, m0 + per_batch))
-            if sl.stop - sl.start == 1:
-                out[m0] = distance_to_surface(points[m0], surfaces[m0], faces)
-            else:
-                out[sl] = distance_to_surface(*_side_by_side(points[sl], surfaces[sl], faces, spacing)
-                                              ).reshape(sl.stop - sl.start, N)
+            out[sl] = distance_to_surface(*_side_by_side(points[sl], surfaces[sl], faces, spacing)
+                                          ).reshape(sl.stop - sl.start, N)
 
     starts = np.arange(0, M, per_batch)
     parallel.map_pieces(batches, [starts[idx] for idx in parallel.split(len(starts))])
