@@ -507,7 +507,8 @@ def section_dembones(args, tmp, have_learner, why, failures, db_py, first_mh, ou
             if every_scan:
                 what += ", learned from every scan"
                 options["key_scans"] = None
-            got = learn_or_fail((have_learner, why, failures), f"dem_bones {bones} alpha {alpha:g}",
+            label = f"dem_bones {bones} alpha {alpha:g}" + (" every scan" if every_scan else "")
+            got = learn_or_fail((have_learner, why, failures), label,
                                 f"   {bones:2d} parts  {what}", frames, tris, bones, tmp, options)
             if got is not None:
                 model, poses, meas = got
