@@ -2,9 +2,10 @@
 
     ./run bench learn_speed                          # 13,380 v x 30 scans, 19 parts, default rounds
     ./run bench learn_speed --frames 10 --iterations 3 --gn-iterations 3 --bcd-sweeps 3
+    ./run bench learn_speed --rig game_engine --shape male,thin --skin lbs
 
 Data: ``sample_scenes.registered.posed_sequence(rig="cmu_mb", shape="female", n_poses=N, motion="rom",
-skin="hybrid", seed=0)``.  Prints the time of every stage (``report["timings_s"]``), total wall and process
+skin="hybrid", seed=0)`` (rig, shape and skin selectable: the cases of ``bench learn``).  Prints the time of every stage (``report["timings_s"]``), total wall and process
 CPU time, the peak resident memory of the process (``resource.getrusage``, includes the data) and the
 training error (mean scan-vertex-to-posed-surface distance, mm) so that speed never silently buys worse
 accuracy.  Unit of work measured in the same run: one ``hybrid_skin`` evaluation of all scans with the
@@ -37,12 +38,15 @@ def main(argv=None) -> int:
     ap.add_argument("--gn-iterations", type=int, default=None)
     ap.add_argument("--bcd-sweeps", type=int, default=None)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--rig", default="cmu_mb", help="MakeHuman skeleton: cmu_mb or game_engine")
+    ap.add_argument("--shape", default="female", help="MakeHuman shape, e.g. female, male,thin")
+    ap.add_argument("--skin", default="hybrid", help="skin that poses the scans: hybrid or lbs")
     args = ap.parse_args(argv)
 
     from articula.sample_scenes.registered import posed_sequence
     t0 = time.perf_counter()
-    verts, faces, _ = posed_sequence(rig="cmu_mb", shape="female", n_poses=args.frames, motion="rom",
-                                     skin="hybrid", seed=args.seed)
+    verts, faces, _ = posed_sequence(rig=args.rig, shape=args.shape, n_poses=args.frames, motion="rom",
+                                     skin=args.skin, seed=args.seed)
     verts = np.asarray(verts, dtype=np.float64)
     _common.report("data", f"{verts.shape[0]} scans x {verts.shape[1]} vertices", "",
                    f"generated in {time.perf_counter() - t0:.1f}s; peak RSS so far {_peak_rss_gib():.2f} GiB")

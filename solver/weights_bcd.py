@@ -7,7 +7,8 @@ term and the Laplacian rows that contain it (its own and its one-ring's).  Compl
 ``g_v = (s_v − α[(Lᵀ r)_v − (Σ_n L[n,v]²) p_v]) / κ_v`` (r = L p − L s, the current Laplacian residuals),
 so the exact gain of moving vertex v alone from p to p' is ``κ_v Σ_m (‖p_m − g_m‖² − ‖p'_m − g_m‖²)``.
 
-Candidates for the twist weights (δ ∈ ``steps``, default 0.2, 0.1, 0.05, 0.02):
+Candidates for the twist weights (δ ∈ ``steps``, default 0.2, 0.1, 0.05, 0.02; the larger ones only where
+the smallest gains, see "Coarse-to-fine steps" below):
 * stay (only the swing weights are re-solved);
 * slide along the chain: ``w_c ± δ`` for each child c of the anchor (clipped to [0,1], sum ≤ 1; the
   neutral remainder absorbs the change);
@@ -37,9 +38,20 @@ quarter) only if the exactly recomputed Q decreases.  Measured on the tube body 
 tried again in the same :func:`optimise_weights` call: late in the alternation it never gains (MakeHuman,
 19 parts: rejected at the first try from the third call on, 1.1 s of a 2.6 s sweep; same objective log).
 
+Coarse-to-fine steps (not in the spec; :func:`evaluate`): each vertex is first offered every move with the
+smallest step (and the moves without a step); the larger steps are offered only along the directions
+(a child's weight up or down, a fork pair, backward, forward onto a grandchild: :func:`candidates`) whose
+smallest step gains.  A direction whose small step loses is thus never tried at 0.2, which the smooth
+dependence of Q on one twist weight makes rare to matter.  Measured on captured calls of MakeHuman
+game_engine female,heavy hybrid (19 parts; its learned root has 4 children and anchors 5,591 of the 13,380
+vertices, whose candidates are 63 % of all), old and new in the same session, one solver thread: a main
+round (α = 100, 3 sweeps) 5.4-5.5 → 3.7-3.9 s with the same Q log (29.266796); the first warm-start round
+(from binary weights) 9.5-10.3 → 5.2-5.7 s, Q 21.740106 → 21.740555 (+2e-5 relative).
+
 Step pruning (not in the spec): within one :func:`optimise_weights` call, a step δ that won fewer than
 ``STEP_MIN_SHARE`` (1 %) of a sweep's twist-changing moves is not offered in the following sweeps (the
-smallest step always is).  Measured on MakeHuman (19 parts, the second main round at α = 100, 3 sweeps):
+smallest step always is; with the coarse-to-fine evaluation a pruned step is not widened to).  The
+measurement below predates the coarse-to-fine steps.  Measured on MakeHuman (19 parts, the second main round at α = 100, 3 sweeps):
 of 37,400 applied moves 34,253 only re-solved the swing weights, 1,752 moved a twist weight by 0.02,
 77 by 0.05, 9 by 0.1 and 7 by 0.2 (1,292 changed the anchor); with pruning the call took 3.1 instead of
 3.9-4.2 s and ended at Q 25.621951 instead of 25.621874.  From binary weights (the first warm-start
@@ -348,8 +360,11 @@ def _children_table(parents):
 def candidates(anchor, twist, parents, steps=STEPS):
     """Twist-weight candidates of a set of vertices.
 
-    anchor (n,), twist (n,B) float64.  Yields ``(anchor' (n,), twist' (n,B), valid (n,) bool)`` per
-    candidate slot (see the module doc for the moves)."""
+    anchor (n,), twist (n,B) float64.  Yields ``(anchor' (n,), twist' (n,B), valid (n,) bool, direction)``
+    per candidate slot (see the module doc for the moves).  direction (int) names the move without its
+    step δ — the same for ``w_c + 0.02`` and ``w_c + 0.2`` — and is −1 for the moves that have no step
+    (stay, the re-expressions backward and forward at weight 1); :func:`evaluate` widens the steps along
+    the directions whose smallest step gains."""
     n, B = twist.shape
     kids = _children_table(parents)
     K = kids.shape[1]
@@ -357,56 +372,72 @@ def candidates(anchor, twist, parents, steps=STEPS):
     ck = kids[anchor]                                            # (n,K) children of the anchor
     cur = np.where(ck >= 0, twist[rows[:, None], np.maximum(ck, 0)], 0.0)
     total = cur.sum(axis=1)
-    yield anchor, twist, np.ones(n, dtype=bool)                  # stay: swing only
+    yield anchor, twist, np.ones(n, dtype=bool), -1              # stay: swing only
+    direction = itertools.count()
     for j in range(K):
         c = ck[:, j]
-        for d in steps:
-            for sign in (1.0, -1.0):
+        for sign in (1.0, -1.0):
+            way = next(direction)
+            for d in steps:
                 new = np.clip(cur[:, j] + sign * d, 0.0, 1.0)
                 valid = (c >= 0) & (new != cur[:, j]) & (total - cur[:, j] + new <= 1.0 + 1e-9)
                 tw = twist.copy()
                 tw[rows[valid], c[valid]] = new[valid]
-                yield anchor, tw, valid
+                yield anchor, tw, valid, way
     for j, j2 in itertools.permutations(range(K), 2):
         c, c2 = ck[:, j], ck[:, j2]
+        way = next(direction)
         for d in steps:
             amount = np.minimum(d, np.minimum(cur[:, j], 1.0 - cur[:, j2]))
             valid = (c >= 0) & (c2 >= 0) & (amount > 0)
             tw = twist.copy()
             tw[rows[valid], c[valid]] -= amount[valid]
             tw[rows[valid], c2[valid]] += amount[valid]
-            yield anchor, tw, valid
+            yield anchor, tw, valid, way
     par = parents[anchor]
     back_ok = (par >= 0) & (total == 0)
+    way = next(direction)
     for d in (0.0,) + tuple(steps):
         tw = np.zeros_like(twist)
         tw[rows[back_ok], anchor[back_ok]] = 1.0 - d
-        yield np.where(back_ok, par, anchor), tw, back_ok.copy()
+        yield np.where(back_ok, par, anchor), tw, back_ok.copy(), way if d else -1
     full = cur >= 1.0 - 1e-6
     fwd_ok = full.any(axis=1)
     target = np.where(fwd_ok, ck[rows, np.argmax(full, axis=1)], anchor)
-    yield target, np.zeros_like(twist), fwd_ok.copy()
+    yield target, np.zeros_like(twist), fwd_ok.copy(), -1
     gk = kids[target]
     for j in range(K):
+        way = next(direction)
         for d in steps:
             valid = fwd_ok & (gk[:, j] >= 0)
             tw = np.zeros_like(twist)
             tw[rows[valid], gk[valid, j]] = d
-            yield target, tw, valid
+            yield target, tw, valid, way
 
 
 # ----------------------------------------------------------------------------- candidate list
 
 def _candidate_list(anchor, twist, parents, steps=STEPS):
     """All valid candidates of a set of n vertices, flattened: ``(v (c,) index into the set, anchor (c,),
-    twist (c,B) float32)`` (the weights are stored as float32, so candidates are evaluated as such)."""
-    cv, ca, ct = [], [], []
-    for a, tw, valid in candidates(anchor, twist.astype(np.float64), parents, steps):
+    twist (c,B) float32, direction (c,))`` (see :func:`candidates`; the weights are stored as float32, so
+    candidates are evaluated as such)."""
+    cv, ca, ct, cd = [], [], [], []
+    for a, tw, valid, way in candidates(anchor, twist.astype(np.float64), parents, steps):
         sel = np.flatnonzero(valid)
         cv.append(sel)
         ca.append(a[sel])
         ct.append(tw[sel])
-    return np.concatenate(cv), np.concatenate(ca), np.concatenate(ct).astype(np.float32)
+        cd.append(np.full(len(sel), way))
+    return np.concatenate(cv), np.concatenate(ca), np.concatenate(ct).astype(np.float32), np.concatenate(cd)
+
+
+def _widened(anchor, twist, parents, v, way, steps):
+    """The candidates with the larger ``steps`` along the directions ``way (r,)`` of the vertices
+    ``v (r,)`` (indices into ``anchor (n,)``, ``twist (n,B)``; a vertex may appear once per direction).
+    Returns ``(v, anchor, twist f32)`` of :func:`_candidate_list`'s layout."""
+    rv, ra, rt, rd = _candidate_list(anchor[v], twist[v], parents, steps)
+    keep = rd == way[rv]
+    return v[rv[keep]], ra[keep], rt[keep]
 
 
 def _by_label(labels, block=None):
@@ -723,20 +754,31 @@ def evaluate(model, skin, state, idx, steps=STEPS):
     """Best candidate of each vertex in idx: ``(gain (n,), anchor (n,), twist (n,B) f32, swing (n,B) f32,
     posed (n,M,3))``; gain 0 and the current state where nothing improves.  skin: :class:`CandidateSkin`.
 
-    Two passes: all candidates of all vertices are screened from their normal equations (one skinning
-    evaluation and one QP call per candidate anchor, :func:`_screen`); each vertex's best is then posed
-    with its float32-stored weights (:func:`_exact`) and taken only if that exact gain is positive, so
-    the reported gains are exactly the changes of Q."""
+    Candidates are screened from their normal equations (one skinning evaluation and one QP call per
+    candidate anchor, :func:`_screen`) coarse-to-fine in the step: first every move with the smallest
+    step of ``steps`` (and the moves without a step), then the larger steps only along the directions
+    (:func:`candidates`) whose smallest step gains.  Each vertex's best is then posed with its
+    float32-stored weights (:func:`_exact`) and taken only if that exact gain is positive, so the
+    reported gains are exactly the changes of Q."""
     g = state.targets(idx)
     kap = state.kappa[idx]
     p_cur = state.Pv[idx]
     f_cur = kap * np.einsum("nmi,nmi->n", p_cur - g, p_cur - g)
     best = (np.zeros(len(idx)), model.anchor[idx].copy(), model.twist_weights[idx].copy(),
             model.swing_weights[idx].copy(), p_cur.copy())
-    v, a, tw = _candidate_list(model.anchor[idx], model.twist_weights[idx], model.skeleton.parents, steps)
+    anchor, twist, parents = model.anchor[idx], model.twist_weights[idx], model.skeleton.parents
+    smallest = min(steps)
+    v, a, tw, way = _candidate_list(anchor, twist, parents, (smallest,))
     gT = np.ascontiguousarray(g.transpose(1, 2, 0))                           # (M,3,n)
     x = model.rest_vertices[idx]
     gain, W = _screen(skin, x, gT, kap, f_cur, v, a, tw)
+    larger = tuple(d for d in steps if d > smallest)
+    grow = np.flatnonzero((way >= 0) & (gain > 0))
+    if larger and len(grow):
+        v2, a2, tw2 = _widened(anchor, twist, parents, v[grow], way[grow], larger)
+        gain2, W2 = _screen(skin, x, gT, kap, f_cur, v2, a2, tw2)
+        v, a, tw = np.concatenate([v, v2]), np.concatenate([a, a2]), np.concatenate([tw, tw2])
+        gain, W = np.concatenate([gain, gain2]), np.concatenate([W, W2])
     first = _best_per_vertex(v, gain)
     vf = v[first]
     gain, p = _exact(skin, x[vf], np.take(gT, vf, axis=2), kap[vf], f_cur[vf], a[first], tw[first], W[first])

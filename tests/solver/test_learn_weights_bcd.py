@@ -132,7 +132,7 @@ def test_candidates_respect_bounds_and_anchor_rule():
     child = sk.child_matrix()
     model.twist_weights[np.flatnonzero(model.twist_weights[:, 3] > 0)[:3], 3] = 1.0   # "forward" applies
     n_back = n_fwd = 0
-    for anchor, tw, valid in candidates(model.anchor, model.twist_weights.astype(np.float64), sk.parents):
+    for anchor, tw, valid, _ in candidates(model.anchor, model.twist_weights.astype(np.float64), sk.parents):
         t = tw[valid]
         assert np.all(t >= 0) and np.all(t <= 1) and np.all(t.sum(1) <= 1 + 1e-9)
         assert not np.any((t != 0) & ~child[anchor[valid]])
@@ -215,7 +215,7 @@ def test_candidate_evaluation_equals_hybrid_skin_for_every_candidate():
     skin = CandidateSkin(sk, poses)
     rng = np.random.default_rng(2)
     tried = 0
-    for anchor, tw, valid in candidates(model.anchor, model.twist_weights.astype(np.float64), sk.parents):
+    for anchor, tw, valid, _ in candidates(model.anchor, model.twist_weights.astype(np.float64), sk.parents):
         if not valid.any():
             continue
         kids = kids_table[anchor]
@@ -345,6 +345,56 @@ def test_tracker_skips_only_vertices_without_improving_candidates():
     assert np.allclose(tracker.proposal[0][cached], g, rtol=1e-9, atol=1e-15)
     moving = cached[g > 0]
     assert np.allclose(tracker.proposal[4][moving], p[g > 0], atol=1e-12)
+
+
+def test_directions_name_moves_independently_of_the_step():
+    """A candidate slot's direction is the same at every step δ and distinct between moves: the slots
+    of steps (0.2,) and (0.05,) pair up one to one, and stepless slots (stay, re-expressions) are −1."""
+    model, _, _ = hybrid_truth(2)
+    sk = model.skeleton
+    model.twist_weights[np.flatnonzero(model.twist_weights[:, 3] > 0)[:3], 3] = 1.0   # "forward" applies
+    tw64 = model.twist_weights.astype(np.float64)
+    big = [way for *_, way in candidates(model.anchor, tw64, sk.parents, (0.2,))]
+    small = [way for *_, way in candidates(model.anchor, tw64, sk.parents, (0.05,))]
+    assert big == small
+    stepped = [w for w in big if w >= 0]
+    assert len(stepped) == len(set(stepped)) and big.count(-1) == 3      # stay, backward at 1, forward at 0
+
+
+def _screen_all(model, skin, state, idx, steps):
+    """Reference for evaluate's screening: every candidate of every step, each vertex's best screened
+    gain ``(n,)`` (0 where none gains)."""
+    from articula.solver.weights_bcd import _candidate_list, _screen
+    g = state.targets(idx)
+    kap = state.kappa[idx]
+    d = state.Pv[idx] - g
+    f_cur = kap * np.einsum("nmi,nmi->n", d, d)
+    v, a, tw, _ = _candidate_list(model.anchor[idx], model.twist_weights[idx], model.skeleton.parents, steps)
+    gain, _ = _screen(skin, model.rest_vertices[idx], np.ascontiguousarray(g.transpose(1, 2, 0)), kap, f_cur,
+                      v, a, tw)
+    best = np.zeros(len(idx))
+    np.maximum.at(best, v, gain)
+    return best
+
+
+def test_coarse_to_fine_steps_lie_between_smallest_step_and_all_steps():
+    """evaluate (smallest step everywhere, larger steps along the gaining directions) gains at least what
+    the smallest step alone gains, more on some vertices (the widening is used), at most what every step
+    gains (screened, brute force over all candidates) and on most vertices exactly that."""
+    from articula.solver.weights_bcd import _setup, _sweep, evaluate
+    start, poses, obj = _noisy_problem()
+    model, state, skin, Q, graph, tracker = _setup(start, poses, obj)
+    for _ in range(2):                                    # interior twist weights: every move kind occurs
+        Q, _ = _sweep(model, skin, state, obj, graph.classes, tracker, Q)
+    idx = np.arange(model.num_vertices)
+    steps = (0.2, 0.1, 0.05, 0.02)
+    coarse = evaluate(model, skin, state, idx, steps)[0]
+    tol = 1e-9 * Q
+    small = _screen_all(model, skin, state, idx, (0.02,))
+    assert np.all(coarse >= small - tol) and (coarse > small + tol).any()
+    full = _screen_all(model, skin, state, idx, steps)
+    assert np.all(coarse <= full + tol)
+    assert np.mean(np.abs(coarse - full) <= tol) > 0.9
 
 
 def test_step_pruning_counts_wins_and_keeps_the_smallest_step():
