@@ -232,40 +232,54 @@ def _groups_for(model, groups):
 def twist_signs(terms, n0, n1, kids, wt):
     """Signs ``(n, V_a, K)`` (±1.0) of the children's twist dual quaternions under the running-sum
     hemisphere rule (module docstring) for frames n0:n1, or None when nothing is flipped (the usual
-    case).  kids (K,) ascending bone indices; wt (V_a, K) twist weights."""
-    Q = terms["twist_dq"][n0:n1][:, kids, :4]                            # (n, K, 4)
+    case).  kids (K,) ascending bone indices; wt (V_a, K) twist weights.
+
+    Child k's test ``⟨q_k, e (1 − Σ w) + Σ_{i<k} s_i w_i q_i⟩ < 0`` (real parts) is evaluated as
+    ``q_k,w (1 − Σ w) + Σ_{i<k} D_ki s_i w_i`` with the per-frame dot products ``D (n, K, K)`` of the
+    children's real parts, so each child costs k passes over ``(n, V_a)`` arrays instead of a 4-vector
+    sum per vertex and frame."""
     if len(kids) < 2:
         return None
-    n, Va, K = len(Q), len(wt), len(kids)
-    total = np.zeros((n, Va, 4))
-    total[..., 0] = 1.0 - wt.sum(axis=1)
-    signs = np.ones((n, Va, K))
-    for k in range(K):
-        q = Q[:, None, k]                                                # (n, 1, 4)
-        flip = (np.einsum("nvi,nvi->nv", np.broadcast_to(q, total.shape), total) < 0) & (wt[None, :, k] > 0)
-        signs[..., k] = np.where(flip, -1.0, 1.0)
-        total += (signs[..., k] * wt[None, :, k])[..., None] * q
-    return signs if (signs < 0).any() else None
+    Q = terms["twist_dq"][n0:n1][:, kids, :4]                            # (n, K, 4)
+    D = np.einsum("nki,nli->nkl", Q, Q)                                  # (n, K, K)
+    rest = 1.0 - wt.sum(axis=1)                                          # (V_a,)
+    signed, signs = [], None                                             # s_k w_k (n, V_a) or (V_a,)
+    for k in range(len(kids)):
+        dot = Q[:, k, 0, None] * rest
+        for i in range(k):
+            dot += D[:, k, i, None] * signed[i]
+        flip = (dot < 0) & (wt[None, :, k] > 0)
+        if flip.any():
+            if signs is None:
+                signs = np.ones(flip.shape + (len(kids),))
+            signs[..., k] = np.where(flip, -1.0, 1.0)
+            signed.append(np.where(flip, -wt[:, k], wt[:, k]))
+        else:
+            signed.append(wt[:, k])
+    return signs
 
 
 def blend_group(terms, n0, n1, a, kids, wt, ws):
     """Blended twist dual quaternions ``(8, n, V_a)`` (un-normalised) and swing∘chain affine maps
     ``(12, n, V_a)`` (row-major 3x4) of one anchor group over frames n0:n1, component-major so each
     component is a contiguous (n, V_a) array.  Twist: ``e + Σ_c w_t,c (Q_c − e)`` (e = identity);
-    swing: ``M_a + Σ_c w_s,c (M_a ∘ Swing_c − M_a)``."""
+    swing: ``M_a + Σ_c w_s,c (M_a ∘ Swing_c − M_a)``.  Where the hemisphere rule flips a child
+    (:func:`twist_signs`), ``e (1 − Σ w) + Σ s w Q`` differs from that by ``−2 w_c Q_c``, added at those
+    (frame, vertex) entries only."""
     chain_a = terms["chain"][n0:n1, a].T[:, :, None]                   # (12, n, 1)
     n, Va = n1 - n0, len(wt)
     if len(kids) == 0:
         tw = np.broadcast_to(DQ_IDENTITY[:, None, None], (8, n, Va))
         return tw, np.broadcast_to(chain_a, (12, n, Va))
+    Q = terms["twist_dq"][n0:n1][:, kids]                                            # (n, K, 8)
+    dt = (Q - DQ_IDENTITY).transpose(2, 0, 1)                                        # (8, n, K)
+    tw = (dt.reshape(8 * n, len(kids)) @ wt.T).reshape(8, n, Va) + DQ_IDENTITY[:, None, None]
     signs = twist_signs(terms, n0, n1, kids, wt)
-    dt = (terms["twist_dq"][n0:n1][:, kids] - DQ_IDENTITY).transpose(2, 0, 1)       # (8, n, K)
-    if signs is None:
-        tw = (dt.reshape(8 * n, len(kids)) @ wt.T).reshape(8, n, Va) + DQ_IDENTITY[:, None, None]
-    else:   # some twists flipped: e (1 − Σ w) + Σ s w Q = e + Σ s w (Q − s e)
-        Q = terms["twist_dq"][n0:n1][:, kids].transpose(2, 0, 1)                     # (8, n, K)
-        sw_ = signs * wt[None]                                                       # (n, V_a, K)
-        tw = np.einsum("ink,nvk->inv", Q, sw_) + DQ_IDENTITY[:, None, None] * (1.0 - wt.sum(axis=1))
+    if signs is not None:
+        for k in range(len(kids)):
+            f, v = np.nonzero(signs[..., k] < 0)
+            if len(f):
+                tw[:, f, v] -= 2.0 * wt[v, k] * Q[f, k].T
     ds = terms["swing_chain"][n0:n1][:, kids] - terms["chain"][n0:n1, a][:, None]   # (n, K, 12)
     sw = (ds.transpose(2, 0, 1).reshape(12 * n, len(kids)) @ ws.T).reshape(12, n, Va) + chain_a
     return tw, sw
