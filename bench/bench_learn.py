@@ -27,12 +27,14 @@ Sections (every number with its unit; the output is also written to ``bench/resu
    Articula) with its default parameters, on its own example ``Bone_Anim`` (400 frames x 754 vertices, rest
    ``Bone_Geom_rest.obj``, whose vertex order equals the frames') at 5, 10 and 20 bones and on the first
    MakeHuman training sequence at our part count, next to ``learn_rig`` with parts = 5 / 10 / 20 / ours.
-   On Bone_Anim ours runs three times per count: with the default α = 100 and with α = 1 (both with the
-   default key scans: learned from 40 of the 400 frames, the other frames' poses fitted with the learned
-   model), and with α = 1 learned from all 400 frames (``key_scans=None``).  Every "ours" row gives wall
+   On Bone_Anim ours runs three times per count: with the defaults (α = 100, joint prior ρ = 0.01) and
+   with α = 1 and no joint prior (both with the default key scans: learned from 40 of the 400 frames, the
+   other frames' poses fitted with the learned model), and with α = 1, no prior, learned from all 400
+   frames (``key_scans=None``).  Every "ours" row gives wall
    time, process CPU time and the solver's thread count (its default: one per core, as Dem Bones' OpenMP).
    RMSE measures the data term alone, which is all Dem Bones minimises; our objective adds α × the Laplacian (local shape) term,
-   so α = 1 is the setting that optimises what the RMSE measures (the shape term still regularises).
+   and the prior holds joints near their initial estimates, so α = 1 without the prior is the setting that
+   optimises what the RMSE measures (the shape term still regularises).
    Dem Bones runs with its OpenMP threads (all cores) and OMP_WAIT_POLICY=PASSIVE (spinning threads made it
    ~10x slower on the shared machine).
    RMSE exactly as Dem Bones defines it (``DemBones::rmse``): sqrt(Σ_frames Σ_vertices ‖x̂ − x‖² / (N·V)),
@@ -502,8 +504,8 @@ def section_dembones(args, tmp, have_learner, why, failures, db_py, first_mh, ou
             except RuntimeError as e:
                 line(f"   {bones:2d} bones  Dem Bones: FAILED - {e}")
         for alpha, every_scan in BONE_ANIM_RUNS:
-            what = f"ours, alpha {alpha:g}" + (" (default)" if alpha == 100 else " (data-fit setting)")
-            options = {"alpha": alpha}
+            what = f"ours, alpha {alpha:g}" + (" (default)" if alpha == 100 else ", no joint prior (data-fit setting)")
+            options = {"alpha": alpha} if alpha == 100 else {"alpha": alpha, "joint_prior": 0.0}
             if every_scan:
                 what += ", learned from every scan"
                 options["key_scans"] = None

@@ -86,7 +86,7 @@ def test_stiff_joint_prior_keeps_the_initial_joints():
     assert all(b <= a * (1 + 1e-12) for a, b in zip(log, log[1:]))
     assert np.abs(res.model.skeleton.heads - start).max() < 1e-6
     free = learn_rig(scans, truth.faces, max_iterations=2, bcd_sweeps=1, gn_iterations=2, joint_warmup_rounds=0,
-                     warm_start=(), **kw)
+                     warm_start=(), joint_prior=0.0, **kw)
     assert np.abs(free.model.skeleton.heads - start).max() > 1e-4
 
 
