@@ -34,6 +34,7 @@ import numpy as np
 from ..solver.bundle import Bundle, save_bundle
 from ..solver.errors import ArticulaInputError
 from ..solver.key_scans import KEY_SCANS
+from ..solver.learn import JOINT_PRIOR
 from ..solver.model import Skeleton
 from ..solver.scan_sequence import list_scan_files, natural_sorted, read_scan_files
 from ..solver.skinning import hybrid_skin
@@ -82,12 +83,13 @@ class LearnOptions:
     initial_skeleton: Skeleton | None = None
     key_scans: int = KEY_SCANS      # learn from at most this many scans, fit the others' poses; 0: all
     workers: int = 0                # solver threads; 0: one per CPU core (the preferences' Threads)
+    joint_prior: float = JOINT_PRIOR  # ρ of the joint-centre prior (solver.learn.learn_rig); 0: none
 
     def solver_kwargs(self) -> dict:
         return dict(parts=self.parts or None, alpha=float(self.alpha), symmetry=bool(self.symmetry),
                     max_iterations=int(self.max_iterations), seed=int(self.seed),
                     initial_skeleton=self.initial_skeleton, key_scans=int(self.key_scans) or None,
-                    workers=int(self.workers))
+                    workers=int(self.workers), joint_prior=float(self.joint_prior))
 
 
 @dataclass
@@ -315,6 +317,7 @@ def report_json(outcome: LearnOutcome) -> dict:
                       "options": {"parts": opts.parts, "alpha": opts.alpha, "symmetry": opts.symmetry,
                                   "max_iterations": opts.max_iterations, "seed": opts.seed,
                                   "key_scans": opts.key_scans, "workers": opts.workers,
+                                  "joint_prior": opts.joint_prior,
                                   "initial_skeleton": opts.initial_skeleton is not None}})
 
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..solver.errors import ArticulaInputError
 from ..solver.key_scans import KEY_SCANS
+from ..solver.learn import JOINT_PRIOR
 from . import jobs, learn
 from .cli import call_operator, save_blend_again
 
@@ -81,7 +82,7 @@ def run(args) -> int:
         learn.check_output_path(path or "")
     paths = _scan_paths(args.scans)
     options = learn.LearnOptions(args.parts, args.alpha, not args.no_symmetry, args.iterations, args.seed,
-                                 key_scans=args.key_scans, workers=args.threads)
+                                 key_scans=args.key_scans, workers=args.threads, joint_prior=args.joint_prior)
     progress = jobs.Progress("learn-rig", echo=True)
     inp = learn.input_from_files(paths, progress)
     outcome = learn.learn(inp, options, progress)
@@ -104,6 +105,10 @@ def add_commands(sub):
     p.add_argument("--parts", type=int, default=0, help="number of body parts (default 0: chosen from the motion)")
     p.add_argument("--alpha", type=float, default=100.0,
                    help="weight of the local-shape (Laplacian) term, dimensionless (default 100)")
+    p.add_argument("--joint-prior", type=float, default=JOINT_PRIOR,
+                   help=f"weight of the prior that keeps joints near their first estimates where the motion "
+                        f"hardly determines them, relative to the data's pull on each joint (default "
+                        f"{JOINT_PRIOR}; 0: none, which with a small --alpha fits the scans most closely)")
     p.add_argument("--no-symmetry", action="store_true", help="do not pair and symmetrise left/right parts")
     p.add_argument("--iterations", type=int, default=4,
                    help="outer rounds of the alternating optimisation after two warm-start rounds (default 4; "

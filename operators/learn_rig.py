@@ -13,6 +13,7 @@ from ..addon import learn, preferences
 from ..addon.jobs import JobOperator
 from ..solver.errors import ArticulaInputError
 from ..solver.key_scans import KEY_SCANS
+from ..solver.learn import JOINT_PRIOR
 
 
 class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
@@ -53,6 +54,11 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
         description="Learn the skeleton, weights and rest mesh from at most this many scans (the most "
                     "different poses) and fit the poses of the other scans with the learned rig: long "
                     "sequences learn in a fraction of the time. 0: learn from every scan")
+    joint_prior: bpy.props.FloatProperty(
+        name="Joint Prior", default=JOINT_PRIOR, min=0.0, soft_max=1.0, precision=3,
+        description="How strongly the joints stay near their first estimates where the motion hardly "
+                    "determines them (e.g. along a knee's hinge axis), as a fraction of the data's own pull "
+                    "on each joint. 0: no prior (with a small Shape Weight: the closest fit to the scans)")
     seed: bpy.props.IntProperty(name="Seed", default=0, min=0,
                                 description="Random seed of the segmentation (same seed, same result)")
     initial_armature: bpy.props.StringProperty(
@@ -83,7 +89,7 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
 
     def draw(self, context):
         col = self.layout.column()
-        for prop in ("parts", "alpha", "symmetry", "max_iterations", "key_scans", "seed"):
+        for prop in ("parts", "alpha", "joint_prior", "symmetry", "max_iterations", "key_scans", "seed"):
             col.prop(self, prop)
         col.prop_search(self, "initial_armature", bpy.data, "objects")
         col.prop(self, "output_bundle")
@@ -95,7 +101,8 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
     # -- job parts -----------------------------------------------------------------------------------
     def prepare(self, context):
         options = learn.LearnOptions(self.parts, self.alpha, self.symmetry, self.max_iterations, self.seed,
-                                     key_scans=self.key_scans, workers=preferences.threads(context))
+                                     key_scans=self.key_scans, workers=preferences.threads(context),
+                                     joint_prior=self.joint_prior)
         if self.initial_armature:
             arm = bpy.data.objects.get(self.initial_armature)
             if arm is None:

@@ -360,7 +360,7 @@ def test_batch_command_writes_bundle_and_report(pkg, tmp_path, truth, needs_lear
     out, rep, blend = (str(tmp_path / "o" / n) for n in ("m.npz", "r.json", "l.blend"))
     os.makedirs(tmp_path / "o")
     assert cli.main(["learn-rig", "--scans", folder, "--parts", "8", "--iterations", "0", "--key-scans", "5",
-                     "--threads", "1", "--out", out, "--report", rep, "--blend", blend]) == 0
+                     "--joint-prior", "0.05", "--threads", "1", "--out", out, "--report", rep, "--blend", blend]) == 0
     bundle = pkg("solver.bundle").load_bundle(out)
     assert len(bundle.poses) == M_SCANS and bundle.model.skeleton.num_bones == 8
     # the input's coordinates and vertex order: the posed model is near scan k vertex by vertex
@@ -372,6 +372,7 @@ def test_batch_command_writes_bundle_and_report(pkg, tmp_path, truth, needs_lear
     assert doc["error_mm"]["median"] <= doc["error_mm"]["max"]
     assert doc["input"]["scans"] == M_SCANS and doc["options"]["parts"] == 8
     assert doc["options"]["key_scans"] == 5 and len(doc["key_scans"]) == 5 and doc["workers"] == 1
+    assert doc["options"]["joint_prior"] == 0.05
     assert doc["timings_s"]["total"] > 0 and {"initialisation", "weights"} <= set(doc["timings_s"])
     assert doc["objective_log"][0][0] == "initial" and doc["objective_log"][0][1] > 0
     assert doc["vertex_error_mm"]["mean"] == pytest.approx(doc["error_mm"]["mean"], rel=1e-9)
@@ -404,11 +405,12 @@ def test_key_scans_learn_from_some_and_pose_every_scan(pkg, tmp_path, truth, nee
     ob = import_sequence(pkg, tmp_path, scans, model.faces)
     out = str(tmp_path / "keys.npz")
     assert bpy.ops.articula.learn_rig(source_object=ob.name, parts=8, max_iterations=0, key_scans=4,
-                                      output_bundle=out, name="Keys") == {'FINISHED'}
+                                      joint_prior=0.0, output_bundle=out, name="Keys") == {'FINISHED'}
     arm = bpy.data.objects["Keys"]
     report = json.loads(arm[learn.REPORT_PROPERTY])
     keys = report["key_scans"]
     assert len(keys) == 4 and report["rest_scan"] in keys and report["options"]["key_scans"] == 4
+    assert report["options"]["joint_prior"] == 0.0
     assert report["other_scans"]["scans"] == M_SCANS - 4 and report["workers"] >= 1
     assert learn.error_summary(report)["count"] == M_SCANS * scans.shape[1]
     assert key_frames(pkg, arm) == {tuple(range(FRAME_START, FRAME_START + M_SCANS))}
