@@ -327,21 +327,38 @@ def _kid_block(bt, a, c, wt_k, ws_k, L3Jdq, vt, keys):
     ``T (N, 8, m)`` and the world swing by ``∂R_sw = R_sw [G ·]×`` (G (N, 3, m)) has twist part
     ``w_t L3 (∂f/∂b) T`` and swing part ``w_s Rm_a R_sw [G·]× (v_t − h_c)`` =
     ``−w_s [RR (v_t − h_c)]× (RR G / s)`` (RR = Rm_a R_sw = s·rotation); a head moves the swing map's
-    translation: ``w_s Rm_a (I − R_sw)``."""
+    translation: ``w_s Rm_a (I − R_sw)``.  All three as one product per frame: the per-vertex rows
+    ``[w_t L3 ∂f/∂b | −w_s [RR (v_t − h_c)]× | w_s I]`` ``(N, V_a, 3, 8 + 3 + 3)`` times the per-frame
+    ``[T; RR G / s; Rm_a (I − R_sw)]`` (zero where a piece has no such part): one pass over the vertices'
+    columns instead of one per term.  Measured (MakeHuman game_engine, the learned root with 4 children
+    and 5,759 vertices, 4 scans, one thread): group_jacobian 95-118 → 67 ms, R equal to 1e-15 relative;
+    one Gauss–Newton build of all 30 scans 1.69 → 1.47 s."""
     names = {"rot": ("T", "G"), "frame": ("T_f", "G_f"), "head": ("T_head", None)}
-    T = np.concatenate([bt[names[k[0]][0]][:, c] for k in keys], axis=-1)
+    T = np.concatenate([bt[names[k[0]][0]][:, c] for k in keys], axis=-1)            # (N, 8, m)
     Gs = [bt[names[k[0]][1]][:, c] for k in keys if k[0] != "head"]
-    blk = wt_k[..., None, None] * _per_frame_matmul(L3Jdq, T)
+    head = keys[-1][0] == "head"
+    N, m = T.shape[0], T.shape[-1]
+    Va = len(ws_k)
+    width = 8 + 3 * bool(Gs) + 3 * head
+    left = np.empty((N, Va, 3, width))
+    np.multiply(wt_k[..., None, None], L3Jdq, out=left[..., :8])
+    right = np.zeros((N, width, m))
+    right[:, :8] = T
     Rm_a, R_sw = bt["Rm"][:, a], bt["R_sw"][:, c]
     RR = Rm_a @ R_sw
-    w = ws_k[None, :, None, None]
+    j = 8
     if Gs:
         G = np.concatenate(Gs, axis=-1)
         lever = (vt - bt["sk"].heads[c]) @ np.swapaxes(RR, 1, 2)         # RR (v_t − h_c), (N, V_a, 3)
-        blk[..., :G.shape[-1]] -= w * _skew_times(lever, ((RR @ G) / bt["s"])[:, None])
-    if keys[-1][0] == "head":
-        blk[..., -3:] += w * (Rm_a @ (np.eye(3) - R_sw))[:, None]
-    return blk
+        _minus_skew_into(ws_k[None, :, None] * lever, left[..., j:j + 3])
+        right[:, j:j + 3, :G.shape[-1]] = (RR @ G) / bt["s"]
+        j += 3
+    if head:
+        left[..., j:j + 3] = 0.0
+        for i in range(3):
+            left[..., i, j + i] = ws_k
+        right[:, j:j + 3, -3:] = Rm_a @ (np.eye(3) - R_sw)
+    return _per_frame_matmul(left, right)
 
 
 def dense_jacobian(model, poses, cols, width, groups=None, heads=False, frame_basis=None):
