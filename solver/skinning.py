@@ -229,33 +229,51 @@ def _groups_for(model, groups):
     return groups
 
 
-def twist_signs(terms, n0, n1, kids, wt):
-    """Signs ``(n, V_a, K)`` (±1.0) of the children's twist dual quaternions under the running-sum
-    hemisphere rule (module docstring) for frames n0:n1, or None when nothing is flipped (the usual
-    case).  kids (K,) ascending bone indices; wt (V_a, K) twist weights.
+def running_flips(Q, wt):
+    """The running-sum hemisphere rule (module docstring): per child k, the ``(n, V)`` bool mask of the
+    entries where its twist dual quaternion is flipped, or None where it never is.  Q ``(n, K, 4)``: the
+    children's twist dual quaternions' real parts per frame; wt ``(V, K)`` twist weights.
 
-    Child k's test ``⟨q_k, e (1 − Σ w) + Σ_{i<k} s_i w_i q_i⟩ < 0`` (real parts) is evaluated as
-    ``q_k,w (1 − Σ w) + Σ_{i<k} D_ki s_i w_i`` with the per-frame dot products ``D (n, K, K)`` of the
-    children's real parts, so each child costs k passes over ``(n, V_a)`` arrays instead of a 4-vector
-    sum per vertex and frame."""
-    if len(kids) < 2:
-        return None
-    Q = terms["twist_dq"][n0:n1][:, kids, :4]                            # (n, K, 4)
+    Child k's test ``⟨q_k, e (1 − Σ w) + Σ_{i<k} s_i w_i q_i⟩ < 0`` is evaluated as
+    ``q_k,w (1 − Σ w) + Σ_{i<k} D_ki s_i w_i`` with the per-frame dot products ``D (n, K, K)`` of the real
+    parts, so each child costs k passes over ``(n, V)`` arrays instead of a 4-vector sum per vertex and
+    frame.  Shared by :func:`twist_signs` (frames × vertices) and the weight search's candidate blends
+    (scans × candidates)."""
     D = np.einsum("nki,nli->nkl", Q, Q)                                  # (n, K, K)
-    rest = 1.0 - wt.sum(axis=1)                                          # (V_a,)
-    signed, signs = [], None                                             # s_k w_k (n, V_a) or (V_a,)
-    for k in range(len(kids)):
+    rest = 1.0 - wt.sum(axis=1)                                          # (V,)
+    flips, signed = [], []                                               # signed: s_k w_k, (n, V) or (V,)
+    for k in range(Q.shape[1]):
         dot = Q[:, k, 0, None] * rest
         for i in range(k):
             dot += D[:, k, i, None] * signed[i]
         flip = (dot < 0) & (wt[None, :, k] > 0)
         if flip.any():
-            if signs is None:
-                signs = np.ones(flip.shape + (len(kids),))
-            signs[..., k] = np.where(flip, -1.0, 1.0)
+            flips.append(flip)
             signed.append(np.where(flip, -wt[:, k], wt[:, k]))
         else:
+            flips.append(None)
             signed.append(wt[:, k])
+    return flips
+
+
+def _group_flips(terms, n0, n1, kids, wt):
+    """:func:`running_flips` of one anchor group's children over frames n0:n1 (all None for < 2)."""
+    if len(kids) < 2:
+        return [None] * len(kids)
+    return running_flips(terms["twist_dq"][n0:n1][:, kids, :4], wt)
+
+
+def twist_signs(terms, n0, n1, kids, wt):
+    """Signs ``(n, V_a, K)`` (±1.0) of the children's twist dual quaternions under the running-sum
+    hemisphere rule (:func:`running_flips`) for frames n0:n1, or None when nothing is flipped (the usual
+    case).  kids (K,) ascending bone indices; wt (V_a, K) twist weights."""
+    flips = _group_flips(terms, n0, n1, kids, wt)
+    if all(f is None for f in flips):
+        return None
+    signs = np.ones((n1 - n0, len(wt), len(kids)))
+    for k, flip in enumerate(flips):
+        if flip is not None:
+            signs[..., k] = np.where(flip, -1.0, 1.0)
     return signs
 
 
@@ -264,8 +282,8 @@ def blend_group(terms, n0, n1, a, kids, wt, ws):
     ``(12, n, V_a)`` (row-major 3x4) of one anchor group over frames n0:n1, component-major so each
     component is a contiguous (n, V_a) array.  Twist: ``e + Σ_c w_t,c (Q_c − e)`` (e = identity);
     swing: ``M_a + Σ_c w_s,c (M_a ∘ Swing_c − M_a)``.  Where the hemisphere rule flips a child
-    (:func:`twist_signs`), ``e (1 − Σ w) + Σ s w Q`` differs from that by ``−2 w_c Q_c``, added at those
-    (frame, vertex) entries only."""
+    (:func:`running_flips`), ``e (1 − Σ w) + Σ s w Q`` differs from that by ``−2 w_c Q_c``, added at
+    those (frame, vertex) entries only."""
     chain_a = terms["chain"][n0:n1, a].T[:, :, None]                   # (12, n, 1)
     n, Va = n1 - n0, len(wt)
     if len(kids) == 0:
@@ -274,12 +292,10 @@ def blend_group(terms, n0, n1, a, kids, wt, ws):
     Q = terms["twist_dq"][n0:n1][:, kids]                                            # (n, K, 8)
     dt = (Q - DQ_IDENTITY).transpose(2, 0, 1)                                        # (8, n, K)
     tw = (dt.reshape(8 * n, len(kids)) @ wt.T).reshape(8, n, Va) + DQ_IDENTITY[:, None, None]
-    signs = twist_signs(terms, n0, n1, kids, wt)
-    if signs is not None:
-        for k in range(len(kids)):
-            f, v = np.nonzero(signs[..., k] < 0)
-            if len(f):
-                tw[:, f, v] -= 2.0 * wt[v, k] * Q[f, k].T
+    for k, flip in enumerate(_group_flips(terms, n0, n1, kids, wt)):
+        if flip is not None:
+            f, v = np.nonzero(flip)
+            tw[:, f, v] -= 2.0 * wt[v, k] * Q[f, k].T
     ds = terms["swing_chain"][n0:n1][:, kids] - terms["chain"][n0:n1, a][:, None]   # (n, K, 12)
     sw = (ds.transpose(2, 0, 1).reshape(12 * n, len(kids)) @ ws.T).reshape(12, n, Va) + chain_a
     return tw, sw

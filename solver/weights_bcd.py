@@ -108,7 +108,7 @@ import numpy as np
 from . import parallel
 from .errors import Cancelled  # noqa: F401  (raised by progress callbacks)
 from .model import Model
-from .skinning import bone_terms, hybrid_skin
+from .skinning import bone_terms, hybrid_skin, running_flips
 
 STEPS = (0.2, 0.1, 0.05, 0.02)
 ACTIVE_SET_MIN_K = 3   # swing QPs with fewer variables enumerate their faces (closed forms, ≤ 7 faces)
@@ -482,31 +482,21 @@ def _twist_blend(q, wt):
     away from the sum so far, starting from the neutral's share (which can be −1e-8 when float32 weights
     sum to just over 1: the rule then flips the first child, as ``hybrid_skin`` does).
 
-    The test for child j, ``⟨q_j, rest e₀ + Σ_{i<j} s_i w_i q_i⟩ < 0`` (real parts), is evaluated as
-    ``q_j,0 rest + Σ_{i<j} D_ji s_i w_i`` with the per-scan real-part dot products ``D (M,k,k)``, and the
-    blend as one matrix product ``(7M, k) @ (k, n)`` with the unsigned weights plus a correction where a
-    sign is −1 (rare): for k = 2 about 15 instead of 60 passes over ``(M,n)`` arrays.  Same values up to
+    The signs come from :func:`solver.skinning.running_flips` (scans as its frames, candidates as its
+    vertices), the blend is one matrix product ``(7M, k) @ (k, n)`` with the unsigned weights plus a
+    correction where a sign is −1 (rare): for k = 2 about 15 instead of 60 passes over ``(M,n)`` arrays.  Same values up to
     rounding (≤ 1e-15 here, ≤ 1e-11 relative in the Q log).  Measured (M = 400, k = 2, n = 100-300,
     one thread): 0.43-0.74 ms vs 3.0-8.2 ms."""
     M, _, k = q.shape
     n = wt.shape[1]
     rest = 1 - wt.sum(axis=0)
-    signed = [None] * k                                      # s_c w_c (M,n) where some s_c = −1
-    if k >= 2:
-        D = np.einsum("mij,mil->mjl", q[:, :4], q[:, :4])   # (M,k,k)
-        for j in range(k):
-            dot = q[:, 0, j, None] * rest
-            for i in range(j):
-                dot += D[:, j, i, None] * (wt[i] if signed[i] is None else signed[i])
-            flip = (dot < 0) & (wt[j] > 0)
-            if flip.any():
-                signed[j] = np.where(flip, -wt[j], wt[j])
+    flips = running_flips(q[:, :4].transpose(0, 2, 1), wt.T) if k >= 2 else [None] * k   # (M,n) masks
     parts = np.ascontiguousarray(q[:, _DQ_PARTS].transpose(1, 0, 2)).reshape(len(_DQ_PARTS) * M, k)
     blend = (parts @ wt).reshape(len(_DQ_PARTS), M, n)
     blend[0] += rest
-    for j in range(k):
-        if signed[j] is not None:
-            corr = signed[j] - wt[j]                         # −2 w_j where flipped, else 0
+    for j, flip in enumerate(flips):
+        if flip is not None:
+            corr = np.where(flip, -2.0 * wt[j], 0.0)
             for c in range(len(_DQ_PARTS)):
                 blend[c] += q[:, _DQ_PARTS[c], j, None] * corr
     out = [None] * 8
