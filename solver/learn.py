@@ -332,13 +332,15 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
     rotation-centre estimates; κ_b = ρ × the joint's mean data curvature,
     :func:`solver.joint_pose_gn.relative_joint_prior`; 0 = none).  Without it near-hinge joints slide
     along their axes, where the data hardly determine them: on MakeHuman game_engine male,thin hybrid
-    (19 parts) the right knee drifted 13 → 89 mm from the generating joint over the six rounds.  Default
-    ``JOINT_PRIOR`` = 0.01; measured on the 8 MakeHuman cases of ``bench learn`` (19 parts, 30 scans; mean
-    joint error mm without → with, same code): cmu_mb 15.8 → 15.5, 9.9 → 9.7, 11.5 → 10.6, 13.6 → 11.9,
-    game_engine 16.9 → 15.8, 12.6 → 12.4, 11.8 → 11.8, 21.8 → 16.6; training surface error within
-    +0.03 mm (1.41 → 1.44 the largest change).  It costs data fit where the joints are free to serve
-    it: Bone_Anim (α = 1, 5 / 10 / 20 parts) RMSE 0.0280 / 0.0181 / 0.0141 → 0.0297 / 0.0197 / 0.0152,
-    so the pure data-fit setting is ``alpha=1, joint_prior=0``.
+    (19 parts) the right knee drifted 13 → 89 mm from the generating joint over the six rounds (a
+    throw-away script following the joints round by round).  Default ``JOINT_PRIOR`` = 0.01; on the 8
+    MakeHuman cases of ``./run bench learn --parts 19`` (19 parts, 30 scans; mean joint error mm without,
+    the 18:57 run at cfae606 → with, the 21:08 run at 226e7ed; game_engine male,thin hybrid was also
+    21.9 without at 96ae482): cmu_mb 15.8 → 15.5, 9.9 → 9.7, 11.5 → 10.6, 13.6 → 11.9, game_engine
+    16.9 → 15.8, 12.6 → 12.4, 11.8 → 11.8, 21.8 → 16.6; training surface error within +0.03 mm
+    (1.41 → 1.44 the largest change).  It costs data fit where the joints are free to serve it:
+    Bone_Anim (α = 1, 5 / 10 / 20 parts, throw-away runs at 226e7ed) RMSE 0.0280 / 0.0181 / 0.0141 →
+    0.0297 / 0.0197 / 0.0152, so the pure data-fit setting is ``alpha=1, joint_prior=0``.
     key_scans: learn the skeleton, weights and rest vertices from at most this many scans
     (:func:`solver.key_scans.select_key_scans`, always including the rest scan; None = all) and fit the
     pose of every other scan with the learned model fixed (:func:`poses_of_other_scans`); the objective
