@@ -7,6 +7,12 @@ computed exactly as it would be alone, so a result depends on the number of work
 work is split (rounding: products over differently shaped batches may differ in the last bit), never
 on the scheduling.
 
+Processes (:class:`ForkedCall`): work whose Python orchestration dominates (the weight BCD's colour
+classes of a few hundred vertices) gains nothing from a second thread, so one independent half of it can
+run in a forked child process (Linux only: fork without exec is unsafe with macOS frameworks and absent
+on Windows) that sends its result back through a pipe; elsewhere, or if the child fails, the caller
+computes that half itself.  The child sees a copy of the memory at the fork and runs serially.
+
 ``with using(n): ...`` sets the number of workers for solver calls made in the block (``None`` or 0 = one
 per CPU core); outside any such block the solver runs on one thread.  Calls from inside a worker run
 serially (no nested pools).  Measured on the 2-core machine, two workers vs one, same inputs, same
@@ -15,7 +21,11 @@ scans 0.14-0.16 → 0.08-0.10 s; the weight candidates of 4,149 vertices 0.34-0.
 Bone_Anim frames 4.8 → 2.7 s; surface distances of 400 Bone_Anim frames 4.2 → 3.0 s.
 """
 import os
+import pickle
+import signal
+import sys
 import threading
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 
@@ -96,3 +106,109 @@ def split(count, min_size=1):
     least ``min_size`` long (fewer pieces if needed; one piece when serial)."""
     n = max(1, min(workers(), count // max(int(min_size), 1)))
     return np.array_split(np.arange(count), n)
+
+
+_FORK = {"enabled": True, "child": False}
+
+
+def can_fork():
+    """Whether :class:`ForkedCall` runs its function in a child process here: Linux, two or more
+    :func:`workers`, not inside a worker thread or a forked child, and not switched off
+    (``ARTICULA_NO_FORK=1`` or :func:`allow_fork`)."""
+    return (_FORK["enabled"] and not _FORK["child"] and sys.platform.startswith("linux")
+            and hasattr(os, "fork") and workers() >= 2 and os.environ.get("ARTICULA_NO_FORK") != "1")
+
+
+@contextmanager
+def allow_fork(enabled):
+    """:func:`can_fork` is False in the block if ``enabled`` is False (for comparing both paths)."""
+    saved = _FORK["enabled"]
+    _FORK["enabled"] = bool(enabled)
+    try:
+        yield
+    finally:
+        _FORK["enabled"] = saved
+
+
+class ForkFailed(RuntimeError):
+    """The forked child did not deliver a result (it raised, crashed or was killed)."""
+
+
+class ForkedCall:
+    """``fn()`` started in a forked child process (if :func:`can_fork`), to be collected by :meth:`result`
+    while the caller works on: the child runs on one thread, pickles ``fn()``'s return value into a pipe
+    and exits without running the parent's exit handlers.  Without fork, :meth:`result` calls ``fn()``
+    itself.  Use as a context manager: leaving the block before :meth:`result` kills and reaps the child."""
+
+    def __init__(self, fn):
+        self.fn, self.pid, self.fd = fn, None, None
+        if not can_fork():
+            return
+        r, w = os.pipe()
+        with warnings.catch_warnings():        # the interpreter warns about forking with live threads;
+            warnings.simplefilter("ignore", DeprecationWarning)  # the child only computes with numpy
+            pid = os.fork()
+        if pid == 0:                                                    # child
+            os.close(r)
+            _child_main(fn, w)
+        os.close(w)
+        self.pid, self.fd = pid, r
+
+    def result(self):
+        """``fn()``'s return value: from the child (raises :class:`ForkFailed` if it gave none), or computed
+        here when no child was started."""
+        if self.pid is None:
+            return self.fn()
+        chunks = []
+        with os.fdopen(self.fd, "rb") as f:
+            self.fd = None
+            while True:
+                b = f.read(1 << 20)
+                if not b:
+                    break
+                chunks.append(b)
+        _, status = os.waitpid(self.pid, 0)
+        self.pid = None
+        try:
+            ok, value = pickle.loads(b"".join(chunks))
+        except Exception:
+            raise ForkFailed(f"the forked child gave no result (exit status {status})") from None
+        if not ok:
+            raise ForkFailed(f"the forked child failed: {value}")
+        return value
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        if self.fd is not None:
+            os.close(self.fd)
+            self.fd = None
+        if self.pid is not None:
+            try:
+                os.kill(self.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            os.waitpid(self.pid, 0)
+            self.pid = None
+        return False
+
+
+def _child_main(fn, fd):
+    """In the forked child: run ``fn()`` serially, write ``(ok, value or error text)`` to ``fd``, exit."""
+    code = 0
+    try:
+        _FORK["child"] = True
+        _STATE.update(workers=1, pool=None, pool_size=0)
+        try:
+            data = pickle.dumps((True, fn()), protocol=pickle.HIGHEST_PROTOCOL)
+        except BaseException as e:                                     # noqa: BLE001 (reported to the parent)
+            data = pickle.dumps((False, f"{type(e).__name__}: {e}"))
+            code = 1
+        view = memoryview(data)
+        while len(view):
+            view = view[os.write(fd, view):]
+    except BaseException:                                              # noqa: BLE001
+        code = 2
+    finally:
+        os._exit(code)

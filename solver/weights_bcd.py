@@ -57,6 +57,21 @@ of 37,400 applied moves 34,253 only re-solved the swing weights, 1,752 moved a t
 3.9-4.2 s and ended at Q 25.621951 instead of 25.621874.  From binary weights (the first warm-start
 round) every step keeps winning and nothing is pruned (the same log).
 
+Halves in parallel (not in the spec; :meth:`TwoRing.halves`, :func:`_halves_in_parallel`).  Colour classes
+of a few hundred vertices are too small for two threads (the evaluation is mostly interpreter work), so a
+sweep is cut in space instead: breadth-first levels from a pseudo-peripheral vertex split the mesh into
+half_a (levels < l), a band (levels l, l + 1) and half_b (levels ≥ l + 2), l balancing the dirty
+vertices' cost.  Vertices of different halves are three or more edges apart, outside each other's two-ring,
+so neither half's targets depend on the other's moves and their residual rows are disjoint: visiting the
+classes on half_a in a forked child (:class:`parallel.ForkedCall`, Linux) while this process visits them on
+half_b, then the band, is exactly the serial visit half_a, half_b, band (the tests compare both paths).
+Only sweeps with at least ``SPLIT_MIN_WORK`` dirty vertex-scans per class are cut (on Dem Bones' 754-vertex
+Bone_Anim the classes hold ~40 vertices and the extra calls cost more than the second core gains).  BLAS
+runs on one thread during :func:`optimise_weights` (:mod:`solver.blas_threads`: its spinning threads slowed
+both halves by ~1.8x).  Measured on a captured game_engine main-round call (13,380 vertices × 30 scans, 19
+parts, 3 sweeps, band 515 vertices, halves 6,386 / 6,479; same session, four runs each): 2.95-4.24 s with
+the child vs 4.56-5.52 s in one process, the same Q log.
+
 Active set (:class:`_Tracker`; exact, so the Q log does not change).  A vertex's data-only proposal
 depends only on its own anchor and weights, so the joint move recomputes only the proposals of vertices
 that changed since.  Its BCD evaluation depends on its own state and on its targets g, i.e. on the
@@ -104,8 +119,10 @@ whole learn_rig, process CPU, old and new run side by side): weights stage 62.3 
 import itertools
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
 
-from . import parallel
+from . import blas_threads, parallel
 from .errors import Cancelled  # noqa: F401  (raised by progress callbacks)
 from .model import Model
 from .skinning import bone_terms, hybrid_skin, running_flips
@@ -115,6 +132,8 @@ ACTIVE_SET_MIN_K = 3   # swing QPs with fewer variables enumerate their faces (c
 PARALLEL_MIN_WORK = 60_000    # vertex-scans per thread of one evaluation (less: one thread; smaller pieces
                               # lose more to the interpreter lock than the second thread gains)
 STEP_MIN_SHARE = 0.01  # a step δ is offered again in a call's next sweep if it won this share of the moves
+SPLIT_MIN_WORK = 10_000   # dirty vertex-scans per colour class below which a sweep is not cut into halves
+                          # (each evaluate call costs ~5 ms of Python, ~1,400 vertex-scans' worth)
 MIN_GAIN = 1e-15       # a move is applied only if it gains more than this fraction of Q
 BLOCK = 2 ** 16        # scan-candidates (M · candidates) per skinning block: each (M, n) temporary is at
                        # most 512 KiB and stays in cache; 2184 candidates at M = 30, 163 at M = 400
@@ -872,35 +891,107 @@ def two_ring_colouring(ring2):
     return colour
 
 
-def _sweep(model, skin, state, objective, classes, tracker, Q, steps=STEPS, jacobi=True, wins=None):
-    """One sweep: the joint move (if ``jacobi``), then every colour class in turn, evaluating only the
-    class's dirty vertices (all of them when every vertex is dirty).  Updates model, state and tracker in
-    place; returns ``(Q, moved)``: the new Q (the old one minus the exact gains applied) and whether the
-    joint move was applied.  wins: optional ``(len(steps),)`` int array; each applied move that changes a
-    twist weight without changing the anchor adds one at the step nearest to its largest change."""
+def _sweep(model, skin, state, objective, graph, tracker, Q, steps=STEPS, jacobi=True, wins=None):
+    """One sweep: the joint move (if ``jacobi``), then every colour class of ``graph`` (:class:`TwoRing`)
+    in turn, evaluating only the class's dirty vertices (all of them when every vertex is dirty).  When
+    the sweep is large enough, the mesh is cut into two halves more than two rings apart and the band
+    between them (:meth:`TwoRing.halves`): the classes are visited on each half, the halves in parallel
+    (:func:`_halves_in_parallel`), then on the band.  Updates model, state and tracker in place; returns
+    ``(Q, moved)``: the new Q (the old one minus the exact gains applied) and whether the joint move was
+    applied.  wins: optional ``(len(steps),)`` int array; each applied move that changes a twist weight
+    without changing the anchor adds one at the step nearest to its largest change."""
     moved = False
     if jacobi:
         Q_joint = joint_move(model, skin, state, objective, Q, steps, tracker=tracker)
         moved, Q = Q_joint < Q, Q_joint
+    wins = np.zeros(len(steps), dtype=np.int64) if wins is None else wins
+    dirty = int(tracker.dirty.sum())
+    split = None
+    if dirty * skin.M >= SPLIT_MIN_WORK * len(graph.classes):
+        split = graph.halves(tracker.dirty * _candidate_cost(skin, model.anchor))
+    if split is None:
+        return Q - _visit(model, skin, state, graph.classes, tracker, Q, steps, wins, evaluate_parallel), moved
+    half_a, half_b, band = split
+    gained = _halves_in_parallel(model, skin, state, graph, tracker, Q, steps, wins, half_a, half_b)
+    gained += _visit(model, skin, state, _restrict(graph.classes, band), tracker, Q, steps, wins, evaluate_parallel)
+    return Q - gained, moved
+
+
+def _visit(model, skin, state, classes, tracker, Q, steps, wins, evaluator):
+    """Evaluate and update the dirty vertices of each class in ``classes`` in turn with ``evaluator``
+    (:func:`evaluate` or :func:`evaluate_parallel`); a move is applied if it gains more than
+    ``MIN_GAIN · Q``.  Returns the sum of the applied (exact) gains."""
+    gained = 0.0
     for idx in classes:
         idx = idx[tracker.dirty[idx]]
         if len(idx) == 0:
             continue
-        gain, a, tw, sw, p = evaluate_parallel(model, skin, state, idx, steps)
+        gain, a, tw, sw, p = evaluator(model, skin, state, idx, steps)
         tracker.dirty[idx] = False
         ok = gain > MIN_GAIN * max(Q, 1e-300)
         if not ok.any():
             continue
         chosen = idx[ok]
-        if wins is not None:
-            _count_steps(wins, steps, model.anchor[chosen] == a[ok], model.twist_weights[chosen], tw[ok])
+        _count_steps(wins, steps, model.anchor[chosen] == a[ok], model.twist_weights[chosen], tw[ok])
         model.anchor[chosen] = a[ok]
         model.twist_weights[chosen] = tw[ok]
         model.swing_weights[chosen] = sw[ok]
         state.update(chosen, p[ok])
         tracker.changed(chosen)
-        Q -= gain[ok].sum()
-    return Q, moved
+        gained += float(gain[ok].sum())
+    return gained
+
+
+def _restrict(classes, mask):
+    """The colour classes cut down to the vertices where ``mask (V,)`` is True (empty ones dropped)."""
+    out = [idx[mask[idx]] for idx in classes]
+    return [idx for idx in out if len(idx)]
+
+
+def _candidate_cost(skin, anchor):
+    """Relative cost ``(V,)`` of evaluating each vertex: ``(1 + k)²`` for an anchor with k children (about
+    k candidate directions, each skinned with k + 1 columns)."""
+    k = np.array([len(kids) for kids in skin.kids], dtype=np.float64)
+    return (1.0 + k[anchor]) ** 2
+
+
+def _halves_in_parallel(model, skin, state, graph, tracker, Q, steps, wins, half_a, half_b):
+    """Visit the classes on ``half_a`` in a forked child (:class:`parallel.ForkedCall`) while this process
+    visits them on ``half_b``, then copy the child's changes in.  The halves are more than two rings
+    apart, so neither half's targets depend on the other's posed positions and their Laplacian residual
+    rows are disjoint: the result is that of visiting half_a, then half_b, in one process (which is what
+    happens where fork is unavailable or the child fails).  Returns the sum of both halves' gains."""
+    in_a = np.zeros(len(model.anchor), dtype=bool)
+    in_a[half_a] = True
+    zone = np.unique(graph.ring2[half_a].indices)              # vertices whose flags half_a's moves can set
+    rows = np.unique(graph.ring1[half_a].indices)              # residual rows half_a's moves change
+    classes_a = _restrict(graph.classes, in_a)
+    in_b = np.zeros_like(in_a)
+    in_b[half_b] = True
+
+    def visit_a():
+        w = np.zeros_like(wins)
+        gained = _visit(model, skin, state, classes_a, tracker, Q, steps, w, evaluate)
+        return dict(gained=gained, wins=w, anchor=model.anchor[half_a], twist=model.twist_weights[half_a],
+                    swing=model.swing_weights[half_a], P=state.Pv[half_a], R=state.Rv[rows],
+                    dirty=tracker.dirty[zone], stale=tracker.stale[half_a])
+
+    here = evaluate if parallel.can_fork() else evaluate_parallel    # one thread each beside a child
+    with parallel.ForkedCall(visit_a) as job:
+        gained = _visit(model, skin, state, _restrict(graph.classes, in_b), tracker, Q, steps, wins, here)
+        try:
+            out = job.result()
+        except parallel.ForkFailed:
+            out = visit_a()                              # this process has not touched half_a
+    model.anchor[half_a], model.twist_weights[half_a], model.swing_weights[half_a] = \
+        out["anchor"], out["twist"], out["swing"]
+    state.Pv[half_a], state.Rv[rows] = out["P"], out["R"]
+    own = in_a[zone]
+    tracker.dirty[zone[own]] = out["dirty"][own]                   # half_a's vertices: as the child left them
+    tracker.dirty[zone[~own]] |= out["dirty"][~own]                # band vertices: either side may mark them
+    tracker.stale[half_a] = out["stale"]
+    wins += out["wins"]
+    return gained + out["gained"]
 
 
 def _count_steps(wins, steps, same_anchor, old, new):
@@ -924,16 +1015,57 @@ def _kept_steps(steps, wins):
 
 
 class TwoRing:
-    """The vertex graph of the BCD for a Laplacian ``L (V,V)``: ``ring2`` (CSR pattern of the two-ring,
-    incl. the vertex) and the colour ``classes`` of :func:`two_ring_colouring` (list of index arrays).
-    It depends on the mesh only, so one learn_rig builds it once for all its :func:`optimise_weights`
-    calls (0.3 s per build on MakeHuman's 13,380 vertices)."""
+    """The vertex graph of the BCD for a Laplacian ``L (V,V)``: ``ring1`` / ``ring2`` (CSR patterns of the
+    one- and two-ring, incl. the vertex), the colour ``classes`` of :func:`two_ring_colouring` (list of
+    index arrays) and ``levels (V,)``: breadth-first distance in edges from a pseudo-peripheral vertex
+    (-1 where unreachable), from which :meth:`halves` cuts the mesh.  It depends on the mesh only, so one
+    learn_rig builds it once for all its :func:`optimise_weights` calls (0.3 s per build on MakeHuman's
+    13,380 vertices)."""
 
     def __init__(self, L):
-        A1 = (L != 0).astype(np.float64)
+        A1 = (sp.csr_matrix(L) != 0).astype(np.float64).tocsr()
+        self.ring1 = A1
         self.ring2 = (A1 @ A1).tocsr()
         colour = two_ring_colouring(self.ring2)
         self.classes = [np.flatnonzero(colour == c) for c in range(colour.max() + 1)]
+        self.levels = _peripheral_levels(A1)
+
+    def halves(self, work):
+        """``(half_a, half_b, band)`` for per-vertex ``work (V,)`` (relative cost to evaluate), or None
+        when no cut leaves both halves work.  half_a: the vertices
+        of level < l, half_b: level ≥ l + 2, band (boolean mask ``(V,)``): levels l and l + 1 and the
+        unreachable vertices; l balances the halves' work.  A vertex of half_a and one of half_b are at
+        least three edges apart, i.e. outside each other's two-ring."""
+        work = np.asarray(work, dtype=np.float64)
+        if self.levels.max() < 3:
+            return None
+        reach = self.levels >= 0
+        per_level = np.bincount(self.levels[reach], weights=work[reach])
+        below = np.concatenate([[0.0], np.cumsum(per_level)])         # below[l]: work of levels < l
+        l = np.arange(1, len(per_level) - 2)                         # half_a = levels < l, non-empty
+        above = below[-1] - below[l + 2]                              # work of levels ≥ l + 2
+        l = int(l[np.argmin(np.abs(below[l] - above))])
+        if below[l] == 0 or below[-1] - below[l + 2] == 0:
+            return None
+        half_a = np.flatnonzero(reach & (self.levels < l))
+        half_b = np.flatnonzero(self.levels >= l + 2)
+        band = ~reach | (self.levels == l) | (self.levels == l + 1)
+        return half_a, half_b, band
+
+
+def _peripheral_levels(A1):
+    """Breadth-first levels ``(V,)`` int (-1: unreachable) over the graph ``A1`` from a pseudo-peripheral
+    vertex of the component of vertex 0: the farthest vertex from the farthest vertex from 0 (two
+    passes), so that the levels run along the mesh's longest extent."""
+    V = A1.shape[0]
+    if V == 0:
+        return np.zeros(0, dtype=np.int64)
+    src = 0
+    for _ in range(2):
+        d = csgraph.shortest_path(A1, unweighted=True, indices=src, directed=False)
+        src = int(np.argmax(np.where(np.isfinite(d), d, -1.0)))
+    d = csgraph.shortest_path(A1, unweighted=True, indices=src, directed=False)
+    return np.where(np.isfinite(d), d, -1).astype(np.int64)
 
 
 def _setup(model, poses, objective, graph=None):
@@ -963,6 +1095,13 @@ def optimise_weights(model, poses, objective, max_sweeps=20, steps=STEPS, rel_to
     a sweep gains less than ``rel_tol`` of Q.  graph: the mesh's :class:`TwoRing` (built if None).
     prune_steps: after each sweep only the steps δ that won at least ``STEP_MIN_SHARE`` of its twist
     moves are offered in the next (:func:`_kept_steps`; the smallest always), see the module docstring."""
+    with blas_threads.limited(1):           # small products only: spinning BLAS threads just compete
+        return _optimise(model, poses, objective, max_sweeps, steps, rel_tol, progress, jacobi, active_set, graph,
+                         prune_steps)
+
+
+def _optimise(model, poses, objective, max_sweeps, steps, rel_tol, progress, jacobi, active_set, graph,
+              prune_steps):
     model, state, skin, Q, graph, tracker = _setup(model, poses, objective, graph)
     log = []
     for sweep in range(max_sweeps):
@@ -970,7 +1109,7 @@ def optimise_weights(model, poses, objective, max_sweeps=20, steps=STEPS, rel_to
         if not active_set:
             tracker.dirty[:] = tracker.stale[:] = True
         wins = np.zeros(len(steps), dtype=np.int64)
-        Q, moved = _sweep(model, skin, state, objective, graph.classes, tracker, Q, steps, jacobi, wins)
+        Q, moved = _sweep(model, skin, state, objective, graph, tracker, Q, steps, jacobi, wins)
         jacobi = jacobi and moved           # a rejected joint move is not tried again
         if prune_steps:
             steps = _kept_steps(steps, wins)

@@ -1,10 +1,13 @@
 """solver.parallel and the solver pieces that use it: two threads give the serial results (to rounding)."""
+import os
+import sys
 import threading
+import time
 
 import numpy as np
 import pytest
 
-from articula.solver import parallel
+from articula.solver import blas_threads, parallel
 from articula.solver.joint_pose_gn import gauss_newton_blocks
 from articula.solver.laplacian import uniform_laplacian
 from articula.solver.learn import learn_rig
@@ -115,3 +118,51 @@ def test_shutdown_stops_the_pool_and_a_new_one_starts_on_demand():
         assert not any(t.is_alive() for t in workers)        # (another copy of the module has its own pool)
         assert parallel.map_pieces(abs, [-1, -2]) == [1, 2]
     parallel.shutdown()
+
+
+linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="ForkedCall forks on Linux only")
+
+
+@linux_only
+def test_forked_call_runs_in_a_child_and_returns_its_value():
+    with parallel.using(2):
+        assert parallel.can_fork()
+        big = np.arange(300_000.0)                         # larger than a pipe's buffer
+        with parallel.ForkedCall(lambda: (os.getpid(), big * 2, parallel.workers(), parallel.can_fork())) as job:
+            here = big.sum()                                 # the caller works on meanwhile
+            pid, doubled, inner_workers, inner_fork = job.result()
+        assert pid != os.getpid() and np.array_equal(doubled, big * 2) and here == big.sum()
+        assert inner_workers == 1 and not inner_fork         # the child runs serially, never forks again
+        with parallel.allow_fork(False):
+            assert not parallel.can_fork()
+            with parallel.ForkedCall(lambda: os.getpid()) as job:
+                assert job.result() == os.getpid()           # no fork: computed by the caller
+    assert not parallel.can_fork()                            # one worker: never forks
+
+
+@linux_only
+def test_forked_call_reports_failures_and_reaps_an_abandoned_child():
+    def boom():
+        raise ValueError("in the child")
+    with parallel.using(2):
+        with parallel.ForkedCall(boom) as job:
+            with pytest.raises(parallel.ForkFailed, match="ValueError: in the child"):
+                job.result()
+        with parallel.ForkedCall(lambda: os._exit(3)) as job:
+            with pytest.raises(parallel.ForkFailed, match="no result"):
+                job.result()
+        with parallel.ForkedCall(lambda: time.sleep(60)) as job:
+            pid = job.pid
+        assert job.pid is None
+        with pytest.raises(ChildProcessError):
+            os.waitpid(pid, os.WNOHANG)                      # killed and reaped when the block was left
+
+
+def test_blas_threads_are_limited_in_the_block_and_restored():
+    before = blas_threads.thread_counts()
+    if sys.platform.startswith("linux"):
+        assert any("openblas" in p for p in before)          # numpy's and scipy's wheels bundle OpenBLAS
+    with blas_threads.limited(1):
+        assert all(n == 1 for n in blas_threads.thread_counts().values())
+        np.linalg.solve(np.eye(200) * 2, np.ones(200))       # BLAS/LAPACK still work
+    assert blas_threads.thread_counts() == before
