@@ -65,12 +65,16 @@ vertices' cost.  Vertices of different halves are three or more edges apart, out
 so neither half's targets depend on the other's moves and their residual rows are disjoint: visiting the
 classes on half_a in a forked child (:class:`parallel.ForkedCall`, Linux) while this process visits them on
 half_b, then the band, is exactly the serial visit half_a, half_b, band (the tests compare both paths).
-Only sweeps with at least ``SPLIT_MIN_WORK`` dirty vertex-scans per class are cut (on Dem Bones' 754-vertex
-Bone_Anim the classes hold ~40 vertices and the extra calls cost more than the second core gains).  BLAS
-runs on one thread during :func:`optimise_weights` (:mod:`solver.blas_threads`: its spinning threads slowed
-both halves by ~1.8x).  Measured on a captured game_engine main-round call (13,380 vertices × 30 scans, 19
-parts, 3 sweeps, band 515 vertices, halves 6,386 / 6,479; same session, four runs each): 2.95-4.24 s with
-the child vs 4.56-5.52 s in one process, the same Q log.
+The joint move's data-only proposals are likewise computed half in the child.  Only sweeps with at least
+``SPLIT_MIN_WORK`` dirty vertex-scans per class are cut (on Dem Bones' 754-vertex Bone_Anim the classes
+hold ~40 vertices and the extra calls cost more than the second core gains), and only where a child can
+be forked: visited in one process the cut sweep is slower than the plain one (more, smaller calls).
+numpy's BLAS runs on one thread in :func:`optimise_weights` (:func:`jacobians.single_blas_thread`, as in
+all of learn_rig).  Measured on MakeHuman game_engine male,thin hybrid (13,380 vertices × 30 scans, 19
+parts; band 515 vertices, halves 6,386 / 6,479), whole learn_rig, same host period: weights stage 32.3 s
+before, 27.8 s with the child, 39.8 s cut but in one process; per main-round sweep half_b 0.70-0.91 s here,
+half_a 0.81-1.29 s in the child, 0.05-0.58 s waiting for it (result ~10 MB through a pipe), the band
+0.15-0.39 s.  The Q logs are the same with and without the child.
 
 Active set (:class:`_Tracker`; exact, so the Q log does not change).  A vertex's data-only proposal
 depends only on its own anchor and weights, so the joint move recomputes only the proposals of vertices
@@ -122,8 +126,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from . import blas_threads, parallel
+from . import parallel
 from .errors import Cancelled  # noqa: F401  (raised by progress callbacks)
+from .jacobians import single_blas_thread
 from .model import Model
 from .skinning import bone_terms, hybrid_skin, running_flips
 
@@ -845,16 +850,31 @@ def joint_move(model, skin, state, objective, Q, steps=STEPS, chunk=4000, tracke
     if that lowers the exact Q (recomputed in full).  Neighbouring vertices moving together keep the
     Laplacian term small where single-vertex moves are penalised by it.  Returns the new Q (≤ Q).
     With a :class:`_Tracker`, only stale proposals are recomputed and the applied vertices are reported
-    to it."""
+    to it.  Where :func:`parallel.can_fork`, half of the stale proposals are computed in a forked child
+    (they are independent of each other)."""
     if tracker is None:
         tracker = _Tracker(model, state.Pv.shape[1])
     proxy = _DataTargets(state)
     gain, *prop = tracker.proposal
     todo = np.flatnonzero(tracker.stale)
-    for c0 in range(0, len(todo), chunk):
-        idx = todo[c0:c0 + chunk]
-        g, a, tw, sw, p = evaluate_parallel(model, skin, proxy, idx, steps)
-        gain[idx], prop[0][idx], prop[1][idx], prop[2][idx], prop[3][idx] = g, a, tw, sw, p
+
+    def propose(part, evaluator):
+        out = [evaluator(model, skin, proxy, part[c0:c0 + chunk], steps) for c0 in range(0, len(part), chunk)]
+        return tuple(np.concatenate(x) for x in zip(*out)) if out else None
+
+    if parallel.can_fork() and len(todo) * skin.M >= 2 * SPLIT_MIN_WORK:
+        mine, theirs = todo[: len(todo) // 2], todo[len(todo) // 2:]   # independent: data-only proposals
+        with parallel.ForkedCall(lambda: propose(theirs, evaluate)) as job:
+            results = [(mine, propose(mine, evaluate))]
+            try:
+                results.append((theirs, job.result()))
+            except parallel.ForkFailed:
+                results.append((theirs, propose(theirs, evaluate)))
+    else:
+        results = [(todo, propose(todo, evaluate_parallel))]
+    for idx, found in results:
+        if found is not None:
+            gain[idx], prop[0][idx], prop[1][idx], prop[2][idx], prop[3][idx] = found
     tracker.stale[todo] = False
     movers = np.flatnonzero(gain > 0)
     movers = movers[np.argsort(-gain[movers], kind="stable")]
@@ -907,7 +927,7 @@ def _sweep(model, skin, state, objective, graph, tracker, Q, steps=STEPS, jacobi
     wins = np.zeros(len(steps), dtype=np.int64) if wins is None else wins
     dirty = int(tracker.dirty.sum())
     split = None
-    if dirty * skin.M >= SPLIT_MIN_WORK * len(graph.classes):
+    if parallel.can_fork() and dirty * skin.M >= SPLIT_MIN_WORK * len(graph.classes):
         split = graph.halves(tracker.dirty * _candidate_cost(skin, model.anchor))
     if split is None:
         return Q - _visit(model, skin, state, graph.classes, tracker, Q, steps, wins, evaluate_parallel), moved
@@ -976,9 +996,8 @@ def _halves_in_parallel(model, skin, state, graph, tracker, Q, steps, wins, half
                     swing=model.swing_weights[half_a], P=state.Pv[half_a], R=state.Rv[rows],
                     dirty=tracker.dirty[zone], stale=tracker.stale[half_a])
 
-    here = evaluate if parallel.can_fork() else evaluate_parallel    # one thread each beside a child
     with parallel.ForkedCall(visit_a) as job:
-        gained = _visit(model, skin, state, _restrict(graph.classes, in_b), tracker, Q, steps, wins, here)
+        gained = _visit(model, skin, state, _restrict(graph.classes, in_b), tracker, Q, steps, wins, evaluate)
         try:
             out = job.result()
         except parallel.ForkFailed:
@@ -1095,7 +1114,7 @@ def optimise_weights(model, poses, objective, max_sweeps=20, steps=STEPS, rel_to
     a sweep gains less than ``rel_tol`` of Q.  graph: the mesh's :class:`TwoRing` (built if None).
     prune_steps: after each sweep only the steps δ that won at least ``STEP_MIN_SHARE`` of its twist
     moves are offered in the next (:func:`_kept_steps`; the smallest always), see the module docstring."""
-    with blas_threads.limited(1):           # small products only: spinning BLAS threads just compete
+    with single_blas_thread():              # small products only: spinning BLAS threads just compete
         return _optimise(model, poses, objective, max_sweeps, steps, rel_tol, progress, jacobi, active_set, graph,
                          prune_steps)
 

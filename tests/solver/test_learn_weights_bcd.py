@@ -464,7 +464,8 @@ def test_halves_are_more_than_two_rings_apart_and_balance_the_work():
 def test_split_sweeps_are_exact_and_the_same_with_or_without_fork(monkeypatch):
     """With every sweep cut into halves (SPLIT_MIN_WORK 0): the halves run in a forked child and here,
     or both here, with the same Q log and weights; the log is strictly decreasing and ends at the
-    recomputed Q; the final Q is within 1 % of the unsplit BCD's (another visiting order)."""
+    recomputed Q; the final Q is within 1 % of the unsplit BCD's (another visiting order), which is
+    what runs where fork is unavailable."""
     from articula.solver import parallel
     from articula.solver import weights_bcd as wb
     start, poses, obj = _noisy_problem()
@@ -473,10 +474,17 @@ def test_split_sweeps_are_exact_and_the_same_with_or_without_fork(monkeypatch):
     calls = []
     real = wb._halves_in_parallel
     monkeypatch.setattr(wb, "_halves_in_parallel", lambda *a: calls.append(1) or real(*a))
+    class InProcess(parallel.ForkedCall):                  # the split visit without the child
+        def __init__(self, fn):
+            self.fn, self.pid, self.fd = fn, None, None
     with parallel.using(2):
         forked, log_forked, _ = optimise_weights(start, poses, obj, max_sweeps=3)
-        with parallel.allow_fork(False):
-            here, log_here, _ = optimise_weights(start, poses, obj, max_sweeps=3)
+        real_call = parallel.ForkedCall
+        monkeypatch.setattr(parallel, "ForkedCall", InProcess)
+        here, log_here, _ = optimise_weights(start, poses, obj, max_sweeps=3)
+        monkeypatch.setattr(parallel, "ForkedCall", real_call)
+        with parallel.allow_fork(False):                   # no fork: the unsplit visit, as everywhere else
+            assert np.allclose(optimise_weights(start, poses, obj, max_sweeps=3)[1], log_unsplit, rtol=1e-12, atol=0)
     assert len(calls) == 6
     assert np.allclose(log_forked, log_here, rtol=1e-12, atol=0)
     for name in ("anchor", "twist_weights", "swing_weights"):

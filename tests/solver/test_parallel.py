@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from articula.solver import blas_threads, parallel
+from articula.solver import parallel
 from articula.solver.joint_pose_gn import gauss_newton_blocks
 from articula.solver.laplacian import uniform_laplacian
 from articula.solver.learn import learn_rig
@@ -156,13 +156,3 @@ def test_forked_call_reports_failures_and_reaps_an_abandoned_child():
         assert job.pid is None
         with pytest.raises(ChildProcessError):
             os.waitpid(pid, os.WNOHANG)                      # killed and reaped when the block was left
-
-
-def test_blas_threads_are_limited_in_the_block_and_restored():
-    before = blas_threads.thread_counts()
-    if sys.platform.startswith("linux"):
-        assert any("openblas" in p for p in before)          # numpy's and scipy's wheels bundle OpenBLAS
-    with blas_threads.limited(1):
-        assert all(n == 1 for n in blas_threads.thread_counts().values())
-        np.linalg.solve(np.eye(200) * 2, np.ones(200))       # BLAS/LAPACK still work
-    assert blas_threads.thread_counts() == before
