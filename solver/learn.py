@@ -54,6 +54,8 @@ MIN_JOINT_MOTION_DEG = 1.0      # a joint must rotate at least this much in some
 OTHER_SCAN_ITERATIONS = 5       # LM iterations of the pose fit of each other scan (Bone_Anim: 4 give the RMS of 50 to 1e-5)
 OTHER_SCAN_TOL = 1e-6           # ... stopping at this relative decrease
 JOINT_PRIOR = 0.01              # default ρ of the joint-centre prior (learn_rig's joint_prior)
+GN_GAIN_TOL = 1e-4              # step (a) ends early when its next LM iteration is expected to gain less
+                                # than this fraction of E (joint_pose_gn.optimise_joints_and_poses gain_tol)
 
 
 @dataclass
@@ -232,6 +234,7 @@ class Settings:
     bcd_sweeps: int = 3
     bcd_steps: tuple = (0.2, 0.1, 0.05, 0.02)
     graph: object = None        # the mesh's weights_bcd.TwoRing, built once
+    gn_gain_tol: float = GN_GAIN_TOL
     states: dict = field(default_factory=dict)          # α -> AlphaState
 
     def at(self, objective):
@@ -257,7 +260,7 @@ def alternation_round(model, poses, problem, scans, settings, fix_joints, timing
     E = problem.value(model, poses) if E is None else E
     model, poses, gn_log = optimise_joints_and_poses(
         model, poses, problem, iterations=settings.gn_iterations, progress=sub(0.0, 1 / 3),
-        fix_joints=fix_joints, damping=state.damping, value=E)
+        fix_joints=fix_joints, damping=state.damping, value=E, gain_tol=settings.gn_gain_tol)
     timings["joints_and_poses"] += time.perf_counter() - t0
     E = gn_log[-1] if gn_log else E
     log.append(("joints_and_poses", float(E)))
@@ -311,8 +314,12 @@ def learn_rig(scans, faces, parts=None, alpha=100.0, symmetry=True, max_iteratio
     (dimensionless, see :mod:`solver.rig_objective`).  symmetry: cut mirror-image parts alike
     (:func:`solver.segmentation.segment`), detect mirror pairs and equalise their bone lengths with
     weight lam (m⁻²).  max_iterations: outer rounds of (a)-(c) (stopping earlier when a
-    round lowers E by less than ``tol`` relative).  seed: rest-scan choice
-    and segmentation seeding.  rest_scan: index of the scan used as initial rest mesh (default: chosen by
+    round lowers E by less than ``tol`` relative).  gn_iterations: at most this many LM iterations in step
+    (a), fewer when the next one is expected to gain less than ``GN_GAIN_TOL`` of E (measured on
+    MakeHuman game_engine male,thin hybrid, whole learn_rig in one session: step (a) 25.0 → 16.1 s, final
+    E 39.278 → 39.327, training error 2.516 → 2.519 mm; on Bone_Anim at 20 parts, α = 1, every round
+    keeps its three iterations: RMSE 0.0141 either way).  seed: rest-scan choice and segmentation
+    seeding.  rest_scan: index of the scan used as initial rest mesh (default: chosen by
     the seed).  initial_skeleton: a :class:`Skeleton` in the coordinates of the rest scan to start from
     instead of segmenting (parts = nearest bone segment).
     progress(fraction, stage, objective): called throughout; may raise :class:`Cancelled`; the objective

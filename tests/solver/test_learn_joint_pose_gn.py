@@ -268,3 +268,28 @@ def test_damping_rule_and_its_carry_over():
     assert damping.mu != 1e-3 and log1
     _, _, log2 = optimise_joints_and_poses(mid, p1, problem, iterations=2, damping=damping)
     assert log2 and log2[-1] <= log1[-1]
+
+
+def test_gain_tol_stops_when_the_next_iteration_is_expected_to_gain_little():
+    """_stalling in closed form (decreases d1, d2 -> expected d2²/d1 against gain_tol · E), and in the
+    LM: with gain_tol the iterations are a prefix of those without it, ending at the first iteration
+    after which the expected decrease falls below gain_tol · E."""
+    from articula.solver.joint_pose_gn import Damping, _stalling
+    assert not _stalling([9.0], 10.0, 0.5)                             # one decrease: no rate yet
+    assert _stalling([9.0, 8.9], 10.0, 0.011 / 8.9 + 1e-12)             # d1 1, d2 0.1: expects 0.01
+    assert not _stalling([9.0, 8.9], 10.0, 0.009 / 8.9)
+    assert not _stalling([9.0, 8.9], 10.0, 0.0)                         # 0: never stops early
+    model, poses, scans = hybrid_truth(8)
+    obj = RigObjective(scans, uniform_laplacian(model.faces, model.num_vertices), 100.0)
+    start, p0 = _perturbed(model, poses)
+    problem = JointPoseProblem(obj)
+    q0 = problem.value(start, p0)
+    _, _, full = optimise_joints_and_poses(start, p0, problem, iterations=8, damping=Damping())
+    seq = [q0] + full
+    expected = [(seq[i - 1] - seq[i]) ** 2 / (seq[i - 2] - seq[i - 1]) / seq[i]
+                for i in range(2, len(seq))]                 # after i iterations: expected next gain / E
+    tol = float(np.median(expected))
+    stop = next(i for i, e in enumerate(expected) if e < tol) + 2        # iterations run
+    _, _, early = optimise_joints_and_poses(start, p0, problem, iterations=8, damping=Damping(), gain_tol=tol)
+    assert 2 <= stop < len(full) and len(early) == stop
+    assert np.allclose(early, full[:stop], rtol=1e-12, atol=0)
