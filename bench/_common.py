@@ -17,3 +17,12 @@ def report(name: str, value, unit: str = "", note: str = "") -> None:
     """Print one result line: ``name: value unit  (note)``."""
     text = f"{value:.4g}" if isinstance(value, float) else str(value)
     print(f"{name}: {text} {unit}".rstrip() + (f"  ({note})" if note else ""), flush=True)
+
+
+def cpu_seconds():
+    """CPU time (s) of this process (all threads) plus that of its children that have been waited for
+    (the solver's forked helper processes, :class:`solver.parallel.ForkedCall`)."""
+    import resource
+    import time
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + kids.ru_utime + kids.ru_stime

@@ -160,10 +160,10 @@ def _child_learn(src, dst):
     if rounds > 0:
         options["max_iterations"] = rounds
     base = peak_rss_kb()
-    t0, c0 = time.perf_counter(), time.process_time()
+    t0, c0 = time.perf_counter(), _common.cpu_seconds()
     result = learn_rig(np.asarray(data["scans"]), np.asarray(data["faces"]), parts=parts if parts > 0 else None,
                        seed=0, **options)
-    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    wall, cpu = time.perf_counter() - t0, _common.cpu_seconds() - c0
     peak = peak_rss_kb()
     try:
         report = json.loads(json.dumps(getattr(result, "report", {}), default=str))
@@ -209,7 +209,7 @@ def learn_detail(meas, num_scans):
     keys = len(rep.get("key_scans", [])) or num_scans
     fitted = "" if keys >= num_scans else " (the others' poses fitted)"
     return (f"learned from {keys} of {num_scans} scans{fitted}, {meas['cpu_s']:.1f} s CPU on "
-            f"{rep.get('workers', '?')} threads")
+            f"{rep.get('workers', '?')} threads (incl. forked helpers)")
 
 
 def learn_or_fail(status, label, prefix, scans, faces, parts, tmp, options=None):
