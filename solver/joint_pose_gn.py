@@ -307,10 +307,12 @@ def gauss_newton_blocks(model, poses, objective, chunk=None, own_only=False, str
     def system(m0):
         sl = slice(m0, min(M, m0 + chunk))
         sub = Poses(poses.rotations[sl], poses.translations[sl], poses.scales[sl])
-        H[sl] = _chunk_system(st, model, sub, sl, own_only)
+        return _chunk_system(st, model, sub, sl, own_only)
 
-    with single_blas_thread():
-        parallel.map_pieces(system, range(0, M, chunk))         # chunks on the solver's threads
+    starts = range(0, M, chunk)
+    with single_blas_thread():              # chunks: half in a forked helper, or on the solver's threads
+        for m0, block in zip(starts, parallel.fork_map(system, starts)):
+            H[m0:m0 + chunk] = block
     n_s, n = st.n_s, st.n
     return (H[:, :n_s, :n_s].sum(axis=0), H[:, :n_s, n_s:n].copy(), H[:, n_s:n, n_s:n].copy(),
             H[:, :n_s, n].sum(axis=0), H[:, n_s:n, n].copy())

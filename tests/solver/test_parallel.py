@@ -156,3 +156,12 @@ def test_forked_call_reports_failures_and_reaps_an_abandoned_child():
         assert job.pid is None
         with pytest.raises(ChildProcessError):
             os.waitpid(pid, os.WNOHANG)                      # killed and reaped when the block was left
+
+
+@linux_only
+def test_fork_map_keeps_the_order_and_computes_the_second_half_in_a_child():
+    with parallel.using(2):
+        got = parallel.fork_map(lambda x: (x * x, os.getpid()), range(7))
+    assert [v for v, _ in got] == [x * x for x in range(7)]
+    assert {pid for _, pid in got[:3]} == {os.getpid()} and os.getpid() not in {pid for _, pid in got[3:]}
+    assert parallel.fork_map(lambda x: os.getpid(), range(3)) == [os.getpid()] * 3    # one worker: here
