@@ -274,8 +274,9 @@ def alternation_round(model, poses, problem, scans, settings, fix_joints, timing
     log.append(("weights", float(E)))
     t0 = time.perf_counter()
     trial = copy.copy(model)
-    trial.rest_vertices = solve_rest_vertices(model, poses, scans, objective.L, objective.alpha, state.shape)
-    E_trial = objective.value(hybrid_skin(trial, poses)) + sym_term
+    trial.rest_vertices, posed = solve_rest_vertices(model, poses, scans, objective.L, objective.alpha,
+                                                     state.shape, with_posed=True)
+    E_trial = objective.value(posed) + sym_term
     if E_trial <= E:
         model, E = trial, E_trial
     timings["rest_vertices"] += time.perf_counter() - t0
