@@ -933,8 +933,21 @@ def _sweep(model, skin, state, objective, graph, tracker, Q, steps=STEPS, jacobi
         return Q - _visit(model, skin, state, graph.classes, tracker, Q, steps, wins, evaluate_parallel), moved
     half_a, half_b, band = split
     gained = _halves_in_parallel(model, skin, state, graph, tracker, Q, steps, wins, half_a, half_b)
-    gained += _visit(model, skin, state, _restrict(graph.classes, band), tracker, Q, steps, wins, evaluate_parallel)
+    gained += _visit(model, skin, state, _subset_classes(graph.ring2, band), tracker, Q, steps, wins,
+                     evaluate_parallel)
     return Q - gained, moved
+
+
+def _subset_classes(ring2, mask):
+    """Colour classes of the vertices where ``mask (V,)`` is True alone (:func:`two_ring_colouring` of
+    the two-ring pattern restricted to them): no two within two rings share a class, and the thin band of
+    :meth:`TwoRing.halves` needs fewer classes, i.e. fewer evaluation calls, than the mesh's colouring
+    cut down to it (game_engine: 10 instead of 14 for 515 band vertices)."""
+    idx = np.flatnonzero(mask)
+    if len(idx) == 0:
+        return []
+    colour = two_ring_colouring(ring2[idx][:, idx].tocsr())
+    return [idx[colour == c] for c in range(colour.max() + 1)]
 
 
 def _visit(model, skin, state, classes, tracker, Q, steps, wins, evaluator):

@@ -493,3 +493,19 @@ def test_split_sweeps_are_exact_and_the_same_with_or_without_fork(monkeypatch):
     assert abs(obj.value(hybrid_skin(forked, poses)) - log_forked[-1]) <= 1e-9 * log_forked[-1]
     assert abs(log_forked[-1] - log_unsplit[-1]) <= 0.01 * log_unsplit[-1]
     forked.validate()
+
+
+def test_band_classes_are_two_ring_independent_and_cover_the_band():
+    """_subset_classes: every masked vertex in exactly one class, no two vertices of a class within two
+    rings (brute force over the ring2 pattern)."""
+    from articula.solver.weights_bcd import _subset_classes
+    model, _, _ = hybrid_truth(2)
+    graph = TwoRing(uniform_laplacian(model.faces, model.num_vertices))
+    _, _, band = graph.halves(np.ones(model.num_vertices))
+    classes = _subset_classes(graph.ring2, band)
+    assert np.array_equal(np.sort(np.concatenate(classes)), np.flatnonzero(band))
+    for idx in classes:
+        block = graph.ring2[idx][:, idx].tocoo()
+        assert np.all(block.row == block.col)                      # only each vertex with itself
+    assert len(classes) <= len([c for c in graph.classes if band[c].any()])
+    assert _subset_classes(graph.ring2, np.zeros(model.num_vertices, bool)) == []
