@@ -18,8 +18,9 @@ every round with the same mesh and α): conjugate gradients on the same normal e
 the current rest vertices and preconditioned by the factorisation of the scalar matrix ``I + α G``
 (V×V, factored once) scaled per vertex by ``c_v = tr(C_vv) / 3``: where neighbouring vertices move alike
 ``C_vw ≈ √(c_v c_w) I``, so the preconditioned spectrum is close to 1.  It stops at a residual of
-``CG_RTOL`` × the right-hand side (Q then differs from the direct solution's by ``rᵀN⁻¹r``: at 1e-9 on MakeHuman game_engine,
-Q 40.112 m², the rest vertices moved by 1.1e-9 m and Q by 1.4e-14 against the 1e-12 solution)
+``CG_RTOL`` × the right-hand side (Q then differs from the direct solution's by ``rᵀN⁻¹r``: at 1e-9
+on MakeHuman game_engine, Q 40.112 m², the rest vertices moved by 1.1e-9 m and Q by 1.4e-14 against the
+1e-12 solution)
 and falls back to the direct solve if that is not reached in ``CG_MAX_ITERATIONS``.  Measured on
 MakeHuman (13,380 vertices × 30 scans, α = 100, from the rest scan): 36 iterations, 0.48 s vs 1.15 s
 for SuperLU on the 3V system (0.14 s for the scalar factorisation, once per α); largest difference to
@@ -163,12 +164,11 @@ def solve_rest_vertices(model, poses, scans, L, alpha, preconditioner=None, with
     ``hybrid_skin`` of the model with rest vertices x up to rounding, at a tenth of its cost)."""
     A, b = affine_form(model, poses)
     N, rhs = normal_equations(A, b, np.asarray(scans, dtype=np.float64), L, alpha)
-    x = None
+    ok = False
     if preconditioner is not None:
         x, ok = conjugate_gradients(N, rhs, model.rest_vertices.ravel(),
                                     preconditioner.inverse(N), CG_RTOL, CG_MAX_ITERATIONS)
-        x = x if ok else None
-    x = (_solve_spd(N, rhs) if x is None else x).reshape(-1, 3)
+    x = (x if ok else _solve_spd(N, rhs)).reshape(-1, 3)
     if not with_posed:
         return x
     return x, np.einsum("mvij,vj->mvi", A, x) + b

@@ -509,8 +509,8 @@ def _twist_blend(q, wt):
 
     The signs come from :func:`solver.skinning.running_flips` (scans as its frames, candidates as its
     vertices), the blend is one matrix product ``(7M, k) @ (k, n)`` with the unsigned weights plus a
-    correction where a sign is −1 (rare): for k = 2 about 15 instead of 60 passes over ``(M,n)`` arrays.  Same values up to
-    rounding (≤ 1e-15 here, ≤ 1e-11 relative in the Q log).  Measured (M = 400, k = 2, n = 100-300,
+    correction where a sign is −1 (rare): for k = 2 about 15 instead of 60 passes over ``(M,n)`` arrays.
+    Same values up to rounding (≤ 1e-15 here, ≤ 1e-11 relative in the Q log).  Measured (M = 400, k = 2, n = 100-300,
     one thread): 0.43-0.74 ms vs 3.0-8.2 ms."""
     M, _, k = q.shape
     n = wt.shape[1]
@@ -863,17 +863,12 @@ def joint_move(model, skin, state, objective, Q, steps=STEPS, chunk=4000, tracke
         out = [evaluator(model, skin, proxy, part[c0:c0 + chunk], steps) for c0 in range(0, len(part), chunk)]
         return tuple(np.concatenate(x) for x in zip(*out)) if out else None
 
-    if parallel.can_fork() and len(todo) * skin.M >= 2 * SPLIT_MIN_WORK:
-        mine, theirs = todo[: len(todo) // 2], todo[len(todo) // 2:]   # independent: data-only proposals
-        with parallel.ForkedCall(lambda: propose(theirs, evaluate)) as job:
-            results = [(mine, propose(mine, evaluate))]
-            try:
-                results.append((theirs, job.result()))
-            except parallel.ForkFailed:
-                results.append((theirs, propose(theirs, evaluate)))
+    if parallel.can_fork() and len(todo) * skin.M >= 2 * SPLIT_MIN_WORK:   # independent: data-only proposals
+        parts = [todo[: len(todo) // 2], todo[len(todo) // 2:]]
+        proposals = parallel.fork_map(lambda part: propose(part, evaluate), parts)
     else:
-        results = [(todo, propose(todo, evaluate_parallel))]
-    for idx, found in results:
+        parts, proposals = [todo], [propose(todo, evaluate_parallel)]
+    for idx, found in zip(parts, proposals):
         if found is not None:
             gain[idx], prop[0][idx], prop[1][idx], prop[2][idx], prop[3][idx] = found
     tracker.stale[todo] = False
@@ -1112,6 +1107,7 @@ def _setup(model, poses, objective, graph=None):
             _Tracker(model, len(poses), graph.ring2))
 
 
+@single_blas_thread()
 def optimise_weights(model, poses, objective, max_sweeps=20, steps=STEPS, rel_tol=1e-6, progress=None,
                      jacobi=True, active_set=True, graph=None, prune_steps=True):
     """Sampling-based BCD on twist (and exact swing) weights with anchors; rest mesh, skeleton and poses
@@ -1127,14 +1123,8 @@ def optimise_weights(model, poses, objective, max_sweeps=20, steps=STEPS, rel_to
     it every sweep evaluates everything (same result, for checking).  Stops after ``max_sweeps`` or when
     a sweep gains less than ``rel_tol`` of Q.  graph: the mesh's :class:`TwoRing` (built if None).
     prune_steps: after each sweep only the steps δ that won at least ``STEP_MIN_SHARE`` of its twist
-    moves are offered in the next (:func:`_kept_steps`; the smallest always), see the module docstring."""
-    with single_blas_thread():              # small products only: spinning BLAS threads just compete
-        return _optimise(model, poses, objective, max_sweeps, steps, rel_tol, progress, jacobi, active_set, graph,
-                         prune_steps)
-
-
-def _optimise(model, poses, objective, max_sweeps, steps, rel_tol, progress, jacobi, active_set, graph,
-              prune_steps):
+    moves are offered in the next (:func:`_kept_steps`; the smallest always), see the module docstring.
+    Runs with numpy's BLAS on one thread (small products only: spinning BLAS threads just compete)."""
     model, state, skin, Q, graph, tracker = _setup(model, poses, objective, graph)
     log = []
     for sweep in range(max_sweeps):
