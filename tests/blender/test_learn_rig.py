@@ -7,6 +7,7 @@ the solver's hybrid skin, written as OBJ files and imported with ``articula.impo
 """
 import json
 import os
+import sys
 from types import SimpleNamespace
 
 import bpy
@@ -349,6 +350,44 @@ def test_cancel_leaves_scene_unchanged(pkg, tmp_path, truth, needs_learn, monkey
     assert scene_state() == before
     assert any(f >= 0.09 for f, _ in seen) and not any(t == "done" for _, t in seen)
     assert any("Q = " in t for _, t in seen)          # the progress text carries the objective
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or (os.cpu_count() or 1) < 2,
+                    reason="the weight step forks its helper on Linux with two or more cores")
+def test_forked_weight_helper_inside_blender_gives_the_in_process_result(pkg, tmp_path, truth, needs_learn,
+                                                                         monkeypatch):
+    """The operator with every weight sweep cut into halves (SPLIT_MIN_WORK 0): half of each sweep runs in
+    a process forked from Blender, and the learned bundle equals the one computed with both halves in
+    Blender's process."""
+    wb, parallel = pkg("solver.weights_bcd"), pkg("solver.parallel")
+    load_bundle = pkg("solver.bundle").load_bundle
+    model, poses, scans = truth
+    ob = import_sequence(pkg, tmp_path, scans, model.faces)
+    monkeypatch.setattr(wb, "SPLIT_MIN_WORK", 0)
+    pids = []
+    real_call = parallel.ForkedCall
+
+    class Recorded(real_call):
+        def __init__(self, fn):
+            super().__init__(fn)
+            pids.append(self.pid)
+
+    class InProcess(real_call):
+        def __init__(self, fn):
+            self.fn, self.pid, self.fd = fn, None, None
+
+    bundles = []
+    for call in (Recorded, InProcess):
+        monkeypatch.setattr(parallel, "ForkedCall", call)
+        out = str(tmp_path / f"{call.__name__}.npz")
+        assert bpy.ops.articula.learn_rig(source_object=ob.name, parts=8, max_iterations=1, seed=0,
+                                          output_bundle=out, name=call.__name__) == {'FINISHED'}
+        bundles.append(load_bundle(out))
+    assert pids and all(p is not None for p in pids)                 # children were forked
+    forked, here = bundles
+    for name in ("rest_vertices", "twist_weights", "swing_weights"):
+        np.testing.assert_allclose(getattr(forked.model, name), getattr(here.model, name), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(forked.poses.rotations, here.poses.rotations, rtol=0, atol=1e-9)
 
 
 # --------------------------------------------------------------------------- batch command
