@@ -177,6 +177,9 @@ def _free_columns(B, fit_scale):
 def _lm_block(prob, poses, idx, max_iterations, tol):
     """Levenberg–Marquardt on the frames ``idx`` (all together).  Returns (poses, E, iterations, converged)."""
     n = len(idx)
+    if max_iterations <= 0:
+        E = prob.energy(poses, idx)
+        return poses, E, np.zeros(n, dtype=np.int64), E <= 0.0
     free = prob.free
     P = len(free)
     H, g, E = prob.system(poses, idx)
@@ -184,7 +187,7 @@ def _lm_block(prob, poses, idx, max_iterations, tol):
     iters = np.zeros(n, dtype=np.int64)
     done = E <= 0.0
     converged = done.copy()
-    for _ in range(max_iterations):
+    for it in range(max_iterations):
         act = np.flatnonzero(~done)
         if not len(act):
             break
@@ -212,7 +215,7 @@ def _lm_block(prob, poses, idx, max_iterations, tol):
         done[acc[small]] = True
         done[stuck] = True
         refresh = acc[~small]
-        if len(refresh):
+        if len(refresh) and it + 1 < max_iterations:        # no system for an iteration that will not run
             H[refresh], g[refresh], E[refresh] = prob.system(_take(poses, refresh), idx[refresh])
     return poses, E, iters, converged
 

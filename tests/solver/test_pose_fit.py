@@ -188,3 +188,25 @@ def test_procrustes_start_without_root_vertices(model):
     truth = synthetic.random_poses(2, 19, seed=18, scale_range=(1.0, 1.0))
     fit = pose_fit.fit_poses(rootless, skinning.hybrid_skin(rootless, truth))
     assert angle_errors(fit.poses.rotations, truth.rotations).max() < 1e-6
+
+
+def test_normal_equations_are_built_once_per_iteration_that_runs(model, monkeypatch):
+    """k LM iterations need k systems (the start and every accepted step but the last); 0 iterations none.
+    The limited fit is a prefix of the longer one: the same poses after the same accepted steps."""
+    truth = synthetic.random_poses(3, 19, seed=13)
+    targets = skinning.hybrid_skin(model, truth)
+    start = perturb(truth, 10.0, seed=2)
+    calls = []
+    original = pose_fit._Problem.system
+    monkeypatch.setattr(pose_fit._Problem, "system", lambda self, p, idx: calls.append(len(idx)) or
+                        original(self, p, idx))
+    fits = {}
+    for k in (0, 1, 2):
+        calls.clear()
+        fits[k] = pose_fit.fit_poses(model, targets, init=start, max_iterations=k, tol=0.0)
+        assert len(calls) == k and sum(calls) <= 3 * k
+    assert angle_errors(fits[0].poses.rotations, start.rotations).max() < 1e-9
+    E0 = np.einsum("nvi,nvi->n", skinning.hybrid_skin(model, start) - targets,
+                   skinning.hybrid_skin(model, start) - targets)
+    assert np.allclose(fits[0].energy, E0, rtol=1e-12) and not fits[0].converged.any()
+    assert (fits[1].energy < fits[0].energy).all() and (fits[2].energy < fits[1].energy).all()
