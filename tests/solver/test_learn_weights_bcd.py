@@ -509,3 +509,26 @@ def test_band_classes_are_two_ring_independent_and_cover_the_band():
         assert np.all(block.row == block.col)                      # only each vertex with itself
     assert len(classes) <= len([c for c in graph.classes if band[c].any()])
     assert _subset_classes(graph.ring2, np.zeros(model.num_vertices, bool)) == []
+
+
+def test_qp_two_variables_closed_form_on_every_face_and_degenerate_problems():
+    """k = 2 (:func:`_qp_two` via _qp_group) against the enumeration of every face: optima inside, on each
+    edge, at each vertex and at 0; flat problems (H = 0, a zero column, b = 0) included."""
+    H0 = np.array([[1.0, 0.3], [0.3, 0.8]])
+    targets = [(0.2, 0.3), (0.5, 0.7), (0.6, -0.5), (-0.5, 0.6), (2.0, 0.1), (0.1, 2.0), (-1.0, -1.0), (1.5, 1.5)]
+    H = [H0] * len(targets) + [np.zeros((2, 2))] * 3 + [np.array([[1.0, 0.0], [0.0, 0.0]])] * 2
+    b = [H0 @ t for t in targets] + [[0.0, 0.0], [1.0, -1.0], [1.0, 1.0], [0.5, 1.0], [0.5, 0.0]]
+    H, b = np.array(H), np.array(b, dtype=np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):       # the enumeration's 1/ridge on H = 0
+        w0, f0 = _qp_group_enumerate(H, b)
+    w, f = _qp_group(H, b)
+    assert np.all(np.isfinite(w)) and np.all(w >= 0) and np.all(w.sum(1) <= 1 + 1e-12)
+    assert np.allclose(f, f0, atol=1e-12)
+    assert np.allclose(f, np.einsum("ni,nij,nj->n", w, H, w) - 2 * np.sum(b * w, 1), atol=1e-12)
+    assert np.allclose(w[:len(targets)], w0[:len(targets)], atol=1e-12)          # unique minimisers
+    expect = [(0.2, 0.3), None, (0.45, 0.0), (0.0, 0.4125), None, None, (0.0, 0.0), None]   # 0.45 = b₁/h₁₁
+    for got, want in zip(w, expect):
+        if want is not None:
+            assert np.allclose(got, want, atol=1e-9)
+    assert np.isclose(w[1].sum(), 1.0) and np.isclose(w[7].sum(), 1.0)           # on the sum edge
+    assert np.allclose(w[8:10], [[0, 0], [1, 0]]) and np.isclose(w[10].sum(), 1.0)   # H = 0: linear
