@@ -117,9 +117,10 @@ applied, so their two-rings stay clean): 25 % less CPU per sweep, but Q after 3 
 duplicate candidates: only 5 % are duplicates.
 Swing QP (:func:`_qp_group`): certified primal-dual active sets for k ≥ 3 instead of enumerating all
 2·2^k − 1 faces (kept as :func:`_qp_group_enumerate`: k = 1, the reference, and the problems the
-active sets do not certify); k = 2 in closed form (:func:`_qp_two`).  Measured (MakeHuman game_engine female,heavy, hybrid, 13,380 vertices × 30 scans, 19 parts,
-whole learn_rig, process CPU, old and new run side by side): weights stage 62.3 s -> 36.3 s, learn_rig
-93.1 s -> 69.0 s; the objective logs agree to 4e-14 relative.
+active sets do not certify); k = 2 in closed form (:func:`_qp_two`).  Measured (MakeHuman game_engine
+female,heavy, hybrid, 13,380 vertices × 30 scans, 19 parts, whole learn_rig, process CPU, old and new
+run side by side): weights stage 62.3 s -> 36.3 s, learn_rig 93.1 s -> 69.0 s; the objective logs agree
+to 4e-14 relative.
 """
 import itertools
 
