@@ -42,7 +42,7 @@ from .procrustes import fit_parts
 from .rest_shape import ShapePreconditioner, solve_rest_vertices
 from .rig_objective import RigObjective
 from .rotations import quat_to_rotvec
-from .segmentation import choose_num_parts, segment
+from .segmentation import choose_num_parts, mirror_map, segment
 from .skeleton_init import build_skeleton
 from .skinning import hybrid_skin
 from .surface_distance import error_statistics, per_vertex_scan_distances
@@ -194,11 +194,12 @@ def initialise(scans, faces, parts, seed, symmetry, initial_skeleton, k_max, pro
         else:
             k = int(parts)
             info["k_curve_mm"] = None
-        labels, rms = segment(rest, scans, faces, k, seed=seed, mirror=symmetry)
+        mirror = mirror_map(rest, scans, faces) if symmetry and k > 1 else None
+        labels, rms = segment(rest, scans, faces, k, seed=seed, mirror=False if mirror is None else mirror)
         info.update(parts=k, segmentation_rms_mm=rms * 1e3)
         R, t = fit_parts(rest, scans, labels, k)
         skeleton, order, bone_of_part, pairs = build_skeleton(rest, labels, faces, k, R, t, symmetry=symmetry,
-                                                              symmetry_scans=scans)
+                                                              symmetry_scans=scans, mirror=mirror)
         bone_labels = bone_of_part[labels]
         W, tau = R[:, order], t[:, order]
     poses = poses_from_part_fits(skeleton, W, tau)

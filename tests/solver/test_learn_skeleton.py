@@ -182,3 +182,22 @@ def test_unequal_pairs_flags_mirror_bones_of_different_length():
     assert unequal_pairs(heads, tails, parents, [(1, 2), (3, 4)]) == []          # 0.40 vs 0.38 m: within 10 %
     heads[4, 2] = tails[2, 2] = 0.7                                              # 0.40 vs 0.30 m
     assert unequal_pairs(heads, tails, parents, [(1, 2), (3, 4)]) == [(1, 2)]    # end bones are not compared
+
+
+def test_mirror_pairs_from_the_vertex_mirror_map():
+    """With the mesh's vertex mirror map the pairs come from it: the same pairs and names as from the
+    symmetry planes on the symmetric rest mesh, and the same parts paired from every posed scan, where no
+    plane reflects the whole body."""
+    from articula.solver.segmentation import mirror_map
+    from articula.solver.skeleton_init import MAP_COVERAGE, map_pair_votes
+    d = _learned()
+    mirror = mirror_map(d["rest"], d["scans"], d["faces"])
+    assert mirror is not None and np.mean(mirror >= 0) >= MAP_COVERAGE
+    sk, order, bone_of_part, pairs = build_skeleton(d["rest"], d["lab"], d["faces"], 8, d["R"], d["t"],
+                                                    mirror=mirror)
+    assert pairs == d["pairs"] and sk.names == d["sk"].names
+    expected = {frozenset((int(d["order"][l]), int(d["order"][r]))) for l, r in d["pairs"]}
+    for m in range(len(d["scans"])):           # (a scan's own rigid turn may flip which side is +X)
+        assert {frozenset(p) for p in map_pair_votes(d["scans"][m], d["lab"], 8, mirror)} == expected, m
+    broken = np.where(np.arange(len(mirror)) % 2 == 0, mirror, -1)      # half the map: planes instead
+    assert build_skeleton(d["rest"], d["lab"], d["faces"], 8, d["R"], d["t"], mirror=broken)[3] == d["pairs"]
