@@ -306,6 +306,11 @@ def run_dembones(py, rest, frames, faces, bones, tmp):
         return {k: out[k] for k in out.files}
 
 
+def rmse_and_seconds(out):
+    """``(RMSE, seconds of compute())`` of a :func:`run_dembones` result, for :func:`versus`."""
+    return float(out["rmse"]), float(out["seconds"])
+
+
 # ------------------------------------------------------------------------------------------ data
 
 def read_obj(path):
@@ -483,7 +488,7 @@ def section_skinning_gt(args, tmp, have_learner, why, failures, db_py):
         if db_py is not None:
             try:
                 out = run_dembones(db_py, g["rest"], g["scans"], g["faces"], B, tmp)
-                db = (float(out["rmse"]), float(out["seconds"]))
+                db = rmse_and_seconds(out)
                 line(f"   Dem Bones ({int(out['bones'])} bones, given the rig's rest mesh): RMSE {float(out['rmse']):.4f} "
                      f"({float(out['rmse']) / diag:.2e} of diag), {float(out['seconds']):.2f} s")
             except RuntimeError as e:
@@ -527,7 +532,7 @@ def section_dembones(args, tmp, have_learner, why, failures, db_py, first_mh, ou
             try:
                 out = run_dembones(db_py, rest, frames, polys, bones, tmp)
                 mine = metrics.dem_bones_rmse(out["reconstruction"], frames)
-                db = (float(out["rmse"]), float(out["seconds"]))
+                db = rmse_and_seconds(out)
                 line(f"   {bones:2d} bones  Dem Bones RMSE {float(out['rmse']):.4f} (published {pub}; recomputed here "
                      f"{mine:.4f}), {int(out['bones'])} bones used, {float(out['seconds']):.2f} s, "
                      f"peak RSS {float(out['rss_kb']) / 1024:.0f} MB")
@@ -569,7 +574,7 @@ def section_dembones(args, tmp, have_learner, why, failures, db_py, first_mh, ou
         except RuntimeError as e:
             line(f"   Dem Bones: FAILED - {e}")
     if mine:
-        db = (float(out["rmse"]), float(out["seconds"])) if db_py is not None and out is not None else None
+        db = None if out is None else rmse_and_seconds(out)
         line(f"   ours (section 1, first case) RMSE {mine[1] * 1000:.2f} mm, {wall_split(mine[2])}"
              f"{versus(db, mine[1], mine[2])}")
     else:

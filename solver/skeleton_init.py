@@ -174,6 +174,7 @@ def rotation_centre(Rp, tp, Rc, tc, h0, mu=0.02):
 
 MIRROR_SIZE_RATIO = 0.8         # mirror parts: vertex counts within this ratio (cut alike on both sides)
 MIRROR_LENGTH_TOLERANCE = 0.1   # mirror bones: initial lengths within this fraction of the longer
+MIRROR_MATCH = 0.6              # mirror parts: this share of a part's vertices has its image in the other
 SYMMETRY_SAMPLE = 1000          # points that take part in the reflect-and-match iterations
 
 
@@ -263,7 +264,7 @@ def symmetry_planes(points, iterations=8, tol=0.02, sample=SYMMETRY_SAMPLE):
     return sorted(found, key=lambda f: f[2])
 
 
-def mirror_pairs(rest, labels, k, plane, min_match=0.6):
+def mirror_pairs(rest, labels, k, plane, min_match=MIRROR_MATCH):
     """Pairs of parts that are mirror images ``[(left, right), ...]`` (part indices; left on the
     positive side of the plane).  A part pairs with the part where most of its reflected vertices land,
     when that relation is mutual and the two are different parts."""
@@ -306,7 +307,7 @@ def pair_votes(shapes, labels, k):
 MAP_COVERAGE = 0.9             # a vertex mirror map pairs the parts itself when it maps this share of vertices
 
 
-def map_pair_votes(rest, labels, k, mirror, min_match=0.6):
+def map_pair_votes(rest, labels, k, mirror, min_match=MIRROR_MATCH):
     """Mirror-pair votes ``{(left, right): 1}`` (part indices) from a vertex mirror map ``mirror (V,)``
     (:func:`solver.segmentation.mirror_map`; -1: no image): parts p and q pair when at least ``min_match``
     of each one's mapped vertices have their image in the other.  Left is the side the mirror normal
@@ -439,8 +440,9 @@ def build_skeleton(rest, labels, faces, k, part_R=None, part_t=None, symmetry=Tr
         heads[b] = h
     pairs = []
     if symmetry and k > 1:
-        if mirror is not None and np.mean(np.asarray(mirror) >= 0) >= MAP_COVERAGE:
-            votes = map_pair_votes(rest, labels, k, np.asarray(mirror, dtype=np.int64))
+        mirror = None if mirror is None else np.asarray(mirror, dtype=np.int64)
+        if mirror is not None and np.mean(mirror >= 0) >= MAP_COVERAGE:
+            votes = map_pair_votes(rest, labels, k, mirror)
         else:
             shapes = [rest]
             if symmetry_scans is not None:
