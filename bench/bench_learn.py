@@ -244,11 +244,21 @@ def learn_or_fail(status, label, prefix, scans, faces, parts, tmp, options=None)
     try:
         if not have_learner:
             raise RuntimeError(f"solver.learn.learn_rig is not available ({why}); no numbers")
-        return run_learner(scans, faces, parts, tmp, options)
+        got = run_learner(scans, faces, parts, tmp, options)
     except RuntimeError as e:
         line(f"{prefix}: FAILED - {e}")
         failures.append(label)
         return None
+    line(f"{prefix} objective log: {objective_log_text(got[2])}")
+    return got
+
+
+def objective_log_text(meas):
+    """The learner's objective log (warm start, then the rounds' steps) at ten significant digits: the
+    number that a change meant to keep behaviour (a refactoring) must leave identical."""
+    rep = meas.get("report", {})
+    steps = list(rep.get("warm_start_log", [])) + list(rep.get("objective_log", []))
+    return " ".join(f"{name}={float(e):.10g}" for name, e in steps) or "(none in the report)"
 
 
 # ------------------------------------------------------------------------------------------ Dem Bones
