@@ -4,7 +4,7 @@
     python batch.py [--open file.blend] <command> [args...]      (Blender as the bpy module; ./run uses this)
 
 Enables the add-on (an installed ``bl_ext.*.articula`` if there is one, else this checkout through a
-local extension repository) and runs ``addon.cli.main``.  Exit code 0 on success, non-zero with a
+local extension repository) and runs ``addon.cli.common.main``.  Exit code 0 on success, non-zero with a
 message on failure.  ``<command> --help`` lists a command's options; ``help`` lists the commands.
 """
 import importlib
@@ -73,7 +73,7 @@ def main() -> int:
     if open_file:
         bpy.ops.wm.open_mainfile(filepath=os.path.abspath(open_file))
     module = enable_addon(bpy)
-    cli = importlib.import_module(module + ".addon.cli")
+    cli = importlib.import_module(module + ".addon.cli.main")
     return cli.main(argv)
 
 

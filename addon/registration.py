@@ -1,34 +1,21 @@
 """Registers every Blender class of the extension, in dependency order.
 
-Each module listed in ``MODULES`` exposes ``classes`` (a tuple of bpy classes, registered in order)
+Each module in ``MODULES`` exposes ``classes`` (a tuple of bpy classes, registered in order)
 and may expose ``register_extra()`` / ``unregister_extra()`` for properties, handlers or menus.
 """
-import importlib
-
 import bpy
 
+from .. import operators
 from ..solver import parallel
+from . import panels, preferences, properties
+from .sequences import points, scans
 
-# Relative to the extension package.  Order matters: property groups before what uses them,
-# operators before the panels that draw their buttons.
-MODULES = (
-    ".addon.preferences",
-    ".addon.properties",
-    ".addon.scan_sequence",
-    ".addon.point_cloud_sequence",
-    ".operators",
-    ".addon.panels",
-)
-
-_PKG = __package__.rpartition(".")[0]  # the extension package, e.g. "bl_ext.user_default.articula"
-
-
-def _modules():
-    return [importlib.import_module(name, _PKG) for name in MODULES]
+# Order matters: property groups before what uses them, operators before the panels that draw their buttons.
+MODULES = (preferences, properties, scans, points, operators, panels)
 
 
 def register():
-    for mod in _modules():
+    for mod in MODULES:
         for cls in getattr(mod, "classes", ()):
             bpy.utils.register_class(cls)
         if hasattr(mod, "register_extra"):
@@ -37,7 +24,7 @@ def register():
 
 def unregister():
     parallel.shutdown()                       # the solver's idle worker threads
-    for mod in reversed(_modules()):
+    for mod in reversed(MODULES):
         if hasattr(mod, "unregister_extra"):
             mod.unregister_extra()
         for cls in reversed(getattr(mod, "classes", ())):

@@ -39,8 +39,8 @@ def _bench_stages(frames, faces, tmp):
     from articula.sample_scenes import depth_recording as rec
     from articula.sample_scenes.depth_noise import NoiseParams, apply_noise
     from articula.sample_scenes.depth_render import incidence_cosine, render_depth
-    from articula.solver import camera
-    from articula.solver.png16 import write_png16
+    from articula.solver.depth import camera
+    from articula.solver.formats.png16 import write_png16
     intr = camera.preset("kinect_v1")
     lo, hi = frames.reshape(-1, 3).min(0), frames.reshape(-1, 3).max(0)
     centre = (lo + hi) / 2
@@ -71,7 +71,7 @@ def _timeit(fn):
 
 
 def _bench_decode(files, n, label):
-    from articula.solver.png16 import read_png16, read_png16_many
+    from articula.solver.formats.png16 import read_png16, read_png16_many
     paths = [files[i % len(files)] for i in range(n)]
     for name, fn in (("read_png16", lambda: [read_png16(p) for p in paths]),
                      ("read_png16_many", lambda: read_png16_many(paths))):
@@ -106,7 +106,7 @@ def _rowwise_unfilter(filtered, types):
 
 
 def _bench_alternative(path):
-    from articula.solver import png16
+    from articula.solver.formats import png16
     with open(path, "rb") as fh:
         _, filtered, types = png16._inflate(fh.read(), path)
     rows = 24
@@ -124,7 +124,7 @@ def main(argv) -> int:
     ap.add_argument("--decodes", type=int, default=300)
     args = ap.parse_args(argv)
     from articula.sample_scenes.registered import posed_sequence
-    from articula.solver.png16 import write_png16
+    from articula.solver.formats.png16 import write_png16
     frames, faces, gt = posed_sequence(n_poses=args.frames, seed=0)
     gt = {k: v for k, v in gt.items() if k != "posed_vertices"}
     _common.report("subject", f"{frames.shape[1]} vertices, {len(faces)} triangles")
@@ -138,7 +138,7 @@ def main(argv) -> int:
             _bench_decode(kinect, args.decodes, "real Kinect v1 files (libpng, Sub/Up/Paeth)")
         else:
             _common.report("decode real Kinect files", "skipped", note=f"{KINECT_DIR} absent")
-        from articula.solver.png16 import read_png16
+        from articula.solver.formats.png16 import read_png16
         paeth = os.path.join(tmp, "paeth.png")
         write_png16(paeth, read_png16(own[0]), filter_type="paeth")
         _bench_decode([paeth], max(1, args.decodes // 10), "all-Paeth file (worst case)")

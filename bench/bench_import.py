@@ -66,7 +66,7 @@ def main(argv=()) -> int:
     args = ap.parse_args(list(argv))
     bpy = _addon()
     from articula.sample_scenes.mesh_files import SequenceWriter
-    from articula.solver.scan_sequence import list_scan_files, read_scan_files
+    from articula.solver.formats.scan_files import list_scan_files, read_scan_files
     tmp = tempfile.mkdtemp(prefix="articula_bench_import_")
     os.environ.setdefault("ARTICULA_HOME", tmp)
     try:
@@ -84,7 +84,7 @@ def main(argv=()) -> int:
         rest = os.path.join(DEM, "Bone_Geom_rest.obj")
         npy = os.path.join(DEM, "Bone_Anim_positions_400x754x3.npy")
         if os.path.isfile(rest) and os.path.isfile(npy):
-            from articula.solver.meshfiles import read_obj
+            from articula.solver.formats.meshes import read_obj
             base = read_obj(rest)
             faces = base.corner_verts.reshape(-1, 3) if (base.face_sizes == 3).all() else base.triangles()
             frames = np.load(npy)[:args.frames]
@@ -131,7 +131,7 @@ def main(argv=()) -> int:
         _common.report(f"frame change, unregistered (rebuild), {len(verts)} v",
                        1000 * _frame_cost(bpy, ob, range(1, 9)), "ms")
         # the alternative: meshes prepared per frame, swapped into the object by a handler
-        from articula.addon import scan_sequence
+        from articula.addon.sequences import scans as scan_sequence
         meshes = []
         for k, m in enumerate(scan_sequence.scan_frame_meshes(ob)):
             me = bpy.data.meshes.new(f"swap{k}")

@@ -2,7 +2,7 @@
 
 The recording is synthetic and exact (analytic ray casting, Kinect v1 nominal intrinsics): a floor seen
 by a camera 1.2 m high looking slightly down, a back wall at 3.6 m and a 0.45 x 0.35 x 1.7 m "subject"
-box walking across, plus 1 mm Gaussian depth noise, written as 16-bit millimetre PNGs by solver.png16
+box walking across, plus 1 mm Gaussian depth noise, written as 16-bit millimetre PNGs by solver.formats.png16
 (Up filter).  Import settings: background subtraction (median of the first 10 frames), floor removal,
 normals, voxel 0.01 m (``--voxel``).
 
@@ -39,8 +39,8 @@ def _addon():
 
 def write_recording(folder, frames, seed=0):
     """Synthetic 640x480 recording; returns seconds spent."""
-    from articula.solver import camera
-    from articula.solver.png16 import write_png16
+    from articula.solver.depth import camera
+    from articula.solver.formats.png16 import write_png16
     sys.path.insert(0, _common.REPO)
     from tests.solver.depth_scene import floor_box_scene, ray_box, rays_world
     intr = camera.PRESETS["kinect_v1"]

@@ -1,5 +1,5 @@
 """Evaluation of rig learning (issue 4) against exact ground truth and the peer tool Dem Bones: training
-error, held-out error, joint-centre error, time and memory of ``solver.learn.learn_rig``.
+error, held-out error, joint-centre error, time and memory of ``solver.learn.pipeline.learn_rig``.
 (``bench_learn_speed.py`` times the learner's stages; this one evaluates the result.)
 
 Sections (every number with its unit; the output is also written to ``bench/results/``):
@@ -8,18 +8,18 @@ Sections (every number with its unit; the output is also written to ``bench/resu
    ``game_engine``; shapes ``female,heavy`` and ``male,thin``; generating skins ``lbs`` and ``hybrid``;
    30 random range-of-motion training poses + 10 held-out poses from another seed):
    * training error: every training-scan vertex to the surface of the learned model posed with its learned
-     pose (mm: mean, std, median, MAD, IQR, max — spec §4.1 / §6.1, ``solver.metrics``);
-   * held-out error: the learned model FIXED, one pose per held-out scan fitted by ``solver.pose_fit``
+     pose (mm: mean, std, median, MAD, IQR, max — spec §4.1 / §6.1, ``solver.fit.metrics``);
+   * held-out error: the learned model FIXED, one pose per held-out scan fitted by ``solver.fit.pose_fit``
      (Levenberg–Marquardt from a per-part Procrustes start), the same distance;
    * joint-centre error: learned joint centres matched to the generating rig's joints (Hungarian
-     assignment, ``solver.metrics.match_joints``), both posed in every training scan (the learned rest pose
+     assignment, ``solver.fit.metrics.match_joints``), both posed in every training scan (the learned rest pose
      is one of the scans), mean distance over the scans per matched pair, mm;
    * wall and CPU time, and peak resident memory of the learning process (a fresh child process per
      run, ``VmHWM``; its baseline after the imports is printed too).
    A reference row needs no learner: ``pose_fit`` with the generating rig's own hybrid model on the held-out
    scans (0 mm for hybrid-skinned data: checks the fitter and the metric end to end).
 2. ``../shared/data/skinning_gt`` cylinder and wolf (libigl .tgf skeleton, .DMAT weights, .Tmat transforms,
-   posed OBJ meshes; ``solver.igl_formats``): the exact rig's own reproduction error (reader check), Dem Bones
+   posed OBJ meshes; ``solver.formats.libigl``): the exact rig's own reproduction error (reader check), Dem Bones
    with as many bones as the rig, and ``learn_rig`` with as many parts: reconstruction error and joint-centre
    error against the rig's joints, in the files' units and relative to the bounding-box diagonal.
 3. Dem Bones (``py-dem-bones`` 0.13.1 from PyPI, in its own virtual environment
@@ -51,7 +51,7 @@ Sections (every number with its unit; the output is also written to ``bench/resu
    training and held-out error, and joint centres vs the true joints, as in section 1.  Small and quick:
    a check of the whole evaluation path with known truth.
 
-If ``solver.learn.learn_rig`` cannot be imported or fails, every "ours" row prints FAILED with the reason
+If ``solver.learn.pipeline.learn_rig`` cannot be imported or fails, every "ours" row prints FAILED with the reason
 and the benchmark exits with status 1 after printing everything else; no number is ever invented.
 
 Usage: ./run bench learn [--quick] [--no-dembones] [--order SECTIONS] [--out FILE]
@@ -133,9 +133,9 @@ def machine():
 # ------------------------------------------------------------------------------------------ learner
 
 def learner_status():
-    """``(True, "")`` when ``solver.learn.learn_rig`` imports, else ``(False, reason)``."""
+    """``(True, "")`` when ``solver.learn.pipeline.learn_rig`` imports, else ``(False, reason)``."""
     try:
-        from articula.solver.learn import learn_rig  # noqa: F401
+        from articula.solver.learn.pipeline import learn_rig  # noqa: F401
         return True, ""
     except Exception as e:                                               # noqa: BLE001 (reported)
         return False, f"{type(e).__name__}: {e}"
@@ -156,8 +156,8 @@ def peak_rss_kb():
 
 def _child_learn(src, dst):
     """In a fresh process: load scans, run learn_rig, save the bundle and the measurements."""
-    from articula.solver.bundle import save_bundle
-    from articula.solver.learn import learn_rig
+    from articula.solver.formats.bundle import save_bundle
+    from articula.solver.learn.pipeline import learn_rig
     data = np.load(src)
     parts, rounds = int(data["parts"]), int(data["rounds"])
     options = json.loads(str(data["options"]))
@@ -187,7 +187,7 @@ def run_learner(scans, faces, parts, tmp, options=None):
     """learn_rig in a child process (``options``: further keyword arguments of learn_rig, JSON-able).
     Returns ``(model, poses, measurements)``; raises RuntimeError with the child's last error line if it
     fails or does not finish within ``LEARN_TIMEOUT``."""
-    from articula.solver.bundle import load_bundle
+    from articula.solver.formats.bundle import load_bundle
     src, dst = os.path.join(tmp, "learn_in.npz"), os.path.join(tmp, "learn_out.npz")
     if os.path.exists(dst):
         os.remove(dst)
@@ -243,7 +243,7 @@ def learn_or_fail(status, label, prefix, scans, faces, parts, tmp, options=None)
     have_learner, why, failures = status
     try:
         if not have_learner:
-            raise RuntimeError(f"solver.learn.learn_rig is not available ({why}); no numbers")
+            raise RuntimeError(f"solver.learn.pipeline.learn_rig is not available ({why}); no numbers")
         got = run_learner(scans, faces, parts, tmp, options)
     except RuntimeError as e:
         line(f"{prefix}: FAILED - {e}")
@@ -325,7 +325,7 @@ def rmse_and_seconds(out):
 
 def read_obj(path):
     """``(vertices (V,3), triangles (T,3), polygons list)`` of an OBJ file."""
-    from articula.solver.meshfiles import read_obj as read
+    from articula.solver.formats.meshes import read_obj as read
     mesh = read(path)
     return mesh.vertices, mesh.triangles(), np.split(mesh.corner_verts, mesh.face_starts[1:])
 
@@ -341,7 +341,7 @@ def bone_anim():
 def skinning_gt(name):
     """The skinning_gt rig ``name``: rest (V,3), triangles, joints (J,3), bones (B,2), weights (V,B), posed
     scans (N,V,3) of poses-1 then poses-2 in natural order, and the exact rig's reproduction (N,V,3)."""
-    from articula.solver import igl_formats
+    from articula.solver.formats import libigl as igl_formats
     d = os.path.join(SHARED, "skinning_gt", f"{name}-all")
     rest, tris, _ = read_obj(os.path.join(d, f"{name}.obj"))
     joints, bones = igl_formats.read_tgf(os.path.join(d, f"{name}.tgf"))
@@ -365,7 +365,7 @@ def skinning_gt(name):
 def _largest_component(g):
     """Keep the largest connected part of the mesh (learn_rig needs one connected mesh; the wolf's eyes are
     separate islands).  ``dropped`` = the number of vertices removed."""
-    from articula.solver.laplacian import components
+    from articula.solver.geometry.mesh_graph import components
     _, labels = components(g["faces"], len(g["rest"]))
     if labels.max() == 0:
         return g
@@ -393,14 +393,15 @@ def part_joints(g):
 
 def surface_stats(scans, model, poses):
     """Scan-vertex -> posed-model-surface statistics (mm, for data in metres) and Dem Bones' RMSE (m)."""
-    from articula.solver import metrics, skinning
+    from articula.solver.fit import metrics
+    from articula.solver.rig import skinning
     posed = skinning.hybrid_skin(model, poses)
     d = metrics.scan_to_model_distances(scans, posed, model.faces)
     return metrics.statistics_mm(d), metrics.dem_bones_rmse(posed, scans)
 
 
 def held_out(model, scans):
-    from articula.solver import pose_fit
+    from articula.solver.fit import pose_fit
     t0 = time.perf_counter()
     fit = pose_fit.fit_poses(model, scans, max_iterations=30, tol=1e-10)
     seconds = time.perf_counter() - t0
@@ -411,13 +412,13 @@ def held_out(model, scans):
 def posed_joints(model, poses):
     """Learned joint centres (non-root bones) in every frame ``(N, B − 1, 3)``.  The learned rest pose is one
     of the scans, so joints are compared posed, frame by frame, not at rest."""
-    from articula.solver import metrics
+    from articula.solver.fit import metrics
     return metrics.posed_joints(model.skeleton, poses)[:, 1:]
 
 
 def joint_errors(learned, reference):
     """Hungarian matching of joint trajectories ``(N, J, 3)``; mean distance over the frames per pair."""
-    from articula.solver import metrics
+    from articula.solver.fit import metrics
     return metrics.match_joints(learned, reference).distances
 
 
@@ -520,7 +521,7 @@ def section_skinning_gt(args, tmp, have_learner, why, failures, db_py):
 
 
 def section_dembones(args, tmp, have_learner, why, failures, db_py, first_mh, ours):
-    from articula.solver import metrics
+    from articula.solver.fit import metrics
     line("== 3. Dem Bones (py-dem-bones 0.13.1, default parameters, own venv) vs learn_rig")
     line("   RMSE = sqrt(sum over frames and vertices of |reconstruction - target|^2 / (frames * vertices)), "
          "as DemBones::rmse()")
@@ -595,7 +596,7 @@ def section_dembones(args, tmp, have_learner, why, failures, db_py, first_mh, ou
 def section_tube(args, tmp, have_learner, why, failures):
     sys.path.insert(0, os.path.join(REPO, "tests", "solver"))
     from learn_data import hybrid_truth
-    from articula.solver import metrics
+    from articula.solver.fit import metrics
     line("== 4. tube body (synthetic, hybrid-skin ground truth; tests/solver/learn_data.py)")
     truth, true_poses, train = hybrid_truth(8, seed=0)
     test = hybrid_truth(5, seed=1)[2][1:]                  # scan 0 of every sequence is the rest pose
@@ -667,7 +668,7 @@ def main(argv=None):
                              capture_output=True, text=True).stdout.strip()
         line(f"code: commit {rev or '?'} (uncommitted changes, if any, included)")
         have, why = learner_status()
-        line(f"learner: {'solver.learn.learn_rig' if have else 'MISSING (' + why + ')'}")
+        line(f"learner: {'solver.learn.pipeline.learn_rig' if have else 'MISSING (' + why + ')'}")
         db_py = None
         if not args.no_dembones:
             try:

@@ -1,4 +1,4 @@
-"""Speed of rig learning (solver.learn.learn_rig) on MakeHuman: per-stage time, wall/CPU, peak memory, accuracy.
+"""Speed of rig learning (solver.learn.pipeline.learn_rig) on MakeHuman: per-stage time, wall/CPU, peak memory, accuracy.
 
     ./run bench learn_speed                          # 13,380 v x 30 scans, 19 parts, default rounds
     ./run bench learn_speed --frames 10 --iterations 3 --gn-iterations 3 --bcd-sweeps 3
@@ -26,8 +26,8 @@ import _common  # noqa: E402  (makes ``import articula`` work)
 
 import numpy as np  # noqa: E402
 
-from articula.solver.learn import learn_rig  # noqa: E402
-from articula.solver.skinning import hybrid_skin  # noqa: E402
+from articula.solver.learn.pipeline import learn_rig  # noqa: E402
+from articula.solver.rig.skinning import hybrid_skin  # noqa: E402
 
 
 def _peak_rss_gib():
@@ -90,7 +90,7 @@ def main(argv=None) -> int:
     _common.report("training surface error mean", err["mean"], "1e-3 file units" if args.bone_anim else "mm",
                    f"median {err['median']:.3g}, max {err['max']:.3g}; vertex RMS {rep['vertex_rms_mm']:.3g} mm")
     if args.bone_anim:
-        from articula.solver.metrics import dem_bones_rmse
+        from articula.solver.fit.metrics import dem_bones_rmse
         _common.report("RMSE (Dem Bones' definition)", dem_bones_rmse(hybrid_skin(res.model, res.poses), verts), "",
                        f"learned from {len(rep['key_scans'])} of {len(verts)} scans")
     _common.report("rounds", rep["iterations"], "", f"converged={rep['converged']}, objective "

@@ -52,19 +52,19 @@ def _best(fn, repeats, reset):
 
 def exactness(bpy, pkg, n=100):
     tube = _mod(pkg, "sample_scenes.tube_body")
-    Poses = _mod(pkg, "solver.model").Poses
+    Poses = _mod(pkg, "solver.rig.model").Poses
     model = tube.model()
     poses = Poses(*tube.random_poses(model.skeleton.num_bones, n, seed=11))
-    rig = _mod(pkg, "addon.rig_builder").build_rig(bpy.context, model, "Exact")
-    _mod(pkg, "addon.actions").write_action(rig.armature, model.skeleton.names, poses)
-    ref = _mod(pkg, "solver.skinning").hybrid_skin(model, poses)
-    evaluated = _mod(pkg, "addon.mesh_io").evaluated_positions
+    rig = _mod(pkg, "addon.rig.builder").build_rig(bpy.context, model, "Exact")
+    _mod(pkg, "addon.rig.actions").write_action(rig.armature, model.skeleton.names, poses)
+    ref = _mod(pkg, "solver.rig.skinning").hybrid_skin(model, poses)
+    evaluated = _mod(pkg, "addon.scene.mesh_io").evaluated_positions
     worst = 0.0
     for f in range(n):
         bpy.context.scene.frame_set(f + 1)
         worst = max(worst, float(np.linalg.norm(evaluated(rig.mesh) - ref[f], axis=1).max()))
     diag = float(np.linalg.norm(np.ptp(model.rest_vertices, axis=0)))
-    flips = int(_mod(pkg, "solver.skinning").twist_flips(model, poses).sum())
+    flips = int(_mod(pkg, "solver.rig.skinning").twist_flips(model, poses).sum())
     _common.report("exactness worst error / bbox diagonal", worst / diag, "",
                    f"{n} poses, {model.num_vertices} vertices, {model.skeleton.num_bones} bones, "
                    f"vertex-frames with a flipped twist hemisphere {flips}")
@@ -74,7 +74,7 @@ def _plain_rig(bpy, pkg, model, preserve_volume, w):
     """One armature with the two bones and one Armature modifier: LBS or Preserve Volume, with
     weights ``w (V,)`` on the upper bone and 1 - w on the lower one."""
     names = model.skeleton.names
-    mesh_io = _mod(pkg, "addon.mesh_io")
+    mesh_io = _mod(pkg, "addon.scene.mesh_io")
     arm = bpy.data.objects.new("Plain", bpy.data.armatures.new("Plain"))
     bpy.context.scene.collection.objects.link(arm)
     bpy.context.view_layer.objects.active = arm
@@ -97,10 +97,10 @@ def _plain_rig(bpy, pkg, model, preserve_volume, w):
 def candy_wrapper(bpy, pkg):
     tube = _mod(pkg, "sample_scenes.tube_body")
     model, ratio = tube.cylinder(41, 24, 0.3), tube.min_ring_radius_ratio
-    evaluated = _mod(pkg, "addon.mesh_io").evaluated_positions
+    evaluated = _mod(pkg, "addon.scene.mesh_io").evaluated_positions
     twist = (np.cos(np.pi / 2), 0, np.sin(np.pi / 2), 0)            # 180° about the bone's Y
     swing = (np.cos(np.pi / 4), np.sin(np.pi / 4), 0, 0)             # 90° about the bone's X
-    art = _mod(pkg, "addon.rig_builder").build_rig(bpy.context, model, "Tube")
+    art = _mod(pkg, "addon.rig.builder").build_rig(bpy.context, model, "Tube")
     # the plain rigs use the Articula weights of the motion under test (twist ramp / swing ramp)
     for label, q, w in (("180° twist", twist, model.twist_weights[:, 1]),
                         ("90° swing", swing, model.swing_weights[:, 1])):
@@ -116,7 +116,7 @@ def candy_wrapper(bpy, pkg):
 
 def build_speed(bpy, pkg, repeats):
     model = _mod(pkg, "sample_scenes.tube_body").model(rings=26, segments=26)
-    build = _mod(pkg, "addon.rig_builder").build_rig
+    build = _mod(pkg, "addon.rig.builder").build_rig
     wall, cpu = _best(lambda: build(bpy.context, model, "Big"), repeats,
                       lambda: bpy.ops.wm.read_homefile(use_empty=True))
     note = f"{model.num_vertices} vertices, {model.skeleton.num_bones} bones, best of {repeats}; target < 2 s"
@@ -132,34 +132,34 @@ def makehuman(bpy, pkg, repeats, n=100):
     except Exception as exc:                                            # assets not fetched
         _common.report("MakeHuman subject", "skipped", "", f"{type(exc).__name__}: {exc}")
         return
-    M = _mod(pkg, "solver.model")
+    M = _mod(pkg, "solver.rig.model")
     sk = M.Skeleton(list(gt["bone_names"]), gt["parents"], gt["heads"], gt["tails"], gt["frames"])
     model = M.Model(gt["rest_vertices"], gt["faces"], sk, gt["anchor"], gt["twist_weights"], gt["swing_weights"])
     poses = M.Poses(gt["pose_rotations"], gt["pose_translations"], gt["pose_scales"])
-    build = _mod(pkg, "addon.rig_builder").build_rig
+    build = _mod(pkg, "addon.rig.builder").build_rig
     wall, cpu = _best(lambda: build(bpy.context, model, "MH"), repeats,
                       lambda: bpy.ops.wm.read_homefile(use_empty=True))
     note = f"{model.num_vertices} vertices, {sk.num_bones} bones, best of {repeats}; target < 2 s"
     _common.report("MakeHuman build rig (wall)", wall, "s", note)
     _common.report("MakeHuman build rig (cpu)", cpu, "s")
     rig = bpy.data.objects["MH"]
-    _mod(pkg, "addon.actions").write_action(rig, sk.names, poses)
-    mesh = _mod(pkg, "addon.rig_reader").find_mesh(rig)
-    evaluated = _mod(pkg, "addon.mesh_io").evaluated_positions
-    ref = _mod(pkg, "solver.skinning").hybrid_skin(model, poses)
+    _mod(pkg, "addon.rig.actions").write_action(rig, sk.names, poses)
+    mesh = _mod(pkg, "addon.rig.reader").find_mesh(rig)
+    evaluated = _mod(pkg, "addon.scene.mesh_io").evaluated_positions
+    ref = _mod(pkg, "solver.rig.skinning").hybrid_skin(model, poses)
     worst = 0.0
     for f in range(n):
         bpy.context.scene.frame_set(f + 1)
         worst = max(worst, float(np.linalg.norm(evaluated(mesh) - ref[f], axis=1).max()))
     diag = float(np.linalg.norm(np.ptp(model.rest_vertices, axis=0)))
-    flips = int(_mod(pkg, "solver.skinning").twist_flips(model, poses).sum())
+    flips = int(_mod(pkg, "solver.rig.skinning").twist_flips(model, poses).sum())
     _common.report("MakeHuman exactness worst error / bbox diagonal", worst / diag, "",
                    f"{n} range-of-motion poses; worst {1000 * worst:.4f} mm; vertex-frames with a flipped twist hemisphere {flips}")
 
 
 def chain_model(pkg, bones=60):
     """A 60-bone chain along Z (one ring of vertices per bone), for the baking benchmark."""
-    M = _mod(pkg, "solver.model")
+    M = _mod(pkg, "solver.rig.model")
     heads = np.stack([np.zeros(bones), np.zeros(bones), 0.1 * np.arange(bones)], 1)
     frames = np.stack([np.column_stack([(1, 0, 0), (0, 0, 1), (0, -1, 0)])] * bones)
     sk = M.Skeleton([f"b{i:02d}" for i in range(bones)], np.arange(bones) - 1, heads,
@@ -173,16 +173,16 @@ def chain_model(pkg, bones=60):
 def bake_speed(bpy, pkg, repeats, frames=5000, bones=60):
     model = chain_model(pkg, bones)
     tube = _mod(pkg, "sample_scenes.tube_body")
-    poses = _mod(pkg, "solver.model").Poses(*tube.random_poses(bones, frames, seed=2))
-    rig = _mod(pkg, "addon.rig_builder").build_rig(bpy.context, model, "Chain")
-    write = _mod(pkg, "addon.actions").write_action
+    poses = _mod(pkg, "solver.rig.model").Poses(*tube.random_poses(bones, frames, seed=2))
+    rig = _mod(pkg, "addon.rig.builder").build_rig(bpy.context, model, "Chain")
+    write = _mod(pkg, "addon.rig.actions").write_action
     wall, cpu = _best(lambda: write(rig.armature, model.skeleton.names, poses), repeats, lambda: None)
     keys = frames * (4 * bones + 6)
     _common.report("bake action (wall)", wall, "s", f"{frames} frames x {bones} bones = {keys:,} keys, "
                    f"best of {repeats}; target < 1 s")
     _common.report("bake action (cpu)", cpu, "s")
     t0 = time.perf_counter()
-    _mod(pkg, "addon.rig_reader").read_poses(rig.armature)
+    _mod(pkg, "addon.rig.reader").read_poses(rig.armature)
     _common.report("read action back", time.perf_counter() - t0, "s")
 
 

@@ -41,7 +41,10 @@ def _best_time(fn, repeats):
 def _speed(args):
     import numpy as np
     import scipy.sparse as sp
-    from articula.solver import jacobians, kinematics, skinning, synthetic
+    from articula.solver.rig import jacobians
+    from articula.solver.rig import kinematics
+    from articula.solver.rig import skinning
+    from articula.sample_scenes import synthetic
 
     model = synthetic.random_model(args.vertices, seed=0)
     model.validate()
@@ -116,9 +119,11 @@ def _ring_area(ring):
 
 def _candy_wrapper():
     import numpy as np
-    from articula.solver import kinematics, skinning, synthetic
-    from articula.solver.model import Poses
-    from articula.solver.rotations import rotvec_to_quat
+    from articula.solver.rig import kinematics
+    from articula.solver.rig import skinning
+    from articula.sample_scenes import synthetic
+    from articula.solver.rig.model import Poses
+    from articula.solver.geometry.rotations import rotvec_to_quat
 
     rings, sectors = 81, 64
     tube = synthetic.tube_model(rings=rings, sectors=sectors, swing_ramp=True)

@@ -2,17 +2,9 @@
 
 Every feature module here exposes ``classes``; they are collected below in registration order.
 """
-import importlib
+from . import bake_poses, build_rig, export_bundle, export_lbs, import_depth, import_scans, learn_rig
 
-FEATURES = (
-    "build_rig",
-    "bake_poses",
-    "export_bundle",
-    "export_lbs",
-    "import_scans",
-    "import_depth",
-    "learn_rig",
-)
+# Registration order.
+FEATURES = (build_rig, bake_poses, export_bundle, export_lbs, import_scans, import_depth, learn_rig)
 
-classes = tuple(cls for name in FEATURES
-                for cls in importlib.import_module(f".{name}", __package__).classes)
+classes = tuple(cls for module in FEATURES for cls in module.classes)

@@ -1,7 +1,7 @@
 """``articula.bake_poses``: bake the poses of a bundle onto an existing rig as a new action."""
 import bpy
 
-from ..addon import rig_io
+from ..addon.rig import bundle_io as rig_io
 from ..addon.jobs import JobOperator
 from .bundle_file import BundleFileInput
 

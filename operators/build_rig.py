@@ -2,7 +2,8 @@
 bundle, baking the bundle's poses (if any) as an action on frames 1..N."""
 import bpy
 
-from ..addon import rig_io, rig_reader
+from ..addon.rig import bundle_io as rig_io
+from ..addon.rig import reader as rig_reader
 from ..addon.jobs import JobOperator
 from .bundle_file import BundleFileInput
 

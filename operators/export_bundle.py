@@ -4,7 +4,7 @@ import os
 
 import bpy
 
-from ..addon import rig_io
+from ..addon.rig import bundle_io as rig_io
 from ..solver.errors import ArticulaInputError
 
 

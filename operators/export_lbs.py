@@ -2,7 +2,8 @@
 bones (for FBX/glTF and game engines) and report how far it deviates from the exact rig."""
 import bpy
 
-from ..addon import lbs_rig, rig_reader
+from ..addon.rig import linear_blend as lbs_rig
+from ..addon.rig import reader as rig_reader
 from ..addon.jobs import scene_guard
 from ..solver.errors import ArticulaInputError
 

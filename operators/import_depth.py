@@ -2,7 +2,7 @@
 (PLY / XYZ / NPY frames) -> a point-cloud object that follows the frame, plus a matching camera.
 
 Thin: gathers the inputs (files, intrinsics, colour frames read by Blender) in ``prepare``, runs
-``solver.point_sequence`` in ``work`` and builds the scene with ``addon.point_cloud_sequence`` in
+``solver.depth.recording`` in ``work`` and builds the scene with ``addon.sequences.points`` in
 ``finish``.  Scripts: ``bpy.ops.articula.import_depth(directory=..., preset='KINECT_V1', ...)``.
 """
 import os
@@ -10,11 +10,11 @@ import time
 
 import bpy
 
-from ..addon import point_cloud_sequence as pcs
+from ..addon.sequences import points as pcs
 from ..addon.jobs import JobOperator
-from ..solver import camera
-from ..solver import depth_processing as dp
-from ..solver import point_sequence as ps
+from ..solver.depth import camera
+from ..solver.depth import frames as dp
+from ..solver.depth import recording as ps
 from ..solver.errors import ArticulaInputError
 
 PRESET_ITEMS = (

@@ -11,7 +11,8 @@ Sources (first match wins):
 import bpy
 from bpy_extras.io_utils import ImportHelper
 
-from ..addon import scan_sequence, scan_sources
+from ..addon.sequences import scans as scan_sequence
+from ..addon.sequences import scan_sources
 from ..addon.jobs import JobOperator
 
 

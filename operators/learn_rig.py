@@ -3,17 +3,18 @@ registered scans, bake one pose per scan and show the per-vertex error as a heat
 
 Input (first match wins): ``files`` in ``directory`` or the folder ``directory`` (mesh files read with
 the solver's readers, coordinates as written); the scan-sequence object named ``source_object``; the
-active object.  The work is in :mod:`addon.learn`.
+active object.  The work is in :mod:`addon.learn.learning`.
 """
 import os
 
 import bpy
 
-from ..addon import learn, preferences
+from ..addon.learn import learning as learn
+from ..addon import preferences
 from ..addon.jobs import JobOperator
 from ..solver.errors import ArticulaInputError
-from ..solver.key_scans import KEY_SCANS
-from ..solver.learn import JOINT_PRIOR
+from ..solver.learn.key_scans import KEY_SCANS
+from ..solver.learn.pipeline import JOINT_PRIOR
 
 
 class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
@@ -127,8 +128,6 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
 
             def read(progress):
                 return inp
-        if learn.solver_learn() is None:
-            raise ArticulaInputError("rig learning is not available in this build (solver.learn.learn_rig is missing)")
         self._output = out
 
         def work(progress):

@@ -74,7 +74,7 @@ def _run_registered(args) -> int:
 
 
 def _run_subject(args) -> int:
-    from ..solver.bundle import save_bundle
+    from ..solver.formats.bundle import save_bundle
     from .subjects import make_subject
     subject = make_subject(args.rig, args.shape, args.subject_seed)
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)

@@ -4,7 +4,7 @@ depth camera, written as 16-bit millimetre PNGs plus ``intrinsics.json`` and ``g
 Scene: the subject (world metres, Z up, facing -Y as MakeHuman bodies do), optionally a floor
 grid at the subject's lowest point and a back wall behind it.  The camera sits at ``distance`` from
 the subject's centre in the horizontal direction ``azimuth_deg`` (0 = in front, i.e. on -Y; 90 = on
-+X), ``height`` metres above the floor (the subject's lowest point), looking at the subject's centre.  Conventions of ``solver.camera``.
++X), ``height`` metres above the floor (the subject's lowest point), looking at the subject's centre.  Conventions of ``solver.depth.camera``.
 
 Output folder::
 
@@ -31,9 +31,9 @@ import time
 
 import numpy as np
 
-from ..solver import camera as cam
+from ..solver.depth import camera as cam
 from ..solver.errors import ArticulaInputError
-from ..solver.png16 import write_png16
+from ..solver.formats.png16 import write_png16
 from .depth_noise import NoiseParams, apply_noise
 from .depth_render import incidence_cosine, render_depth, visible_vertices
 

@@ -1,6 +1,6 @@
 """A numpy z-buffer triangle rasteriser for synthetic depth images.
 
-Renders a triangle mesh given in the camera frame (``solver.camera`` conventions: +X right, +Y down,
+Renders a triangle mesh given in the camera frame (``solver.depth.camera`` conventions: +X right, +Y down,
 +Z forward, metres) into a pinhole depth image:
 
 * every triangle is tested against the pixel centres of its bounding box, all triangles at once
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..solver.camera import Intrinsics, project
+from ..solver.depth.camera import Intrinsics, project
 from ..solver.errors import ArticulaInputError
 
 CHUNK = 400_000  # candidate pixels processed at once (bounds memory to a few tens of MB)

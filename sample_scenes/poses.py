@@ -2,7 +2,7 @@
 
 Per bone the pose is parameterised by a swing rotation vector ``s`` in the bone's local XZ plane and a
 twist angle ``t`` about local Y; the rotation relative to rest is ``q = q(s) * q_twist(t)`` (w, x, y, z),
-in bone-local axes as Blender's pose-bone quaternion (``solver.model.Poses``).  Limits come from
+in bone-local axes as Blender's pose-bone quaternion (``solver.rig.model.Poses``).  Limits come from
 :mod:`.bone_roles`: ball joints draw ``s`` uniformly from the disk ``|s| <= cone`` and ``t`` uniformly
 from ``[-twist, twist]``; hinges (elbow, knee) draw the flexion angle uniformly from the rest-relative range
 (:func:`.bone_roles.hinge_ranges`) and rotate about the anatomical hinge axis
@@ -20,8 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..solver.errors import ArticulaInputError
-from ..solver.model import Poses
-from ..solver.rotations import matrix_to_quat, quat_mul, rotvec_to_quat
+from ..solver.rig.model import Poses
+from ..solver.geometry.rotations import matrix_to_quat, quat_mul, rotvec_to_quat
 from .bone_roles import LIMITS, hinge_geometry, hinge_ranges, skeleton_roles
 
 

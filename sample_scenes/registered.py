@@ -13,7 +13,7 @@ In memory (for other generators, e.g. depth rendering and unregistered scans)::
 On disk: :func:`generate_registered` writes ``pose_0000.obj`` ... (or ``.ply``; zero-padded so the
 names sort in frame order) with the same vertex order and faces in all files (quads by default,
 ``faces="triangles"`` for triangles), ``ground_truth.npz``, and for ``skin="hybrid"`` the model bundle
-``ground_truth_model.npz`` ("articula-model/1", via ``solver.bundle.save_bundle``, with the poses).
+``ground_truth_model.npz`` ("articula-model/1", via ``solver.formats.bundle.save_bundle``, with the poses).
 
 ``ground_truth.npz`` keys (B bones, N poses):
 
@@ -27,12 +27,12 @@ bone_matrices (N,B,4,4)   rest-to-posed world map of each bone (x -> R x + t, ho
 posed_heads, posed_tails  (N,B,3) posed joint positions
 lbs_weights (V,B) f32     the rig's weights (rows sum 1) — the skin for ``lbs``/``dqs``
 anchor (V,) int32,        hybrid skin (only for ``skin="hybrid"``): anchor part and twist/swing
-twist_weights, swing_weights (V,B) f32   weights on the anchor's children (solver.model.Model)
+twist_weights, swing_weights (V,B) f32   weights on the anchor's children (solver.rig.model.Model)
 posed_vertices (N,V,3)    the posed meshes (float64; files hold them rounded)
 skin, motion, rig         strings; seed, subject_seed (-1 = none) int; macros: JSON of the shape
 =======================  =====================================================================
 Skins: ``lbs`` = linear blend skinning, ``dqs`` = dual quaternions as Blender's Preserve Volume,
-``hybrid`` = Articula's swing/twist skin (``solver.skinning``).
+``hybrid`` = Articula's swing/twist skin (``solver.rig.skinning``).
 """
 from __future__ import annotations
 
@@ -41,11 +41,11 @@ import os
 
 import numpy as np
 
-from ..solver import skinning
-from ..solver.bundle import save_bundle
+from ..solver.rig import skinning
+from ..solver.formats.bundle import save_bundle
 from ..solver.errors import ArticulaInputError
-from ..solver.kinematics import forward_kinematics
-from ..solver.model import Model, Poses, Skeleton
+from ..solver.rig.kinematics import forward_kinematics
+from ..solver.rig.model import Model, Poses, Skeleton
 from .mesh_files import FORMATS, SequenceWriter
 from .poses import rom_poses
 from .subjects import make_subject

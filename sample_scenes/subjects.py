@@ -22,7 +22,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..solver.errors import ArticulaInputError
-from ..solver.model import Model, Skeleton
+from ..solver.rig.model import Model, Skeleton
 from . import makehuman as mh
 from .hybrid_weights import anchors_from_lbs, twist_ramp_weights
 from .mpfb_rig import load_rig, load_weights, place_joints, roll_frames

@@ -11,7 +11,7 @@ twist 0.8r on the child nearest b's tail (or 0.8r/k on every child with ``fork_t
 """
 import numpy as np
 
-from ..solver.model import Model, Skeleton
+from ..solver.rig.model import Model, Skeleton
 
 #          name,           parent,         head,                 tail,                  radius
 BONES = [

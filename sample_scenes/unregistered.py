@@ -33,7 +33,7 @@ import os
 
 import numpy as np
 
-from ..solver import camera as cam
+from ..solver.depth import camera as cam
 from ..solver.errors import ArticulaInputError
 from .depth_noise import NoiseParams, apply_noise
 from .depth_recording import check_frames

@@ -44,9 +44,9 @@ from functools import lru_cache
 import numpy as np
 
 from ..solver.errors import ArticulaInputError
-from ..solver.kinematics import chain_from_world
-from ..solver.model import Poses
-from ..solver.rotations import matrix_to_quat
+from ..solver.rig.kinematics import chain_from_world
+from ..solver.rig.model import Poses
+from ..solver.geometry.rotations import matrix_to_quat
 from .assets import ensure_assets
 from .bone_roles import hinge_geometry, skeleton_roles
 from .fcurves import channel_curves, euler_xyz_to_matrix, evaluate

@@ -31,5 +31,5 @@ def empty_scene(addon):
 
 @pytest.fixture
 def pkg(addon):
-    """Import a submodule of the enabled extension: ``pkg('addon.rig_builder')``."""
+    """Import a submodule of the enabled extension: ``pkg('addon.rig.builder')``."""
     return lambda name: importlib.import_module(f"{MODULE}.{name}")

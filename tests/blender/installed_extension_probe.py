@@ -26,8 +26,7 @@ try:
     result["module_file"] = getattr(mod, "__file__", None)
 
     registration = importlib.import_module(MODULE + ".addon.registration")
-    classes = [cls for name in registration.MODULES
-               for cls in getattr(importlib.import_module(name, MODULE), "classes", ())]
+    classes = [cls for module in registration.MODULES for cls in getattr(module, "classes", ())]
     # Operators, panels and menus are also reachable as bpy.types.<name>; property groups and preferences not.
     result["classes"] = {cls.__name__: bool(getattr(cls, "is_registered", False)) and (
         getattr(bpy.types, cls.__name__, None) is cls
@@ -35,7 +34,7 @@ try:
     result["panel_main"] = hasattr(bpy.types, "ARTICULA_PT_main")
 
     operators = importlib.import_module(MODULE + ".operators")
-    result["features"] = list(operators.FEATURES)
+    result["features"] = [module.__name__.rpartition(".")[2] for module in operators.FEATURES]
     result["operator_idnames"] = sorted(cls.bl_idname for cls in operators.classes)
     result["bpy_ops_articula"] = sorted("articula." + name for name in dir(bpy.ops.articula))
 

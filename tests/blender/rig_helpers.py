@@ -9,7 +9,7 @@ def subject(pkg, **kw):
 
 
 def poses(pkg, num_bones, n, **kw):
-    Poses = pkg("solver.model").Poses
+    Poses = pkg("solver.rig.model").Poses
     return Poses(*pkg("sample_scenes.tube_body").random_poses(num_bones, n, **kw))
 
 
@@ -32,7 +32,7 @@ def bundle_arrays(pkg, model, poses=None):
 
 def evaluate_frames(pkg, mesh_ob, frames):
     """Evaluated mesh positions (len(frames), V, 3) at the given scene frames."""
-    mesh_io = pkg("addon.mesh_io")
+    mesh_io = pkg("addon.scene.mesh_io")
     out = []
     for f in frames:
         bpy.context.scene.frame_set(int(f))

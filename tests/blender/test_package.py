@@ -69,7 +69,7 @@ def _source_features():
     tree = ast.parse((REPO / "operators" / "__init__.py").read_text(encoding="utf-8"))
     for node in tree.body:
         if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "FEATURES" for t in node.targets):
-            return list(ast.literal_eval(node.value))
+            return [elt.id for elt in node.value.elts]          # FEATURES = (module, module, ...)
     raise AssertionError("operators/__init__.py defines no FEATURES")
 
 
@@ -159,8 +159,7 @@ def test_bundled_wheels_are_extracted_and_import(installed):
 
 def test_operators_run_from_the_installed_copy(installed):
     calls = installed["calls"]
-    if not calls:
-        pytest.skip("the source registers no operators yet (operators/__init__.py FEATURES is empty)")
+    assert calls, "the installed copy registers no operators"
     for idname, call in calls.items():
         assert "Traceback" not in str(call["detail"]), f"{idname} crashed: {call['detail']}"
         if call["outcome"] == "returned":

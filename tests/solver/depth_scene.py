@@ -3,7 +3,7 @@ import tests): a floor plane (world z = 0) seen by a tilted camera, optionally a
 standing on it and a back wall; plus a sphere.  World Z up; camera frame x right, y down, z forward."""
 import numpy as np
 
-from articula.solver import camera
+from articula.solver.depth import camera
 
 
 def rays_world(intr, cam_to_world):

@@ -74,7 +74,7 @@ def body(sectors=8, rings_per_unit=22):
 
 
 def rotvec_matrix(r):
-    """Rodrigues formula, written here independently of solver.rotations.  r (..., 3) -> (..., 3, 3)."""
+    """Rodrigues formula, written here independently of solver.geometry.rotations.  r (..., 3) -> (..., 3, 3)."""
     r = np.asarray(r, dtype=float)
     th = np.linalg.norm(r, axis=-1)[..., None, None]
     k = r / np.where(th[..., 0] > 0, th[..., 0], 1.0)
@@ -124,7 +124,7 @@ def rigid_scans(M=10, seed=0, max_angle=0.7):
 
 def truth_skeleton():
     """The body's skeleton as a solver :class:`Skeleton` (PARTS order already has parents[b] < b)."""
-    from articula.solver.model import Skeleton, frames_from_bones
+    from articula.solver.rig.model import Skeleton, frames_from_bones
     return Skeleton(PARTS, PARENTS, JOINTS, TAILS, frames_from_bones(JOINTS, TAILS))
 
 
@@ -150,9 +150,9 @@ def smooth_skin(rest, labels, width=0.1):
 def hybrid_truth(M=8, seed=0, max_angle=0.6):
     """Ground-truth hybrid model + poses and the scans it generates (solver's hybrid_skin).
     Returns ``(model, poses, scans)``; scan 0 is the rest pose."""
-    from articula.solver.model import Model, Poses
-    from articula.solver.rotations import rotvec_to_quat
-    from articula.solver.skinning import hybrid_skin
+    from articula.solver.rig.model import Model, Poses
+    from articula.solver.geometry.rotations import rotvec_to_quat
+    from articula.solver.rig.skinning import hybrid_skin
     rest, faces, labels = body()
     anchor, twist, swing = smooth_skin(rest, labels)
     model = Model(rest, faces, truth_skeleton(), anchor, twist, swing)

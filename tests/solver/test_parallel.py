@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 
 from articula.solver import parallel
-from articula.solver.joint_pose_gn import gauss_newton_blocks
-from articula.solver.laplacian import uniform_laplacian
-from articula.solver.learn import learn_rig
-from articula.solver.model import Poses
-from articula.solver.pose_fit import fit_poses
-from articula.solver.rig_objective import RigObjective
-from articula.solver.skinning import hybrid_skin
-from articula.solver.surface_distance import distance_to_surface, per_vertex_scan_distances
-from articula.solver.weights_bcd import optimise_weights
+from articula.solver.learn.joints_poses import gauss_newton_blocks
+from articula.solver.geometry.mesh_graph import uniform_laplacian
+from articula.solver.learn.pipeline import learn_rig
+from articula.solver.rig.model import Poses
+from articula.solver.fit.pose_fit import fit_poses
+from articula.solver.learn.objective import RigObjective
+from articula.solver.rig.skinning import hybrid_skin
+from articula.solver.geometry.surface_distance import distance_to_surface, per_vertex_scan_distances
+from articula.solver.learn.weights import optimise_weights
 
 from .learn_data import hybrid_truth
 
@@ -93,7 +93,7 @@ def test_skin_blocks_fits_and_distances_equal_serial(sequence):
 
 
 def test_weights_and_whole_learning_equal_serial(sequence, monkeypatch):
-    from articula.solver import weights_bcd
+    from articula.solver.learn import weights as weights_bcd
     monkeypatch.setattr(weights_bcd, "PARALLEL_MIN_WORK", 2000)       # split every colour class as well
     model, poses, scans = sequence
     objective = RigObjective(scans, uniform_laplacian(model.faces, model.num_vertices), 100.0)
@@ -165,3 +165,21 @@ def test_fork_map_keeps_the_order_and_computes_the_second_half_in_a_child():
     assert [v for v, _ in got] == [x * x for x in range(7)]
     assert {pid for _, pid in got[:3]} == {os.getpid()} and os.getpid() not in {pid for _, pid in got[3:]}
     assert parallel.fork_map(lambda x: os.getpid(), range(3)) == [os.getpid()] * 3    # one worker: here
+
+
+def test_single_blas_thread_restores_the_thread_count():
+    threads = parallel._openblas_threads()
+    if threads is None:
+        pytest.skip("numpy's BLAS is not a bundled OpenBLAS")
+    get, _ = threads
+    before = get()
+    with parallel.single_blas_thread():
+        assert get() == 1
+        with parallel.single_blas_thread():
+            assert get() == 1
+        assert get() == 1
+    assert get() == before
+    with pytest.raises(ValueError):
+        with parallel.single_blas_thread():
+            raise ValueError
+    assert get() == before

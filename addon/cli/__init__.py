@@ -1,0 +1,2 @@
+"""Batch commands: ``./run <command> ...`` and ``blender -b -P batch.py -- <command> ...``.
+"""

@@ -1,0 +1,199 @@
+"""``demo``: Articula's main job on its embedded default data, end to end through the real operators.
+
+1. builds the sample data (``sample_scenes``): a MakeHuman subject (``cmu_mb`` rig, hybrid skin) in a
+   short range-of-motion sequence written as OBJ scans with its ground-truth model bundle, and a depth
+   recording of a walk seen by a Kinect-v1-like camera;
+2. in a new scene imports the scans (``articula.import_scans``) and the depth recording
+   (``articula.import_depth``), builds the exact swing/twist rig from the bundle with its poses baked
+   (``articula.build_rig``);
+3. learns a rig from the imported scan-sequence object alone (``articula.learn_rig``: skeleton,
+   swing/twist weights and rest mesh, one baked pose per scan, the per-vertex error as a heat map) and
+   prints its error statistics (``--no-learn`` skips this; ``--parts`` and ``--learn-iterations`` set
+   the learner's part count and outer rounds);
+4. lays the results out side by side (depth recording, ground-truth rig, scans, learned rig), saves
+   ``<out>/demo.blend`` and renders ``<out>/demo.png`` (Workbench, headless; the learned rig in its
+   heat-map colours, blue 0 mm to red at the largest error).
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+
+import bpy
+import numpy as np
+
+from ...sample_scenes.depth_recording import generate_depth
+from ...sample_scenes.registered import generate_registered, posed_sequence
+from ...solver.errors import ArticulaInputError
+from ..learn import learning as learn
+from ..scene import render
+from ..sequences import scans as scan_sequence
+from .common import save_blend_again, save_blend_first
+
+SPACING = 1.1  # metres between the demo's exhibits along X
+LEARNED_NAME = "Learned rig"
+DEFAULT_PARTS = 0          # learn_rig's part count in the demo (0: chosen from the motion)
+DEFAULT_ITERATIONS = 3     # learn_rig's outer rounds in the demo (the operator's default is 10)
+TITLES = {"depth": "Depth recording", "rig": "Articula rig (baked poses)", "scans": "Registered scans"}
+
+
+def learned_title(scale_mm: float) -> str:
+    """The learned rig's label, with the heat map's range (blue 0 mm to red ``scale_mm``)."""
+    return f"Learned rig (error heat map, 0-{scale_mm:.0f} mm)"
+
+
+def _stage(name: str, t0: float) -> float:
+    now = time.perf_counter()
+    print(f"demo: {name} ({now - t0:.1f} s)", flush=True)
+    return now
+
+
+def make_data(data_dir: str, n_scans: int, n_depth: int, seed: int = 0) -> dict:
+    """Write the demo's sample data below ``data_dir``; return the paths."""
+    scans = os.path.join(data_dir, "scans")
+    depth = os.path.join(data_dir, "depth")
+    generate_registered(scans, rig="cmu_mb", shape="female", n_poses=n_scans, motion="rom",
+                        skin="hybrid", fmt="obj", seed=seed)
+    frames, faces, gt = posed_sequence(rig="cmu_mb", shape="male", n_poses=n_depth, motion="walk",
+                                       skin="hybrid", seed=seed)
+    generate_depth(depth, frames, faces, gt, resolution=(320, 240), seed=seed)
+    return {"scans": scans, "depth": depth, "bundle": os.path.join(scans, "ground_truth_model.npz")}
+
+
+def _new_objects(before: set) -> list:
+    return [ob for ob in bpy.data.objects if ob.as_pointer() not in before]
+
+
+def _call(op, **kwargs) -> list:
+    """Run an operator; return the objects it created."""
+    before = {ob.as_pointer() for ob in bpy.data.objects}
+    if op(**kwargs) != {'FINISHED'}:
+        raise ArticulaInputError(f"{op.idname_py()} did not finish")
+    return _new_objects(before)
+
+
+def _roots(objects) -> list:
+    return [ob for ob in objects if ob.parent is None or ob.parent not in objects]
+
+
+def _shift(objects, dx: float) -> None:
+    for ob in _roots(objects):
+        ob.matrix_world.translation.x += dx
+
+
+def build_scene(paths: dict, blend: str) -> dict:
+    """Import and build everything into a new empty scene saved as ``blend`` first (so the importers'
+    frame caches go next to it); return the created objects by role."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    save_blend_first(blend)
+    scans = _call(bpy.ops.articula.import_scans, directory=paths["scans"])
+    depth = _call(bpy.ops.articula.import_depth, directory=paths["depth"],
+                  intrinsics=os.path.join(paths["depth"], "intrinsics.json"), remove_floor=True)
+    _place_depth_camera(depth, os.path.join(paths["depth"], "ground_truth.npz"))
+    rig = _call(bpy.ops.articula.build_rig, filepath=paths["bundle"])
+    _shift(scans, SPACING)
+    _shift(depth, -SPACING)
+    return {"scans": scans, "depth": depth, "rig": rig}
+
+
+def learn_scene(scans: list, parts: int = 0, iterations: int = 2, seed: int = 0) -> tuple:
+    """Learn a rig from the imported scan-sequence object (one of ``scans``) with ``articula.learn_rig``
+    and place it beside the scans; return ``(objects, report)``, the report being the solver's report
+    the operator stored on the armature (``articula_learn_report``)."""
+    seqs = [ob for ob in scans if scan_sequence.is_scan_sequence(ob)]
+    if not seqs:
+        raise ArticulaInputError("demo: the scan import made no scan-sequence object to learn from")
+    objects = _call(bpy.ops.articula.learn_rig, source_object=seqs[0].name, name=LEARNED_NAME, parts=parts,
+                    max_iterations=iterations, seed=seed)
+    arms = [ob for ob in objects if ob.type == 'ARMATURE' and learn.REPORT_PROPERTY in ob]
+    if len(arms) != 1:
+        raise ArticulaInputError(f"demo: articula.learn_rig made {len(arms)} armatures with a report, expected 1")
+    # The learner works in the scans' own coordinates; the scans object sits at +SPACING.
+    _shift(objects, float(seqs[0].matrix_world.translation.x) + SPACING)
+    return objects, json.loads(arms[0][learn.REPORT_PROPERTY])
+
+
+def _heat_scale(objects) -> float:
+    """The error (mm) the top (red) colour of the learned mesh's heat map stands for."""
+    return max(float(ob.data.get(learn.SCALE_PROPERTY, 0.0)) for ob in objects if ob.type == 'MESH')
+
+
+def learned_summary(report: dict) -> str:
+    """One line about a learned rig: parts, rounds and its error statistics (mm)."""
+    s = learn.error_summary(report)
+    err = ", ".join(f"{k} {s[k]:.2f}" for k in ("mean", "median", "max") if k in s)
+    return (f"{report.get('parts', '?')} parts, {report.get('iterations', '?')} rounds; "
+            f"error (scan vertex to learned surface, mm) {err or 'n/a'}")
+
+
+def _place_depth_camera(objects, gt_path: str) -> None:
+    """Put the imported depth camera where the generator's camera was, so the points sit on the body."""
+    from mathutils import Matrix
+    cams = [ob for ob in objects if ob.type == 'CAMERA']
+    if cams and os.path.exists(gt_path):
+        with np.load(gt_path) as gt:
+            cams[0].matrix_world = Matrix(gt["blender_camera_matrix"][0].tolist())
+
+
+def run(args) -> int:
+    out = os.path.abspath(args.out)
+    os.makedirs(out, exist_ok=True)
+    width, height = _resolution(args.resolution)
+    if not args.no_learn:
+        if args.scans < learn.MIN_SCANS:
+            raise ArticulaInputError(f"--scans {args.scans}: learning a rig needs at least {learn.MIN_SCANS} scans "
+                                     f"(or --no-learn)")
+        if args.parts < 0 or args.learn_iterations < 0:
+            raise ArticulaInputError("--parts and --learn-iterations must be 0 or more")
+    t0 = time.perf_counter()
+    paths = make_data(os.path.join(out, "demo_data"), args.scans, args.depth_frames, args.seed)
+    t = _stage("sample data written", t0)
+    blend = os.path.join(out, "demo.blend")
+    built = build_scene(paths, blend)
+    t = _stage(f"imported and built ({', '.join(f'{k}: {len(v)} objects' for k, v in built.items())})", t)
+    titles = dict(TITLES)
+    if not args.no_learn:
+        parts = f"{args.parts} parts" if args.parts else "parts chosen from the motion"
+        print(f"demo: learning a rig from {args.scans} scans ({parts}, at most {args.learn_iterations} "
+              f"rounds)", flush=True)
+        built["learned"], report = learn_scene(built["scans"], args.parts, args.learn_iterations, args.seed)
+        titles["learned"] = learned_title(_heat_scale(built["learned"]))
+        t = _stage(f"learned rig {LEARNED_NAME!r}: {learned_summary(report)}", t)
+    scene = bpy.context.scene
+    scene.frame_set(max(1, args.scans // 2))
+    png = os.path.join(out, "demo.png")
+    render.render_overview(scene, png, {titles[k]: v for k, v in built.items()},
+                           [titles["learned"]] if "learned" in built else [], width, height)
+    t = _stage(f"rendered {png}", t)
+    save_blend_again()
+    _stage(f"saved {blend}", t)
+    print(f"demo: done in {time.perf_counter() - t0:.1f} s -> {blend}, {png}")
+    return 0
+
+
+def _resolution(text: str) -> tuple:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise ArticulaInputError(f"--resolution: expected WIDTHxHEIGHT such as 1280x720, got {text!r}") from None
+    if w < 16 or h < 16:
+        raise ArticulaInputError(f"--resolution: {text!r} is too small (at least 16x16)")
+    return w, h
+
+
+def add_commands(sub) -> None:
+    p = sub.add_parser("demo", help="build the sample data, import it, build the rig, learn a rig from the "
+                                    "scans, render out/demo.png")
+    p.add_argument("--out", default="out", help="output folder (default: out)")
+    p.add_argument("--scans", type=int, default=12, help="registered scans to generate (default 12)")
+    p.add_argument("--depth-frames", type=int, default=30, help="depth frames to generate (default 30)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--no-learn", action="store_true", help="do not learn a rig from the scans")
+    p.add_argument("--parts", type=int, default=DEFAULT_PARTS,
+                   help=f"parts (bones) of the learned rig; 0 lets the learner choose from the motion, which "
+                        f"takes longer (default {DEFAULT_PARTS})")
+    p.add_argument("--learn-iterations", type=int, default=DEFAULT_ITERATIONS,
+                   help=f"at most this many outer rounds of the learner (default {DEFAULT_ITERATIONS})")
+    p.add_argument("--resolution", default="1280x720", help="picture size WIDTHxHEIGHT (default 1280x720)")
+    p.set_defaults(func=run)

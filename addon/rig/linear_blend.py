@@ -1,0 +1,111 @@
+"""Build the plain linear-blend version of an Articula rig in the scene (the Blender half of
+:mod:`lbs_export`): an armature with the control bones, swing helpers and twist segment bones, and a
+copy of the rig mesh with one plain Armature modifier, sharing the rig's active action.
+
+Twist segment bones are driven like the twist bones of the hybrid rig (SWING_TWIST_Y, local space) with
+the simple expression ``twist * k / n``, which Blender evaluates without Python.
+"""
+from dataclasses import dataclass
+
+import bpy
+from mathutils import Matrix
+
+from ...solver.rig.model import Poses
+from .. import compat
+from ...solver.rig import linear_blend as lbs_export
+from . import builder as rig_builder
+from ...solver.rig import names as rig_names
+from . import reader as rig_reader
+from ..scene.mesh_io import write_vertex_groups
+
+MAX_DEVIATION_PROP = "articula_lbs_max_mm"
+
+
+@dataclass
+class LbsRig:
+    armature: bpy.types.Object
+    mesh: bpy.types.Object
+    max_mm: float          # max |LBS - hybrid| over the measured poses, millimetres
+    mean_mm: float
+    poses_measured: int
+    poses_source: str      # 'ACTION' or 'RANDOM'
+
+
+def _edit_segments(arm_data, layout):
+    helpers = arm_data.collections[rig_names.HELPERS_COLLECTION]
+    ebs = arm_data.edit_bones
+    for name, kind, c, k in layout:
+        if kind not in ('S', 'N'):
+            continue
+        ref = ebs[layout[c][0]]                                   # control bone c (same rest)
+        eb = ebs.new(name)
+        eb.head, eb.tail, eb.roll = ref.head, ref.tail, ref.roll
+        eb.parent = ebs[rig_names.swing(ref.name)] if kind == 'S' else ref.parent
+        eb.use_deform = True
+        eb.hide = True
+        helpers.assign(eb)
+
+
+def _drive_segments(arm, layout, segments):
+    for name, kind, c, k in layout:
+        if kind not in ('S', 'N'):
+            continue
+        pb = arm.pose.bones[name]
+        pb.rotation_mode = 'XYZ'
+        rig_builder.lock(pb)
+        driver = pb.driver_add("rotation_euler", 1).driver
+        driver.type = 'SCRIPTED'
+        driver.expression = f"twist * {k} / {segments}"
+        var = driver.variables.new()
+        var.name, var.type = "twist", 'TRANSFORMS'
+        t = var.targets[0]
+        t.id, t.bone_target = arm, layout[c][0]
+        t.transform_type, t.rotation_mode, t.transform_space = 'ROT_Y', 'SWING_TWIST_Y', 'LOCAL_SPACE'
+
+
+def _measure_poses(arm, model, count=100):
+    """The rig's action poses, or ``count`` random poses (twists up to ±90°) when it has none."""
+    if arm.animation_data is not None and arm.animation_data.action is not None:
+        return rig_reader.read_poses(arm), 'ACTION'
+    from ...sample_scenes.tube_body import random_poses
+    return Poses(*random_poses(model.skeleton.num_bones, count, seed=0, max_twist_deg=90.0)), 'RANDOM'
+
+
+def build_lbs_rig(context, arm, segments: int = 4) -> LbsRig:
+    """Create the LBS version of the rig whose main armature is ``arm``; returns :class:`LbsRig`."""
+    model = rig_reader.read_model(arm)
+    layout, weights = lbs_export.lbs_weights(model, segments)      # validates names and segments
+    poses, source = _measure_poses(arm, model)
+    worst, mean = lbs_export.deviation(model, poses, segments)
+    src_mesh = rig_reader.find_mesh(arm)
+    sk = model.skeleton
+    with rig_builder.object_mode(context):
+        lbs_arm = bpy.data.objects.new(f"{arm.name}.lbs", bpy.data.armatures.new(f"{arm.name}.lbs"))
+        mesh = bpy.data.objects.new(f"{src_mesh.name}.lbs", src_mesh.data.copy())
+        coll = context.collection or context.scene.collection
+        coll.objects.link(lbs_arm)
+        coll.objects.link(mesh)
+        for a in list(mesh.data.attributes):
+            if a.name == rig_names.ANCHOR_ATTRIBUTE:
+                mesh.data.attributes.remove(a)
+        with rig_builder.edit_mode(context, lbs_arm):
+            rig_builder.edit_main_bones(lbs_arm.data, sk)
+            _edit_segments(lbs_arm.data, layout)
+        rig_builder.pose_main(context.scene, lbs_arm, sk)
+        _drive_segments(lbs_arm, layout, segments)
+        mesh.vertex_groups.clear()
+        write_vertex_groups(mesh, [name for name, *_ in layout], weights)
+        mod = mesh.modifiers.new("Armature", 'ARMATURE')
+        mod.object = lbs_arm
+        mod.use_deform_preserve_volume = False
+        mesh.parent = lbs_arm
+        mesh.matrix_parent_inverse = Matrix.Identity(4)
+        ad = arm.animation_data
+        if ad is not None and ad.action is not None:
+            compat.assign_action(lbs_arm, ad.action, getattr(ad, "action_slot", None))
+        lbs_arm[MAX_DEVIATION_PROP] = float(worst.max() * 1000.0)
+        context.view_layer.objects.active = lbs_arm
+        lbs_arm.select_set(True)
+    return LbsRig(lbs_arm, mesh, float(worst.max() * 1000.0), float(mean * 1000.0), len(poses), source)
+
+

@@ -1,0 +1,362 @@
+"""The scan-sequence object: a mesh object that plays a sequence of scans back frame by frame.
+
+Storage
+    All frames live in one cache file, written once at import; ``ob.articula.cache_file`` holds its path
+    (relative to the .blend when the file sits in the .blend's folder tree, else absolute).  It is put in
+    ``<blend folder>/<blend name>_articula/`` when the .blend is saved, else in the preferences' cache
+    folder under ``scan_cache/``.
+
+    * registered sequences: ``<name>-<id>.npy``, one ``(N, V, 3)`` float32 array, memory-mapped, so a
+      frame change reads only that frame.  The object's mesh carries the faces (first frame's topology).
+    * unregistered sequences (topology changes between frames): a folder ``<name>-<id>.scans/`` of
+      memory-mapped ``.npy`` arrays (concatenated positions, face sizes and corner vertices, and their
+      per-frame offsets); a frame change rebuilds the mesh geometry from one frame's slices.
+      Chosen over one mesh datablock per frame (swapped into the object: ~0.1 ms) because the .blend
+      stays small and both kinds share one storage path; the price is 25-60 ms per frame change at
+      50k vertices (``./run bench import``).
+
+Playback
+    A persistent ``frame_change_post`` handler writes the current frame into every scan-sequence
+    object of the scene through the position attribute (the fast path).  Blender re-evaluates after
+    frame_change_post when a handler tagged data, so after ``scene.frame_set(k)`` the evaluated mesh is
+    frame k.  Objects in edit mode are left alone.  Before the first frame / after the last one the
+    first / last frame is held.  The frame a mesh shows is kept in its ID property
+    ``articula_frame`` so unchanged frames cost nothing.
+
+:func:`scan_frames` hands all frames to the solver as one array (no source files re-read).
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import uuid
+
+import bpy
+import numpy as np
+
+from ...solver.errors import ArticulaInputError
+from ...solver.formats.meshes import PolyMesh
+from ...solver.formats.scan_files import ScanSequence
+from ..scene import mesh_io
+from .. import preferences
+
+SHOWN = "articula_frame"   # ID property on the mesh: sequence index it currently shows
+
+# -- Blender mesh <-> PolyMesh ----------------------------------------------------------------------
+
+
+def set_geometry(me: bpy.types.Mesh, vertices, face_sizes, corner_verts) -> None:
+    """Replace ``me``'s geometry with polygons (``face_sizes`` (F,), ``corner_verts`` (C,))."""
+    v = np.ascontiguousarray(vertices, np.float32).reshape(-1)
+    sizes = np.asarray(face_sizes, np.int32)
+    starts = np.zeros(len(sizes), np.int32)
+    np.cumsum(sizes[:-1], out=starts[1:])
+    me.clear_geometry()
+    if not len(v):
+        me.update()
+        return
+    me.vertices.add(len(v) // 3)
+    me.attributes["position"].data.foreach_set("vector", v)
+    me.loops.add(len(corner_verts))
+    me.loops.foreach_set("vertex_index", np.ascontiguousarray(corner_verts, np.int32))
+    me.polygons.add(len(sizes))
+    me.polygons.foreach_set("loop_start", starts)
+    me.update(calc_edges=True)
+
+
+def read_polymesh(me: bpy.types.Mesh, matrix=None) -> PolyMesh:
+    """The polygons and positions (float64; transformed by the 4x4 ``matrix`` if given) of ``me``."""
+    pos = np.empty(3 * len(me.vertices), np.float32)
+    if len(pos):   # an empty mesh has no position attribute
+        me.attributes["position"].data.foreach_get("vector", pos)
+    pos = pos.reshape(-1, 3).astype(np.float64)
+    if matrix is not None:
+        m = np.array(matrix, np.float64)
+        pos = pos @ m[:3, :3].T + m[:3, 3]
+    sizes = np.empty(len(me.polygons), np.int32)
+    me.polygons.foreach_get("loop_total", sizes)
+    corners = np.empty(len(me.loops), np.int32)
+    me.loops.foreach_get("vertex_index", corners)
+    return PolyMesh(pos, sizes, corners)
+
+
+# -- cache files -------------------------------------------------------------------------------------
+
+
+def new_cache_path(name: str, registered: bool) -> str:
+    """Absolute path for a new cache file (see the module docstring for the folder)."""
+    if bpy.data.filepath:
+        stem = os.path.splitext(os.path.basename(bpy.data.filepath))[0]
+        folder = os.path.join(os.path.dirname(bpy.data.filepath), f"{stem}_articula")
+    else:
+        folder = os.path.join(preferences.cache_dir(), "scan_cache")
+    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name) or "scans"
+    return os.path.join(folder, f"{safe}-{uuid.uuid4().hex[:8]}.{'npy' if registered else 'scans'}")
+
+
+def stored_path(abs_path: str, blend_path: str = None) -> str:
+    """``//relative`` when ``abs_path`` is inside the folder of the .blend, else the absolute path."""
+    blend_path = bpy.data.filepath if blend_path is None else blend_path
+    if blend_path:
+        base = os.path.dirname(os.path.abspath(blend_path))
+        try:
+            rel = os.path.relpath(abs_path, base)
+        except ValueError:  # another drive
+            return abs_path
+        if not rel.startswith(os.pardir):
+            return "//" + rel.replace(os.sep, "/")
+    return abs_path
+
+
+def write_cache(path: str, seq: ScanSequence) -> None:
+    """Write the sequence's frames (no bpy: callable from a worker thread); a clear error when the
+    cache cannot be written, and never a half-written one (written under ``.part``, then renamed)."""
+    tmp = path + ".part"
+    try:
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        if seq.registered:
+            with open(tmp, "wb") as fh:
+                np.save(fh, np.ascontiguousarray(seq.frames, np.float32))
+        else:
+            os.makedirs(tmp)
+            for key, array in _unregistered_arrays(seq.meshes).items():
+                np.save(os.path.join(tmp, key + ".npy"), array)
+        os.replace(tmp, path)
+    except OSError as exc:
+        remove_cache(tmp)
+        raise ArticulaInputError(f"cannot write the frame cache {path}: {exc.strerror or exc}") from None
+
+
+def remove_cache(path: str) -> None:
+    """Delete a cache (file or folder) that no object uses, e.g. after a failed import."""
+    _loaded.pop(path, None)
+    if os.path.isdir(path):
+        shutil.rmtree(path, ignore_errors=True)
+        return
+    try:
+        os.remove(path)
+    except OSError:
+        pass
+
+
+def _unregistered_arrays(meshes) -> dict:
+    def offsets(sizes):
+        return np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    return {"positions": np.concatenate([m.vertices for m in meshes]).astype(np.float32),
+            "vertex_offsets": offsets([len(m.vertices) for m in meshes]),
+            "face_sizes": np.concatenate([m.face_sizes for m in meshes]).astype(np.int32),
+            "face_offsets": offsets([len(m.face_sizes) for m in meshes]),
+            "corner_verts": np.concatenate([m.corner_verts for m in meshes]).astype(np.int32),
+            "corner_offsets": offsets([len(m.corner_verts) for m in meshes])}
+
+
+_loaded = {}   # absolute path -> (mtime, data): np.memmap (.npy) or dict of memmaps (.scans folder)
+
+
+def _load(path: str):
+    try:
+        mtime = os.path.getmtime(path)
+    except OSError:
+        return None
+    hit = _loaded.get(path)
+    if hit and hit[0] == mtime:
+        return hit[1]
+    try:
+        if os.path.isdir(path):
+            data = {k: np.load(os.path.join(path, k + ".npy"), mmap_mode="r")
+                    for k in ("positions", "vertex_offsets", "face_sizes", "face_offsets", "corner_verts",
+                              "corner_offsets")}
+        else:
+            data = np.load(path, mmap_mode="r")
+    except (OSError, ValueError):
+        return None
+    _loaded[path] = (mtime, data)
+    return data
+
+
+def cache_data(ob: bpy.types.Object):
+    """The loaded cache of a scan-sequence object (memmap or dict), or raise naming the object."""
+    path = bpy.path.abspath(ob.articula.cache_file)
+    data = _load(path) if ob.articula.cache_file else None
+    if data is None:
+        raise ArticulaInputError(f"{ob.name}: its frame cache {path or '(none)'} is missing or unreadable; "
+                                 f"import the scans again")
+    return data
+
+
+def _frame_mesh(data, k: int) -> PolyMesh:
+    v0, v1 = data["vertex_offsets"][k:k + 2]
+    f0, f1 = data["face_offsets"][k:k + 2]
+    c0, c1 = data["corner_offsets"][k:k + 2]
+    return PolyMesh(data["positions"][v0:v1], data["face_sizes"][f0:f1], data["corner_verts"][c0:c1])
+
+
+# -- the object ---------------------------------------------------------------------------------------
+
+
+def create_object(context, name: str, seq: ScanSequence, cache_path: str, frame_start: int,
+                  source: str) -> bpy.types.Object:
+    """Create the scan-sequence object (its cache already written at ``cache_path``), link it to the
+    active collection, make it active and set the scene's frame range to the sequence."""
+    me = bpy.data.meshes.new(name)
+    topo = seq.topology
+    set_geometry(me, topo.vertices, topo.face_sizes, topo.corner_verts)
+    me[SHOWN] = 0
+    ob = bpy.data.objects.new(name, me)
+    context.collection.objects.link(ob)
+    data = ob.articula
+    data.kind = 'SCAN_SEQUENCE'
+    data.registered = seq.registered
+    data.source = source
+    data.frame_start = frame_start
+    data.frame_count = len(seq)
+    set_cache_path(ob, stored_path(cache_path))
+    scene = context.scene
+    scene.frame_start = frame_start
+    scene.frame_end = frame_start + len(seq) - 1
+    for other in context.view_layer.objects.selected:
+        other.select_set(False)
+    context.view_layer.objects.active = ob
+    ob.select_set(True)
+    show_frame(ob, scene.frame_current)
+    return ob
+
+
+def set_cache_path(ob, path: str) -> None:
+    """Store the cache path (``//``-relative when saved; resolved with bpy.path.abspath)."""
+    ob.articula.cache_file = path
+
+
+def is_scan_sequence(ob) -> bool:
+    return ob is not None and ob.type == 'MESH' and ob.articula.kind == 'SCAN_SEQUENCE'
+
+
+def frame_index(ob, scene_frame: int) -> int:
+    """Sequence index shown at ``scene_frame`` (held at the ends)."""
+    n = ob.articula.frame_count
+    return min(max(int(scene_frame) - ob.articula.frame_start, 0), max(n - 1, 0))
+
+
+def show_frame(ob: bpy.types.Object, scene_frame: int, force: bool = False) -> bool:
+    """Put the frame for ``scene_frame`` into ``ob``'s mesh; False when the cache is unusable."""
+    me = ob.data
+    k = frame_index(ob, scene_frame)
+    if not force and me.get(SHOWN) == k:
+        return True
+    try:
+        data = cache_data(ob)
+    except ArticulaInputError:
+        return False
+    if ob.articula.registered:
+        if data.ndim != 3 or data.shape[1] != len(me.vertices) or k >= len(data):
+            return False     # topology was edited or the cache belongs to something else
+        if len(me.vertices):
+            me.attributes["position"].data.foreach_set("vector", np.ascontiguousarray(data[k]).reshape(-1))
+            me.update()
+    else:
+        if k + 1 >= len(data["vertex_offsets"]):
+            return False
+        m = _frame_mesh(data, k)
+        set_geometry(me, m.vertices, m.face_sizes, m.corner_verts)
+    me[SHOWN] = k
+    return True
+
+
+def scan_frames(ob: bpy.types.Object):
+    """All frames of a registered scan-sequence object for the solver, from its cache (source files
+    are not read again): ``(frames (N, V, 3) float32, faces (F, 3) int32 triangles)``."""
+    if not is_scan_sequence(ob):
+        raise ArticulaInputError(f"{getattr(ob, 'name', ob)}: not a scan-sequence object")
+    if not ob.articula.registered:
+        raise ArticulaInputError(f"{ob.name}: the scans are not registered (topology changes between "
+                                 f"frames); use scan_frame_meshes() or track them instead")
+    data = cache_data(ob)
+    if data.ndim != 3 or data.shape[1] != len(ob.data.vertices):
+        raise ArticulaInputError(f"{ob.name}: mesh has {len(ob.data.vertices)} vertices but its frame cache "
+                                 f"has {data.shape[1] if data.ndim == 3 else '?'}; was the mesh edited?")
+    return np.array(data, np.float32), mesh_io.read_triangles(ob.data)
+
+
+def scan_frame_meshes(ob: bpy.types.Object) -> list:
+    """One :class:`PolyMesh` per frame (registered or not), from the cache."""
+    if not is_scan_sequence(ob):
+        raise ArticulaInputError(f"{getattr(ob, 'name', ob)}: not a scan-sequence object")
+    data = cache_data(ob)
+    if ob.articula.registered:
+        topo = read_polymesh(ob.data)
+        return [PolyMesh(np.array(f, np.float64), topo.face_sizes, topo.corner_verts) for f in data]
+    return [PolyMesh(*(np.array(a) for a in (m.vertices, m.face_sizes, m.corner_verts)))
+            for m in (_frame_mesh(data, k) for k in range(len(data["vertex_offsets"]) - 1))]
+
+
+# -- handlers -----------------------------------------------------------------------------------------
+
+
+_failed = set()   # objects whose playback failed once (reported once, not every frame)
+
+
+@bpy.app.handlers.persistent
+def on_frame_change(scene, depsgraph=None):
+    frame = scene.frame_current
+    for ob in scene.objects:
+        if ob.type == 'MESH' and ob.articula.kind == 'SCAN_SEQUENCE' and ob.mode != 'EDIT' \
+                and ob.articula.cache_file:
+            try:
+                ok = show_frame(ob, frame)
+            except Exception as exc:   # never let one object break playback of the others
+                ok, why = False, f"{type(exc).__name__}: {exc}"
+            else:
+                why = f"frame cache {ob.articula.cache_file} missing or not matching the mesh"
+            if not ok and ob.name not in _failed:
+                _failed.add(ob.name)
+                print(f"Articula: {ob.name}: cannot show scan frame {frame} ({why})")
+
+
+@bpy.app.handlers.persistent
+def on_load_post(*_args):
+    _loaded.clear()
+    _failed.clear()
+
+
+@bpy.app.handlers.persistent
+def on_undo_redo(*_args):
+    """Undo restores meshes as they were when the step was pushed; show the current frame again."""
+    if bpy.context.scene:
+        on_frame_change(bpy.context.scene)
+
+
+@bpy.app.handlers.persistent
+def on_save_pre(filepath="", *_args):
+    """Keep cache paths valid when the .blend is saved somewhere else: re-derive them relative to
+    the new file (or absolute when the cache is outside its folder)."""
+    if not filepath:
+        return
+    for ob in bpy.data.objects:
+        if ob.type == 'MESH' and ob.articula.kind == 'SCAN_SEQUENCE' and ob.articula.cache_file \
+                and not ob.library:
+            set_cache_path(ob, stored_path(bpy.path.abspath(ob.articula.cache_file), filepath))
+
+
+_HANDLERS = (("frame_change_post", on_frame_change), ("load_post", on_load_post), ("save_pre", on_save_pre),
+             ("undo_post", on_undo_redo), ("redo_post", on_undo_redo))
+
+
+def register_extra():
+    for name, fn in _HANDLERS:
+        lst = getattr(bpy.app.handlers, name)
+        for h in [h for h in lst if getattr(h, "__name__", "") == fn.__name__
+                  and getattr(h, "__module__", "") == fn.__module__]:
+            lst.remove(h)
+        lst.append(fn)
+
+
+def unregister_extra():
+    for name, fn in _HANDLERS:
+        lst = getattr(bpy.app.handlers, name)
+        for h in [h for h in lst if getattr(h, "__name__", "") == fn.__name__
+                  and getattr(h, "__module__", "") == fn.__module__]:
+            lst.remove(h)
+    _loaded.clear()
+
+
+classes = ()

@@ -1,0 +1,277 @@
+"""Pinhole depth cameras: intrinsics, presets, ``intrinsics.json``, projection and back-projection.
+
+Conventions (the same for every depth tool in Articula)
+------------------------------------------------------
+* **Camera frame** (OpenCV / depth-sensor convention): +X right, +Y down, +Z forward (the viewing
+  direction).  A Blender camera looks down its local -Z with +Y up, so
+  ``blender_cam_matrix_world = cam_to_world @ diag(1, -1, -1, 1)`` (see :func:`blender_from_cv`);
+  :func:`blender_camera_settings` gives the lens, sensor, shift and resolution of the same camera.
+* **Pixels**: column ``u`` (0..W-1, to the right), row ``v`` (0..H-1, downwards); the centre of pixel
+  (u, v) is at image coordinates (u, v).  So the image centre is ((W-1)/2, (H-1)/2).
+* **Depth** is the Z coordinate in the camera frame (distance along the optical axis, *not* along
+  the ray), in metres in memory and ``depth_unit_m`` (default millimetres) in 16-bit PNGs; 0 = none.
+* Projection: ``u = fx X/Z + cx``, ``v = fy Y/Z + cy``; back-projection ``X = (u - cx) Z / fx``,
+  ``Y = (v - cy) Z / fy``.  No lens distortion (depth streams are usually delivered undistorted).
+* **Extrinsics**: ``cam_to_world`` (4, 4) maps camera-frame points to world (metres, world Z up).
+
+``intrinsics.json`` ("articula-intrinsics/1")::
+
+    {"format": "articula-intrinsics/1", "name": "kinect_v1", "width": 640, "height": 480,
+     "fx": 580.0, "fy": 580.0, "cx": 319.5, "cy": 239.5, "depth_unit_m": 0.001}
+
+:func:`load_intrinsics` also accepts Open3D's ``PinholeCameraIntrinsic`` JSON (``width``,
+``height``, column-major ``intrinsic_matrix``).
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import asdict, dataclass, replace
+
+import numpy as np
+
+from ..errors import ArticulaInputError
+
+FORMAT = "articula-intrinsics/1"
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole intrinsics of a depth image (pixels), see the module docstring for conventions."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    depth_unit_m: float = 0.001  # metres per PNG depth unit
+    name: str = "custom"
+
+    @property
+    def K(self) -> np.ndarray:
+        """(3, 3) calibration matrix."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def shape(self) -> tuple:
+        """Image array shape (H, W)."""
+        return (self.height, self.width)
+
+    def fov_deg(self) -> tuple:
+        """Horizontal and vertical field of view in degrees (edge to edge of the image)."""
+        return (2 * math.degrees(math.atan(self.width / (2 * self.fx))),
+                2 * math.degrees(math.atan(self.height / (2 * self.fy))))
+
+    def with_resolution(self, width: int, height: int) -> "Intrinsics":
+        """The same camera delivering a (uniformly) rescaled image, e.g. 640x480 -> 320x240.
+
+        Pixel centres map as ``u' = (u + 0.5) s - 0.5``, so cx, cy stay at the same field point."""
+        sx, sy = width / self.width, height / self.height
+        return replace(self, width=int(width), height=int(height), fx=self.fx * sx, fy=self.fy * sy,
+                       cx=(self.cx + 0.5) * sx - 0.5, cy=(self.cy + 0.5) * sy - 0.5)
+
+    def validate(self, where: str = "intrinsics") -> "Intrinsics":
+        """Raise :class:`ArticulaInputError` (mentioning ``where``) unless the values are usable."""
+        for key in ("width", "height"):
+            val = getattr(self, key)
+            if not isinstance(val, (int, np.integer)) or isinstance(val, bool) or not 0 < val <= 100000:
+                raise ArticulaInputError(f"{where}: {key} must be a positive integer, got {val!r}")
+        for key in ("fx", "fy", "cx", "cy", "depth_unit_m"):
+            val = getattr(self, key)
+            if isinstance(val, bool) or not isinstance(val, (int, float, np.floating, np.integer)) \
+                    or not math.isfinite(val):
+                raise ArticulaInputError(f"{where}: {key} must be a finite number, got {val!r}")
+        for key in ("fx", "fy", "depth_unit_m"):
+            if getattr(self, key) <= 0:
+                raise ArticulaInputError(f"{where}: {key} must be positive, got {getattr(self, key)!r}")
+        if not (-self.width <= self.cx <= 2 * self.width and -self.height <= self.cy <= 2 * self.height):
+            raise ArticulaInputError(f"{where}: principal point ({self.cx}, {self.cy}) is far outside "
+                                     f"the {self.width}x{self.height} image")
+        return self
+
+
+def _from_fov(name, width, height, hfov_deg, vfov_deg):
+    fx = (width / 2) / math.tan(math.radians(hfov_deg) / 2)
+    fy = (height / 2) / math.tan(math.radians(vfov_deg) / 2)
+    return Intrinsics(width, height, round(fx, 2), round(fy, 2), (width - 1) / 2, (height - 1) / 2,
+                      name=name)
+
+
+#: Nominal depth-camera models.  Real devices differ by a few percent (per-unit factory
+#: calibration); load the device's own values with :func:`load_intrinsics` when you have them.
+PRESETS = {
+    # Kinect v1 (PrimeSense), 640x480 depth: focal length of the IR camera ~580 px (Konolige &
+    # Mihelich, "Technical description of Kinect calibration", ROS wiki kinect_calibration/technical;
+    # consistent with the nominal 57 deg horizontal FOV), principal point at the image centre.
+    "kinect_v1": Intrinsics(640, 480, 580.0, 580.0, 319.5, 239.5, name="kinect_v1"),
+    # Kinect v2 (Kinect for Windows v2 / Xbox One), 512x424 ToF depth, nominal FOV 70.6 x 60 deg.
+    "kinect_v2": _from_fov("kinect_v2", 512, 424, 70.6, 60.0),
+    # Azure Kinect DK, NFOV unbinned depth mode: 640x576, nominal FOV 75 x 65 deg (Azure Kinect DK
+    # hardware specification).  Pinhole equivalent of the nominal FOV (the real lens is distorted).
+    "azure_kinect_nfov": _from_fov("azure_kinect_nfov", 640, 576, 75.0, 65.0),
+    # Intel RealSense D435, 848x480 depth (the recommended resolution), nominal depth FOV
+    # 87 x 58 deg (Intel RealSense D400 series datasheet).
+    "realsense_d435": _from_fov("realsense_d435", 848, 480, 87.0, 58.0),
+}
+
+
+def preset(name: str, resolution=None) -> Intrinsics:
+    """A copy of ``PRESETS[name]``, optionally rescaled to ``resolution = (width, height)``."""
+    if name not in PRESETS:
+        raise ArticulaInputError(f"unknown camera preset {name!r}; available: {', '.join(PRESETS)}")
+    intr = PRESETS[name]
+    return intr if resolution is None else intr.with_resolution(*resolution)
+
+
+# ------------------------------------------------------------------------------------------ files
+
+def save_intrinsics(path, intr: Intrinsics) -> None:
+    """Write ``intr`` as ``intrinsics.json`` ("articula-intrinsics/1"), atomically."""
+    path = os.fspath(path)
+    intr.validate(path)
+    data = {"format": FORMAT, **asdict(intr)}
+    data["width"], data["height"] = int(intr.width), int(intr.height)
+    tmp = f"{path}.part{os.getpid()}"
+    with open(tmp, "w", encoding="utf-8") as f:
+        json.dump(data, f, indent=1)
+        f.write("\n")
+    os.replace(tmp, path)
+
+
+def load_intrinsics(path) -> Intrinsics:
+    """Read and validate ``intrinsics.json`` (Articula's format or Open3D's pinhole JSON)."""
+    path = os.fspath(path)
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = json.load(f)
+    except OSError as exc:
+        raise ArticulaInputError(f"{path}: cannot read intrinsics ({exc.strerror or exc})") from exc
+    except ValueError as exc:
+        raise ArticulaInputError(f"{path}: not valid JSON ({exc})") from exc
+    if not isinstance(data, dict):
+        raise ArticulaInputError(f"{path}: expected a JSON object with width, height, fx, fy, cx, cy")
+    if data.get("format", FORMAT) != FORMAT:
+        raise ArticulaInputError(f"{path}: unknown intrinsics format {data['format']!r} (expected {FORMAT!r})")
+    if "fx" not in data and "intrinsic_matrix" in data:
+        data = _from_open3d(data, path)
+    missing = [k for k in ("width", "height", "fx", "fy", "cx", "cy") if k not in data]
+    if missing:
+        raise ArticulaInputError(f"{path}: intrinsics lack {', '.join(missing)}")
+    intr = Intrinsics(width=data["width"], height=data["height"], fx=data["fx"], fy=data["fy"],
+                      cx=data["cx"], cy=data["cy"], depth_unit_m=data.get("depth_unit_m", 0.001),
+                      name=str(data.get("name", os.path.basename(os.path.dirname(os.path.abspath(path))))))
+    return intr.validate(path)
+
+
+def _from_open3d(data, path):
+    mat = data["intrinsic_matrix"]
+    if not (isinstance(mat, list) and len(mat) == 9):
+        raise ArticulaInputError(f"{path}: intrinsic_matrix must hold 9 numbers (column-major 3x3)")
+    k = np.asarray(mat, dtype=float).reshape(3, 3).T
+    return dict(data, fx=float(k[0, 0]), fy=float(k[1, 1]), cx=float(k[0, 2]), cy=float(k[1, 2]))
+
+
+# ------------------------------------------------------------------------------------ projection
+
+def pixel_grid(intr: Intrinsics):
+    """(H, W) float arrays u (column) and v (row) of pixel-centre coordinates."""
+    return np.meshgrid(np.arange(intr.width, dtype=float), np.arange(intr.height, dtype=float))
+
+
+def project(points_cam: np.ndarray, intr: Intrinsics):
+    """Project (N, 3) camera-frame points: returns (N, 2) image coordinates (u, v) and (N,) depth Z.
+
+    Points with Z <= 0 get NaN coordinates."""
+    p = np.asarray(points_cam, dtype=float)
+    z = p[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = np.where(z > 0, 1.0 / z, np.nan)
+    uv = np.stack([intr.fx * p[:, 0] * inv + intr.cx, intr.fy * p[:, 1] * inv + intr.cy], axis=1)
+    return uv, z
+
+
+def backproject(uv: np.ndarray, depth_m: np.ndarray, intr: Intrinsics) -> np.ndarray:
+    """(N, 2) image coordinates (u, v) and (N,) depths (m) -> (N, 3) camera-frame points."""
+    uv = np.asarray(uv, dtype=float)
+    z = np.asarray(depth_m, dtype=float)
+    return np.stack([(uv[:, 0] - intr.cx) * z / intr.fx, (uv[:, 1] - intr.cy) * z / intr.fy, z], axis=1)
+
+
+def depth_to_points(depth_m: np.ndarray, intr: Intrinsics):
+    """Back-project a depth image.
+
+    ``depth_m``: (H, W) depth in metres (0 or non-finite = missing) matching ``intr``.
+    Returns ``points`` (K, 3) float64 in the camera frame (metres) for the K valid pixels in
+    row-major order, and their flat pixel indices (K,) int64 (``rows, cols = divmod(idx, W)``).
+    """
+    depth_m = np.asarray(depth_m)
+    if depth_m.shape != intr.shape:
+        raise ArticulaInputError(f"depth image of shape {depth_m.shape} does not match the "
+                                 f"{intr.width}x{intr.height} intrinsics {intr.name!r}")
+    flat = depth_m.reshape(-1).astype(float, copy=False)
+    idx = np.flatnonzero(np.isfinite(flat) & (flat > 0))
+    rows, cols = np.divmod(idx, intr.width)
+    z = flat[idx]
+    pts = np.empty((idx.size, 3))
+    pts[:, 0] = (cols - intr.cx) * (z / intr.fx)
+    pts[:, 1] = (rows - intr.cy) * (z / intr.fy)
+    pts[:, 2] = z
+    return pts, idx
+
+
+# ------------------------------------------------------------------------------------ extrinsics
+
+def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """``cam_to_world`` (4, 4) of a camera at ``eye`` looking at ``target`` with world ``up`` shown
+    upwards in the image (camera +Z towards the target, +Y = image down)."""
+    eye, target, up = (np.asarray(x, dtype=float) for x in (eye, target, up))
+    z = target - eye
+    if np.linalg.norm(z) < 1e-12:
+        raise ArticulaInputError("camera eye and target coincide")
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)
+    if np.linalg.norm(x) < 1e-9:
+        raise ArticulaInputError("camera viewing direction is parallel to the up vector")
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    m = np.eye(4)
+    m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = x, y, z, eye
+    return m
+
+
+def world_to_camera(points: np.ndarray, cam_to_world: np.ndarray) -> np.ndarray:
+    """(N, 3) world points -> camera frame, for a rigid ``cam_to_world`` (4, 4)."""
+    r, t = cam_to_world[:3, :3], cam_to_world[:3, 3]
+    return (np.asarray(points, dtype=float) - t) @ r
+
+
+def camera_to_world(points: np.ndarray, cam_to_world: np.ndarray) -> np.ndarray:
+    """(N, 3) camera-frame points -> world."""
+    return np.asarray(points, dtype=float) @ cam_to_world[:3, :3].T + cam_to_world[:3, 3]
+
+
+_CV_TO_BLENDER = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+def blender_from_cv(cam_to_world: np.ndarray) -> np.ndarray:
+    """Blender camera ``matrix_world`` (looks down -Z, +Y up) for an OpenCV-style ``cam_to_world``.
+    The matrix is its own inverse, so the same call converts back."""
+    return np.asarray(cam_to_world, dtype=float) @ _CV_TO_BLENDER
+
+
+
+def blender_camera_settings(intr: Intrinsics, sensor_width_mm: float = 36.0) -> dict:
+    """Blender camera/render settings that reproduce ``intr`` (checked against Blender's own
+    projection in ``tests/blender/test_camera_blender.py``): ``lens`` (mm) with
+    ``sensor_fit = 'HORIZONTAL'`` and ``sensor_width``, ``shift_x``/``shift_y`` (fractions of the
+    image width) for an off-centre principal point, the render resolution, and the pixel aspect for
+    fx != fy.  Use with ``matrix_world = blender_from_cv(cam_to_world)``."""
+    shift_x = ((intr.width - 1) / 2 - intr.cx) / intr.width
+    shift_y = (intr.cy - (intr.height - 1) / 2) / intr.width * intr.fx / intr.fy
+    aspect = intr.fx / intr.fy
+    return {"lens": intr.fx * sensor_width_mm / intr.width, "sensor_width": sensor_width_mm,
+            "sensor_fit": "HORIZONTAL", "shift_x": shift_x, "shift_y": shift_y,
+            "resolution_x": intr.width, "resolution_y": intr.height,
+            "pixel_aspect_x": max(1.0, 1.0 / aspect), "pixel_aspect_y": max(1.0, aspect)}

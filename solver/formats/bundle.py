@@ -1,0 +1,129 @@
+"""The model bundle: one ``.npz`` file (format "articula-model/1") holding a model and, optionally,
+poses and provenance.  Keys exactly as the table in ../shared/ARCHITECTURE.md; provenance is stored
+as a JSON string under ``provenance``.  Files are read with ``allow_pickle=False``; a broken file
+raises :class:`ArticulaInputError` naming the key and the problem, a missing file names the path.
+"""
+import json
+import os
+import zipfile
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ArticulaInputError
+from ..rig.model import Model, Poses, Skeleton
+
+FORMAT = "articula-model/1"
+MODEL_KEYS = ("rest_vertices", "faces", "bone_names", "parents", "heads", "tails", "frames",
+              "anchor", "twist_weights", "swing_weights")
+POSE_KEYS = ("pose_rotations", "pose_translations", "pose_scales")
+
+
+@dataclass
+class Bundle:
+    model: Model
+    poses: Poses = None
+    provenance: dict = field(default_factory=dict)
+
+
+def save_bundle(path, model: Model, poses: Poses = None, provenance: dict = None) -> None:
+    """Validate and write ``model`` (and ``poses``, ``provenance``: a JSON-serialisable dict) to
+    ``path``.  The file is written to a temporary name first and renamed, so a failure never leaves
+    a half-written bundle."""
+    model.validate()
+    sk = model.skeleton
+    arrays = {
+        "format": np.array(FORMAT),
+        "rest_vertices": model.rest_vertices.astype(np.float64),
+        "faces": model.faces.astype(np.int32),
+        "bone_names": np.array(sk.names, dtype=np.str_),
+        "parents": sk.parents.astype(np.int32),
+        "heads": sk.heads, "tails": sk.tails, "frames": sk.frames,
+        "anchor": model.anchor.astype(np.int32),
+        "twist_weights": model.twist_weights.astype(np.float32),
+        "swing_weights": model.swing_weights.astype(np.float32),
+    }
+    if poses is not None:
+        poses.validate(sk.num_bones)
+        arrays.update(pose_rotations=poses.rotations, pose_translations=poses.translations,
+                      pose_scales=poses.scales)
+    try:
+        text = json.dumps(provenance or {})
+    except (TypeError, ValueError) as exc:
+        raise ArticulaInputError(f"provenance: not JSON-serialisable ({exc})") from exc
+    arrays["provenance"] = np.array(text)
+    path = os.fspath(path)
+    tmp = path + ".tmp.npz"
+    with open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
+    os.replace(tmp, path)
+
+
+def _read_arrays(path) -> dict:
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise ArticulaInputError(f"{path}: no such bundle file")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {k: data[k] for k in data.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise ArticulaInputError(f"{path}: not a readable .npz bundle ({exc})") from exc
+
+
+def _get(arrays, key, kind, path):
+    if key not in arrays:
+        raise ArticulaInputError(f"{path}: missing key {key!r}")
+    a = arrays[key]
+    if kind == "float" and a.dtype.kind not in "fiu":
+        raise ArticulaInputError(f"{path}: key {key!r} must be numeric, got dtype {a.dtype}")
+    if kind == "int" and a.dtype.kind not in "iu":
+        raise ArticulaInputError(f"{path}: key {key!r} must be integer, got dtype {a.dtype}")
+    if kind == "str" and a.dtype.kind != "U":
+        raise ArticulaInputError(f"{path}: key {key!r} must be a string array, got dtype {a.dtype}")
+    return a
+
+
+def load_bundle(path) -> Bundle:
+    """Read and validate a bundle; returns ``Bundle(model, poses or None, provenance dict)``."""
+    arrays = _read_arrays(path)
+    fmt = _get(arrays, "format", "str", path)
+    if fmt.shape != () or str(fmt) != FORMAT:
+        raise ArticulaInputError(f"{path}: key 'format' is {fmt!r}, expected {FORMAT!r}")
+    g = {k: _get(arrays, k, "int" if k in ("faces", "parents", "anchor") else
+                 "str" if k == "bone_names" else "float", path) for k in MODEL_KEYS}
+    if g["bone_names"].ndim != 1:
+        raise ArticulaInputError(f"{path}: key 'bone_names' must be 1-D, got shape {g['bone_names'].shape}")
+    skeleton = Skeleton(list(g["bone_names"]), g["parents"], g["heads"], g["tails"], g["frames"])
+    model = Model(g["rest_vertices"], g["faces"], skeleton, g["anchor"], g["twist_weights"], g["swing_weights"])
+    try:
+        model.validate()
+    except ArticulaInputError as exc:
+        raise ArticulaInputError(f"{path}: {exc}") from exc
+    poses = _load_poses(arrays, path, skeleton.num_bones)
+    provenance = {}
+    if "provenance" in arrays:
+        try:
+            provenance = json.loads(str(_get(arrays, "provenance", "str", path)))
+        except ValueError as exc:
+            raise ArticulaInputError(f"{path}: key 'provenance' is not valid JSON ({exc})") from exc
+        if not isinstance(provenance, dict):
+            raise ArticulaInputError(f"{path}: key 'provenance' must hold a JSON object")
+    return Bundle(model, poses, provenance)
+
+
+def _load_poses(arrays, path, num_bones):
+    present = [k for k in POSE_KEYS if k in arrays]
+    if not present:
+        return None
+    if "pose_rotations" not in arrays:
+        raise ArticulaInputError(f"{path}: key {present[0]!r} present but 'pose_rotations' missing")
+    rot = _get(arrays, "pose_rotations", "float", path)
+    n = len(rot) if rot.ndim else 0
+    trans = _get(arrays, "pose_translations", "float", path) if "pose_translations" in arrays else np.zeros((n, 3))
+    scales = _get(arrays, "pose_scales", "float", path) if "pose_scales" in arrays else np.ones(n)
+    poses = Poses(rot, trans, scales)
+    try:
+        poses.validate(num_bones)
+    except ArticulaInputError as exc:
+        raise ArticulaInputError(f"{path}: {exc}") from exc
+    return poses

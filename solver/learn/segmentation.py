@@ -1,0 +1,816 @@
+"""Segmentation of a registered mesh sequence into k rigid parts by their motion (spec §3.2 step 2).
+
+Method (rigid-transform clustering in the spirit of Le & Deng's rigid-bone initialisation, written
+from the spec's description):
+
+1. seeding: k-means++ on vertex trajectories (the concatenated 3M positions of a vertex over the M
+   scans), applied hierarchically: the k-part solution is built from the (k−1)-part one by splitting
+   its worst-fitting part (largest squared error) in two, seeded by k-means++ (k = 2) on that part's
+   trajectories and refined as a 2-part rigid clustering of that part alone (best of SPLIT_TRIES);
+2. per part and scan, the best rigid transform rest → scan (Kabsch);
+3. every vertex moves to the part whose M rigid transforms reproduce its M positions best
+   (least squared error); empty parts are re-seeded at the worst-fitting vertex;
+4. 2-3 repeat until no label changes (after every split, over all parts);
+5. connectivity: every part must be one connected piece of the mesh.  Islands (all components of a
+   part but its largest) are removed smallest first, each by the cheaper of merging it into the
+   adjacent part whose refitted motion fits the union best, or (islands of at least
+   MIN_PART_VERTICES) making it a part of its own and merging instead the two adjacent parts whose
+   union fits best.  The second case occurs when two distant pieces with alike motion ended in one
+   part; then 2-3 and 5 alternate (at most CONNECT_ROUNDS times).
+
+6. mirror symmetry (when the mesh has a vertex mirror map, :func:`mirror_map`): parts that are mirror
+   images of each other are re-cut alike.  Steps 3 and 5 alternate once more with step 3 replaced by
+   :func:`mirrored_labels`: a vertex v and its mirror vertex m(v) go together to the compatible pair of
+   parts (c, d) — mirror partners, a part and itself for a part symmetric in itself, or a part and the
+   pieces of its mirror image when one side is split in more parts (:func:`mirror_compatible`) — that
+   minimises ``err[v, c] + err[m(v), d]``, the fit cost of both sides under their own rigid motions.
+   Each boundary then lies where the motion of both sides together puts it, instead of wherever each
+   side's noise and skin blending put it (MakeHuman cmu_mb at 16-19 parts cut the left foot inside the
+   Foot bone and the right one at the ankle).  learn_rig, MakeHuman, 19 parts, the 8 cases of
+   ``bench/bench_learn.py --order makehuman`` (means over the cases, mm): joint-centre error mean 15.0 →
+   14.1, median 9.9 → 9.7, max 57.5 → 52.7 (cmu_mb female,heavy hybrid: max 51.7 → 25.8; male,thin lbs
+   34.9 → 26.7; game_engine cases within ±1 mm); training / held-out surface error 1.942 / 2.039 →
+   1.925 / 2.023.  The segmentation's own fit error rises a little (RMS 7.11 → 7.29 mm, cmu_mb
+   female,heavy lbs); segment(k=19) costs 0.5-0.8 s more CPU (0.4 s of it the map).
+   The map comes from the mesh topology: MakeHuman's quad mesh is mirror
+   symmetric (its triangulation is not: mirror-image quads are split along either diagonal), and a map
+   propagated from one quad over the whole mesh either is consistent or proves the seed wrong; seeds are
+   quads paired by their side and diagonal lengths, which do not depend on the pose.  Posed scans are
+   too asymmetric for a symmetry plane to give the map (range-of-motion scans: 100-400 mm median
+   mismatch even under the true map).  Meshes without such a map keep steps 1-5 unchanged (a geometric
+   map from an exactly symmetric scan is used where there is one).
+
+Speed.  MakeHuman body, 13,380 vertices × 30 scans, CPU time on numpy 2.x: segment(k=19) 0.7-1.6 s
+instead of 13-17 s, the whole curve k = 1..20 (choose_num_parts) 0.3-0.5 s instead of 110-170 s.
+
+* steps 1-4 run on about SAMPLES vertices: the rest mesh is binned in cubic cells and every occupied
+  cell contributes one vertex, weighted by the number of vertices in its cell, so that the weighted
+  sample error estimates the full one.  All vertices are then assigned to their best part and 2-3
+  are repeated at full resolution until the labels settle (at most POLISH_ROUNDS rounds);
+* 2 and 3 work on one *moment* vector per vertex, ``φ_v = [s_mv x_vᵀ (9M), s_mv (3M), x_v (3), c_v]``
+  (x rest, s scans, both centred; ``c_v = M|x_v|² + Σ_m|s_mv|²``): the per-part sums ``Σ_v w_v φ_v``
+  hold all covariances and centroids Kabsch needs, the squared error of vertex v under part c is
+  ``Σ_m|t_mc|² − 2 φ_v·ψ_c`` with ``ψ_c = [R_mc, t_mc, −Σ_m R_mcᵀ t_mc, −½]``, and the least error
+  of any vertex set follows from its sums alone (the costs of step 5);
+* only the parts that gained or lost vertices are refitted and only their error columns recomputed;
+  their sums are updated by the moments of the vertices that moved;
+* the hierarchy makes every k cost one refinement started close to its optimum: the curve
+  k = 1..k_max is one run, and ``segment(k)`` with the same seed finishes the curve's k-th solution.
+  It also fits better than the best of 4 independent k-means++ restarts per k did: RMS at 19 parts
+  6.7 / 6.3 / 8.9 mm instead of 9.1 / 9.2 / 11.2 mm (MakeHuman cmu_mb 30 and 12 scans, game_engine).
+
+``choose_num_parts`` reads k from the curve E(k) (RMS rigid-fit error on the samples, metres): the
+smallest k whose error is at most RESIDUAL_FRACTION (3 %) of the one-part error E(1), i.e. the parts
+reproduce all but 3 % (RMS) of the motion that a single rigid transform cannot; or, if that is never
+reached, the smallest k within PLATEAU (10 %) of the best error on the curve (noise or skin
+deformation that no number of rigid parts removes).  Curves (E in mm, k = 1, 2, ...):
+
+* MakeHuman cmu_mb (31 bones, 30 move), hybrid skin, 30 scans: 322 227 167 114 43 33 29 25 21 18 13
+  12 11 10 9.7 8.7 7.6 7.1 6.7 6.0 → k = 16; 12 scans → 15; game_engine (53 bones), lbs, 30 scans:
+  365 267 214 121 43 36 32 27 23 18 16 15 13.9 12.9 11.2 10.8 10.0 9.0 8.8 8.5 → 16; seeds 0-2 give
+  15-17.  After the torso and the four limbs (k = 5) the curve falls smoothly: every further split
+  (hands, feet, head, upper/lower limbs) still takes off 5-15 %.  The knee of log E(k) used before
+  picked 5-6 parts there, and a threshold relative to the body size cannot serve both these bodies
+  and the tube below (7 exact tube parts leave 0.34 % of the diagonal, 19 MakeHuman parts 0.4 %).
+* the tests' tube body, exactly articulated (8 parts): E(7) = 8-10 % of E(1), E(8) = 0 → k = 8; the
+  same tube with smooth (hybrid-skinned) joints: 78 … 8.8 3.8 2.7 2.2 → k = 10 (E(8) = 4.9 % of E(1)).
+* Gaussian noise on the 30-scan MakeHuman: σ = 2 mm → k = 16; σ = 10 mm → 14 (plateau, E ≥ 23 mm).
+
+Units: positions in metres, errors in metres (squared errors in m²).
+"""
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from ..errors import ArticulaInputError, Cancelled  # noqa: F401  (Cancelled raised by callbacks)
+from ..geometry.mesh_graph import adjacency
+from ..geometry.procrustes import rotation_from_covariance
+
+
+MIN_PART_VERTICES = 4       # a rigid part needs a few non-collinear points to have a defined motion
+SAMPLES = 2000              # about this many vertices carry the clustering (cell subsample of the rest mesh)
+SPLIT_TRIES = 3             # k-means++ seeded 2-clusterings tried when a part is split (best kept)
+CHUNK = 4096                # vertices per block of full-resolution moments
+POLISH_ROUNDS = 10          # at most this many full-resolution rounds of steps 2-3 after the sample clustering
+CONNECT_ROUNDS = 3          # at most this many alternations of full-resolution refinement and step 5
+RESIDUAL_FRACTION = 0.03    # choose_num_parts: smallest k with E(k) <= this fraction of E(1) ...
+PLATEAU = 0.10              # ... or within this fraction of the curve's best error
+MIRROR_SCANS = 6            # mirror map: at most this many scans (rest first, then evenly spaced) used
+MIRROR_MATCH = 0.5          # mirror parts: most (this fraction) of a part's mirrored vertices in the other
+MIRROR_CONTAIN = 0.7        # compatible parts: this fraction of one part's mirrored vertices in the other
+MIRROR_GEOMETRIC_TOL = 0.25  # geometric fallback map: reflected vertex within this × median edge length
+MIRROR_SEED_POLYGONS = 8    # topological mirror map: seed quads (their mirror images found by lengths) ...
+MIRROR_SIGNATURE_TOL = 0.01  # ... whose image quads have lengths within this fraction
+MIRROR_TRIES = 200          # ... and at most this many propagations in all
+MIRROR_EDGE_TOL = 0.05      # topological map: median relative difference of mirrored edges' mean lengths
+
+
+# ----------------------------------------------------------------------------- moments and fits
+
+def centred(rest, scans):
+    """Rest ``(V,3)`` and scans ``(M,V,3)`` (float64) moved to their centroids: rigid fits and errors
+    are unchanged, the expanded squared errors lose fewer digits."""
+    rest = np.asarray(rest, dtype=np.float64)
+    scans = np.asarray(scans, dtype=np.float64)
+    return rest - rest.mean(axis=0), scans - scans.mean(axis=1, keepdims=True)
+
+
+def moments(rest, scans):
+    """Per-vertex moments ``φ (V, 12M+4)`` = [s_mv x_vᵀ row-major per scan (9M), s_mv (3M), x_v (3), c_v]
+    with ``c_v = M|x_v|² + Σ_m |s_mv|²`` (m²), the constant of the expanded squared error."""
+    M, V = scans.shape[:2]
+    s = scans.transpose(1, 0, 2)                                        # (V,M,3)
+    outer = (s[:, :, :, None] * rest[:, None, None, :]).reshape(V, 9 * M)
+    c = M * np.einsum("vi,vi->v", rest, rest) + np.einsum("vmi,vmi->v", s, s)
+    return np.concatenate([outer, s.reshape(V, 3 * M), rest, c[:, None]], axis=1)
+
+
+def part_sums(phi, labels, weights, k):
+    """Weighted per-part sums ``(S (k, D), n (k,))`` of moments ``phi (P,D)`` under ``labels (P,)``."""
+    P = len(labels)
+    W = sp.csr_matrix((weights, (labels, np.arange(P))), shape=(k, P))
+    return np.asarray(W @ phi), np.bincount(labels, weights=weights, minlength=k)
+
+
+def fit_from_sums(S, n, M):
+    """Kabsch per part and scan from part sums ``S (p, 12M+4)`` and weights ``n (p,)``.
+    Returns ``R (M,p,3,3)``, ``t (M,p,3)``; parts without weight get the identity."""
+    p = len(n)
+    safe = np.where(n > 0, n, 1.0)
+    cross = S[:, :9 * M].reshape(p, M, 3, 3)                          # Σ w s xᵀ
+    mu_d = S[:, 9 * M:12 * M].reshape(p, M, 3) / safe[:, None, None]
+    mu_s = S[:, 12 * M:12 * M + 3] / safe[:, None]                     # (p,3)
+    cov = cross - n[:, None, None, None] * mu_d[..., :, None] * mu_s[:, None, None, :]
+    R = rotation_from_covariance(cov)
+    R = np.where((n > 0)[:, None, None, None], R, np.eye(3))
+    t = mu_d - np.einsum("pmij,pj->pmi", R, mu_s)
+    return R.transpose(1, 0, 2, 3), t.transpose(1, 0, 2)
+
+
+def part_vectors(R, t):
+    """``ψ (p, 12M+4)`` = [R_mc, t_mc, −Σ_m R_mcᵀ t_mc, −½] and ``T (p,)`` = Σ_m |t_mc|², such that the
+    squared error (m²) of a vertex with moments φ under part c is ``T_c − 2 φ·ψ_c``."""
+    M, p = t.shape[:2]
+    psi = np.concatenate([R.transpose(1, 0, 2, 3).reshape(p, 9 * M), t.transpose(1, 0, 2).reshape(p, 3 * M),
+                          -np.einsum("mkij,mki->kj", R, t), np.full((p, 1), -0.5)], axis=1)
+    return psi, np.einsum("mki,mki->k", t, t)
+
+
+def errors_from_moments(phi, R, t):
+    """Squared errors ``(P,p)`` (m², summed over scans) of moments ``phi (P,D)`` under the part
+    transforms ``R (M,p,3,3)``, ``t (M,p,3)``."""
+    psi, T = part_vectors(R, t)
+    # einsum, not BLAS: few columns at a time, where threaded BLAS costs more CPU than it saves
+    return np.maximum(T[None, :] - 2.0 * np.einsum("pd,kd->pk", phi, psi), 0.0)
+
+
+def sums_cost(S, n, M):
+    """Least total squared error (m²) of point sets with sums ``S (p,D)``, weights ``n (p,)`` under their
+    own best rigid fits."""
+    psi, T = part_vectors(*fit_from_sums(S, n, M))
+    return np.maximum(n * T - 2.0 * np.einsum("pd,pd->p", S, psi), 0.0)
+
+
+def rigid_fit_errors(rest, scans, R, t):
+    """Squared error ``(V,k)`` (m²): ``Σ_m ‖R[m,c] rest[v] + t[m,c] − scans[m,v]‖²`` for every vertex and
+    part (rest ``(V,3)``, scans ``(M,V,3)``, R ``(M,k,3,3)``, t ``(M,k,3)``), by expanding the square
+    (no (M,k,V,3) temporary)."""
+    x2 = np.einsum("vi,vi->v", rest, rest)
+    s2 = np.einsum("mvi,mvi->v", scans, scans)
+    t2 = np.einsum("mki,mki->k", t, t)
+    Rt = np.einsum("mkij,mki->kj", R, t)                              # Σ_m R_mcᵀ t_mc
+    sR = np.einsum("mvi,mkij->vkj", scans, R, optimize=True)          # Σ_m s_mvᵀ R_mc
+    st = np.einsum("mvi,mki->vk", scans, t, optimize=True)
+    M = scans.shape[0]
+    err = (M * x2 + s2)[:, None] + t2[None, :] + 2 * rest @ Rt.T
+    err -= 2 * np.einsum("vkj,vj->vk", sR, rest) + 2 * st
+    return np.maximum(err, 0.0)
+
+
+# ----------------------------------------------------------------------------- point sets
+
+def cells(ijk):
+    """Index ``(V,)`` in 0..C−1 of the distinct rows of integer cell coordinates ``ijk (V,3)``."""
+    order = np.lexsort(ijk.T[::-1])
+    s = ijk[order]
+    cell = np.empty(len(ijk), dtype=np.int64)
+    cell[order] = np.cumsum(np.r_[True, np.any(s[1:] != s[:-1], axis=1)]) - 1
+    return cell
+
+
+def grid_sample(points, n):
+    """About ``n`` points of ``points (V,3)`` spread evenly: the points are binned in cubic cells whose
+    size makes about n cells occupied (bisection on the size) and every occupied cell contributes its
+    point nearest to the cell's mean.  Returns ``(indices (P,), cell (V,))`` with ``cell[v]`` the
+    position in ``indices`` of v's cell (``bincount(cell)`` = vertices per sample)."""
+    V = len(points)
+    if n >= V:
+        return np.arange(V), np.arange(V)
+    q = points - points.min(axis=0)
+    lo, hi = 0.0, float(q.max()) + 1e-12
+    for _ in range(40):
+        h = 0.5 * (lo + hi)
+        cell = cells(np.floor(q / h).astype(np.int64))
+        P = int(cell.max()) + 1
+        if abs(P - n) <= n // 20:
+            break
+        lo, hi = (h, hi) if P > n else (lo, h)
+    count = np.bincount(cell, minlength=P)
+    mean = np.stack([np.bincount(cell, weights=points[:, i], minlength=P) for i in range(3)], 1) / count[:, None]
+    d2 = np.sum((points - mean[cell]) ** 2, axis=1)
+    order = np.lexsort((d2, cell))                             # by cell, nearest to the mean first
+    first = np.r_[True, cell[order][1:] != cell[order][:-1]]
+    return order[first], cell
+
+
+class Sample:
+    """Weighted points with stored moments: ``phi (P,D)``, weights ``w (P,)`` (vertices represented),
+    trajectories ``traj (P,3M)``, number of scans ``M``."""
+
+    def __init__(self, phi, w, traj, M):
+        self.phi, self.w, self.traj, self.M = phi, w, traj, M
+
+    @classmethod
+    def of_mesh(cls, rest, scans, n=SAMPLES):
+        """The cell subsample (:func:`grid_sample`) of centred ``rest (V,3)``, ``scans (M,V,3)``."""
+        index, cell = grid_sample(rest, n)
+        traj = scans[:, index].transpose(1, 0, 2).reshape(len(index), -1)
+        return cls(moments(rest[index], scans[:, index]), np.bincount(cell).astype(np.float64), traj,
+                   scans.shape[0])
+
+    def subset(self, mask):
+        return Sample(self.phi[mask], self.w[mask], self.traj[mask], self.M)
+
+    def __len__(self):
+        return len(self.w)
+
+    def sums(self, idx, labels, k):
+        """Part sums ``(S (k,D), n (k,))`` of the points ``idx`` with ``labels``."""
+        return part_sums(self.phi[idx], labels, self.w[idx], k)
+
+    def errors(self, R, t):
+        """Squared errors ``(P,p)`` under ``R (M,p,3,3)``, ``t (M,p,3)``."""
+        return errors_from_moments(self.phi, R, t)
+
+
+class Mesh:
+    """All vertices (weight 1) of centred ``rest (V,3)``, ``scans (M,V,3)``; moments formed on demand."""
+
+    def __init__(self, rest, scans):
+        self.rest, self.scans, self.M = rest, scans, scans.shape[0]
+        self.w = np.ones(len(rest))
+
+    def __len__(self):
+        return len(self.rest)
+
+    def sums(self, idx, labels, k):
+        """Part sums of the vertices ``idx`` with ``labels``, in blocks of CHUNK vertices."""
+        S, n = np.zeros((k, 12 * self.M + 4)), np.zeros(k)
+        for a in range(0, len(idx), CHUNK):
+            phi = moments(self.rest[idx[a:a + CHUNK]], self.scans[:, idx[a:a + CHUNK]])
+            S_, n_ = part_sums(phi, labels[a:a + CHUNK], self.w[idx[a:a + CHUNK]], k)
+            S += S_
+            n += n_
+        return S, n
+
+    def errors(self, R, t):
+        return rigid_fit_errors(self.rest, self.scans, R, t)
+
+
+# ----------------------------------------------------------------------------- clustering
+
+class Clustering:
+    """Labels ``(P,)`` of a point set (:class:`Sample` or :class:`Mesh`) with their part sums, rigid fits
+    ``R (M,k,3,3)``, ``t (M,k,3)`` and squared errors ``err (P,k)``, kept consistent by :meth:`relabel`."""
+
+    def __init__(self, points, labels, k):
+        self.points, self.labels, self.k = points, np.asarray(labels, dtype=np.int64), k
+        self.S, self.n = points.sums(np.arange(len(points)), self.labels, k)
+        self.R, self.t = fit_from_sums(self.S, self.n, points.M)
+        self.err = points.errors(self.R, self.t)
+
+    def add_part(self):
+        """One more (empty, identity) part."""
+        P, M = len(self.points), self.points.M
+        self.k += 1
+        self.S = np.vstack([self.S, np.zeros((1, self.S.shape[1]))])
+        self.n = np.r_[self.n, 0.0]
+        self.R = np.concatenate([self.R, np.broadcast_to(np.eye(3), (M, 1, 3, 3))], axis=1)
+        self.t = np.concatenate([self.t, np.zeros((M, 1, 3))], axis=1)
+        self.err = np.hstack([self.err, np.full((P, 1), np.inf)])
+
+    def relabel(self, new):
+        """Move the points to ``new`` labels; refit the parts that changed.  Returns False if none did."""
+        moved = np.flatnonzero(new != self.labels)
+        if len(moved) == 0:
+            return False
+        S_out, n_out = self.points.sums(moved, self.labels[moved], self.k)
+        S_in, n_in = self.points.sums(moved, new[moved], self.k)
+        self.S += S_in - S_out
+        self.n += n_in - n_out                              # vertex counts: exact in float64
+        parts = np.unique(np.r_[self.labels[moved], new[moved]])
+        R, t = fit_from_sums(self.S[parts], self.n[parts], self.points.M)
+        self.R[:, parts], self.t[:, parts] = R, t
+        self.err[:, parts] = self.points.errors(R, t)
+        self.labels = new
+        return True
+
+    def best_labels(self):
+        """Step 3: every point to its best part; empty parts get the worst-fitting points."""
+        new = np.argmin(self.err, axis=1)
+        counts = np.bincount(new, minlength=self.k)
+        if counts.min() == 0:
+            new = _reseed_empty(new, self.err[np.arange(len(new)), new], self.k)
+        return new
+
+    def total(self):
+        """Weighted total squared error (m²)."""
+        return float(self.points.w @ self.err[np.arange(len(self.labels)), self.labels])
+
+    def refine(self, iterations):
+        """Steps 2-3 until no label changes (at most ``iterations`` rounds)."""
+        for _ in range(iterations):
+            if not self.relabel(self.best_labels()):
+                break
+        return self
+
+
+def _reseed_empty(labels, err_current, k):
+    """Give every empty part the worst-fitting vertex (largest error under its current part)."""
+    counts = np.bincount(labels, minlength=k)
+    order = np.argsort(-err_current)
+    taken = 0
+    for c in np.flatnonzero(counts == 0):
+        while counts[labels[order[taken]]] <= 1:
+            taken += 1
+        counts[labels[order[taken]]] -= 1
+        labels[order[taken]] = c
+        counts[c] = 1
+        taken += 1
+    return labels
+
+
+def kmeanspp_labels(features, k, rng, weights):
+    """k-means++ seeds on ``features (P,D)`` (drawn with probability ∝ weight × squared distance to the
+    nearest seed); returns the nearest-seed labels ``(P,)``."""
+    P = len(features)
+    seeds = [int(rng.choice(P, p=weights / weights.sum()))]
+    d2 = np.sum((features - features[seeds[0]]) ** 2, axis=1)
+    for _ in range(1, k):
+        p = weights * d2
+        p = p / p.sum() if p.sum() > 0 else weights / weights.sum()
+        seeds.append(int(rng.choice(P, p=p)))
+        d2 = np.minimum(d2, np.sum((features - features[seeds[-1]]) ** 2, axis=1))
+    D = np.stack([np.sum((features - features[s]) ** 2, axis=1) for s in seeds], axis=1)
+    return np.argmin(D, axis=1)
+
+
+def split_worst(cl, rng, iterations):
+    """k → k+1 parts in place: the part of ``cl`` (:class:`Clustering`) with the largest weighted error
+    is split by a rigid 2-clustering of its own points (k-means++ seeded), then all parts are refined."""
+    own = cl.err[np.arange(len(cl.labels)), cl.labels] * cl.points.w
+    sizes = np.bincount(cl.labels, minlength=cl.k)
+    worst = int(np.argmax(np.where(sizes >= 2, np.bincount(cl.labels, weights=own, minlength=cl.k), -1.0)))
+    mask = cl.labels == worst
+    sub = cl.points.subset(mask)
+    tries = [Clustering(sub, kmeanspp_labels(sub.traj, 2, rng, sub.w), 2).refine(iterations)
+             for _ in range(SPLIT_TRIES)]
+    two = min(tries, key=Clustering.total)
+    new = cl.labels.copy()
+    new[np.flatnonzero(mask)[two.labels == 1]] = cl.k
+    cl.add_part()
+    cl.relabel(new)
+    return cl.refine(iterations)
+
+
+def hierarchy(rest, scans, k_max, seed=0, iterations=50, samples=SAMPLES, progress=None):
+    """Steps 1-4 on the cell subsample for k = 1..k_max.  Yields ``(k, Clustering)`` (the same object,
+    updated in place) for every k; centred ``rest (V,3)``, ``scans (M,V,3)``."""
+    rng = np.random.default_rng(seed)
+    sample = Sample.of_mesh(rest, scans, samples)
+    cl = Clustering(sample, np.zeros(len(sample), dtype=np.int64), 1)
+    yield 1, cl
+    for k in range(2, min(k_max, len(sample)) + 1):
+        split_worst(cl, rng, iterations)
+        if progress is not None:
+            progress(k / k_max, f"choosing the number of parts (k={k})", None)
+        yield k, cl
+
+
+# ----------------------------------------------------------------------------- full resolution
+
+def islands_of(labels, A):
+    """Components of the parts on the mesh: ``(comp (V,), size (C,), islands)`` where ``islands`` are the
+    components that are not their part's largest.  ``A``: vertex adjacency as COO."""
+    same = labels[A.row] == labels[A.col]
+    G = sp.coo_matrix((np.ones(same.sum()), (A.row[same], A.col[same])), shape=A.shape)
+    n, comp = connected_components(G, directed=False)
+    size = np.bincount(comp, minlength=n)
+    comp_label = np.zeros(n, dtype=np.int64)
+    comp_label[comp] = labels
+    largest = np.full(int(labels.max()) + 1, -1)
+    order = np.argsort(size, kind="stable")                    # ascending: the last write wins
+    largest[comp_label[order]] = order
+    return comp, size, np.setdiff1d(np.arange(n), largest[largest >= 0])
+
+
+def adjacent_pairs(labels, A, k):
+    """Pairs ``(a, b)``, a < b < k, of parts that share a mesh edge ``(E,2)``."""
+    a, b = labels[A.row], labels[A.col]
+    keep = (a < b) & (b < k)
+    return np.unique(np.stack([a[keep], b[keep]], axis=1), axis=0)
+
+
+def make_parts_connected(mesh, labels, A):
+    """Step 5: remove every island of a part (a connected component that is not the part's largest),
+    smallest first, by the cheaper of (a) merging it into the adjacent part whose refitted rigid motion
+    fits the union best and (b) making it a part of its own and merging the two adjacent parts whose
+    union fits best (keeps k; only for islands of at least MIN_PART_VERTICES vertices).  Costs are
+    exact least-squares errors from part sums (:func:`sums_cost`).  ``mesh``: :class:`Mesh`;
+    ``A``: vertex adjacency (V,V) of a connected mesh.  Returns new labels; every part is connected."""
+    labels, k, M = labels.copy(), int(labels.max()) + 1, mesh.M
+    A = sp.coo_matrix(A)
+    S, n = mesh.sums(np.arange(len(labels)), labels, k)
+    while True:
+        comp, size, islands = islands_of(labels, A)
+        if len(islands) == 0:
+            return labels
+        members = np.flatnonzero(comp == islands[np.argmin(size[islands])])
+        p = labels[members[0]]
+        S_i, n_i = mesh.sums(members, np.zeros(len(members), dtype=np.int64), 1)
+        S[p] -= S_i[0]
+        n[p] -= n_i[0]
+        inside = np.zeros(len(labels), dtype=bool)
+        inside[members] = True
+        nb = np.unique(labels[A.col[inside[A.row] & ~inside[A.col]]])
+        gain = sums_cost(S[nb] + S_i, n[nb] + n_i, M) - sums_cost(S[nb], n[nb], M)
+        j = nb[np.argmin(gain)]
+        own = np.inf
+        if n_i[0] >= MIN_PART_VERTICES:
+            labels[members] = k                                # the island as a (temporary) part k
+            pairs = adjacent_pairs(labels, A, k)
+            merge = (sums_cost(S[pairs[:, 0]] + S[pairs[:, 1]], n[pairs[:, 0]] + n[pairs[:, 1]], M)
+                     - sums_cost(S[pairs[:, 0]], n[pairs[:, 0]], M) - sums_cost(S[pairs[:, 1]], n[pairs[:, 1]], M))
+            own = sums_cost(S_i, n_i, M)[0] + merge.min() if len(pairs) else np.inf
+        if own < gain.min():
+            a, b = pairs[np.argmin(merge)]
+            labels[labels == b] = a
+            labels[members] = b
+            S[a] += S[b]
+            n[a] += n[b]
+            S[b], n[b] = S_i[0], n_i[0]
+        else:
+            labels[members] = j
+            S[j] += S_i[0]
+            n[j] += n_i[0]
+
+
+def mirror_partners(labels, mirror, k, match=MIRROR_MATCH):
+    """Mirror image of every part under the vertex map ``mirror (V,)`` (-1: unknown): ``partner (k,)``
+    with partner[a] = b when most (``match``) of a's mapped vertices map into b and most of b's into a
+    (b = a: a part symmetric in itself, such as the trunk), else -1.  Also needs most of the part's
+    vertices mapped."""
+    ok = mirror >= 0
+    C = np.zeros((k, k))
+    np.add.at(C, (labels[ok], labels[mirror[ok]]), 1.0)
+    size = np.bincount(labels, minlength=k)
+    rows = C.sum(axis=1)
+    best = np.argmax(C, axis=1)
+    good = (rows >= match * size) & (C[np.arange(k), best] >= match * np.maximum(rows, 1))
+    partner = np.where(good, best, -1)
+    mutual = good & (partner[np.where(good, best, 0)] == np.arange(k))
+    return np.where(mutual, partner, -1)
+
+
+def mirror_compatible(labels, mirror, k, contain=MIRROR_CONTAIN, match=MIRROR_MATCH):
+    """Which parts may hold a vertex and its mirror image: ``(k,k)`` bool, symmetric.  Parts a and b are
+    compatible when they are mirror partners (:func:`mirror_partners`, a = b for a part symmetric in
+    itself) or when one of them lies mostly (``contain`` of its mapped vertices) in the other's mirror
+    image — a limb end split in two on one side only (hand and fingers) is then compatible with the one
+    part on the other side.  Parts with no compatible part, or with fewer than ``match`` of their vertices
+    mapped, are compatible with every part (no constraint)."""
+    ok = mirror >= 0
+    C = np.zeros((k, k))
+    np.add.at(C, (labels[ok], labels[mirror[ok]]), 1.0)
+    rows = C.sum(axis=1)
+    inside = C >= contain * np.maximum(rows, 1)[:, None]
+    P = inside | inside.T
+    partner = mirror_partners(labels, mirror, k, match)
+    a = np.flatnonzero(partner >= 0)
+    P[a, partner[a]] = P[partner[a], a] = True
+    free = ~P.any(axis=1) | (rows < match * np.bincount(labels, minlength=k))
+    P[free, :] = True
+    P[:, free] = True
+    return P
+
+
+def mirrored_labels(cl, mirror, compatible):
+    """Step 3 with mirror symmetry: every vertex v with a mirror vertex m(v) goes to the part c of the
+    compatible pair (c, d) (:func:`mirror_compatible`) that minimises the summed squared error
+    ``err[v, c] + err[m(v), d]`` of both sides under the parts' own rigid motions.  The pair minimises
+    the same sum seen from m(v), so m(v) goes to d: mirror-image parts are cut at mirrored places, where
+    the motion of both sides together puts the boundary.  Vertices without a mirror vertex go to their
+    best part as in :meth:`Clustering.best_labels`."""
+    new = np.argmin(cl.err, axis=1)
+    v = np.flatnonzero(mirror >= 0)
+    if len(v):
+        own, other = cl.err[v], cl.err[mirror[v]]
+        cost = np.empty_like(own)
+        for c in range(cl.k):
+            cost[:, c] = own[:, c] + other[:, compatible[c]].min(axis=1)
+        new[v] = np.argmin(cost, axis=1)
+    if np.bincount(new, minlength=cl.k).min() == 0:
+        new = _reseed_empty(new, cl.err[np.arange(len(new)), new], cl.k)
+    return new
+
+
+def finish(rest, scans, faces, R, t, mirror=None):
+    """Steps 2-5 at full resolution from the sample's part transforms ``R (M,k,3,3)``, ``t (M,k,3)``
+    (centred ``rest``, ``scans``).  With a vertex ``mirror (V,)`` map (:func:`mirror_map`), the parts
+    that are mirror images of each other are then re-cut alike (:func:`mirrored_labels` in place of
+    step 3, alternating with step 5 as before).  Returns ``(labels (V,), rms metres)``."""
+    mesh, k = Mesh(rest, scans), t.shape[1]
+    err = rigid_fit_errors(rest, scans, R, t)
+    labels = np.argmin(err, axis=1)
+    labels = _reseed_empty(labels, err[np.arange(len(labels)), labels], k)
+    cl, A = Clustering(mesh, labels, k), adjacency(faces, len(rest))
+    for _ in range(CONNECT_ROUNDS):
+        labels = make_parts_connected(mesh, cl.refine(POLISH_ROUNDS).labels, A)
+        if not cl.relabel(labels):
+            break
+    compatible = mirror_compatible(labels, mirror, k) if mirror is not None else np.ones((k, k), dtype=bool)
+    if not compatible.all():
+        for _ in range(CONNECT_ROUNDS):
+            for _ in range(POLISH_ROUNDS):
+                if not cl.relabel(mirrored_labels(cl, mirror, compatible)):
+                    break
+            labels = make_parts_connected(mesh, cl.labels, A)
+            if not cl.relabel(labels):
+                break
+    counts = np.bincount(labels, minlength=k)
+    if counts.min() < MIN_PART_VERTICES:
+        raise ArticulaInputError(
+            f"parts: the motion cannot be split into {k} connected rigid parts (one part would have only "
+            f"{counts.min()} vertices); use fewer parts")
+    final = Clustering(mesh, labels, k)                        # sums from scratch, no accumulated updates
+    return labels, float(np.sqrt(final.total() / (len(rest) * len(scans))))
+
+
+def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES, mirror=True):
+    """Segment into exactly ``k`` connected rigid parts (each with at least MIN_PART_VERTICES vertices).
+
+    rest (V,3), scans (M,V,3) metres, faces (F,3); seed: k-means++ draws of the splits; iterations: at
+    most this many rounds of steps 2-3 per split; samples: size of the cell subsample.  Returns
+    ``(labels (V,) int64 in [0,k), rms)`` where rms is the RMS distance (metres) of the scans from the
+    per-part rigid fits.  Raises :class:`ArticulaInputError` when a part ends up with too few vertices.
+    mirror: True finds the mesh's vertex mirror map (:func:`mirror_map`) and cuts mirror-image parts
+    alike (:func:`finish`); False does not; or a map ``(V,)`` (-1: no mirror vertex) to use."""
+    if mirror is True:
+        mirror = mirror_map(rest, scans, faces) if k > 1 else None
+    elif mirror is False:
+        mirror = None
+    else:
+        mirror = np.asarray(mirror, dtype=np.int64)
+    rest, scans = centred(rest, scans)
+    V = len(rest)
+    if k < 1 or k > V:
+        raise ArticulaInputError(f"parts: {k} parts requested for a mesh of {V} vertices")
+    cl = None
+    for kk, cl in hierarchy(rest, scans, k, seed, iterations, samples):
+        pass
+    if kk < k:
+        raise ArticulaInputError(f"parts: {k} parts requested for a mesh of {V} vertices; use fewer parts")
+    return finish(rest, scans, faces, cl.R, cl.t, mirror)
+
+
+def parts_from_curve(errors, floor=0.0):
+    """Index (k − 1) chosen on a curve ``errors (K,)`` = E(1..K): the first point with
+    E ≤ RESIDUAL_FRACTION·E(1), else the first within PLATEAU of the smallest E.  Errors are first
+    raised to ``floor`` (exact fits give rounding-level errors)."""
+    e = np.maximum(np.asarray(errors, dtype=np.float64), floor)
+    ok = (e <= RESIDUAL_FRACTION * e[0]) | (e <= (1.0 + PLATEAU) * e.min())
+    return int(np.argmax(ok))
+
+
+def choose_num_parts(rest, scans, faces, k_max=20, seed=0, progress=None):
+    """Number of parts from the motion (module docstring): the curve E(k), k = 1..k_max, of the
+    hierarchical clustering and :func:`parts_from_curve` (errors floored at 1e-6 of the mesh size).
+
+    Returns ``(k, errors (k_max,))`` with ``errors[i]`` = E(i+1) in metres (RMS on the cell subsample;
+    repeated at the end if the subsample cannot carry k_max parts).  ``progress(fraction, stage,
+    objective)`` is called after each k (may raise Cancelled)."""
+    rest, scans = centred(rest, scans)
+    k_max = int(min(k_max, len(rest)))
+    errors = []
+    for _, cl in hierarchy(rest, scans, k_max, seed, progress=progress):
+        errors.append(np.sqrt(cl.total() / (cl.points.w.sum() * len(scans))))
+    errors = np.array(errors + errors[-1:] * (k_max - len(errors)))
+    size = np.linalg.norm(np.ptp(rest, axis=0))
+    return parts_from_curve(errors, 1e-6 * size) + 1, errors
+
+
+# ----------------------------------------------------------------------------- mirror symmetry
+
+
+def _paired_quads(f):
+    """Quads ``(Q,4)`` when every two consecutive triangles of ``f (F,3)`` share an edge (in opposite
+    directions): how a quad mesh is usually triangulated and written.  Otherwise None."""
+    if len(f) == 0 or len(f) % 2:
+        return None
+    a, b = f[0::2], f[1::2]
+    for r in range(3):                              # rotate the first triangle: (x0, x1, x2), x2 -> x0 shared
+        x = np.roll(a, -r, axis=1)
+        for s in range(3):
+            y = np.roll(b, -s, axis=1)               # (x0, x2, y) is the second triangle
+            hit = (y[:, 0] == x[:, 0]) & (y[:, 1] == x[:, 2])
+            if r == 0 and s == 0:
+                quads, found = np.zeros((len(a), 4), dtype=np.int64), np.zeros(len(a), dtype=bool)
+            new = hit & ~found
+            quads[new] = np.concatenate([x[new], y[new, 2:]], axis=1)
+            found |= new
+    return quads if found.all() else None
+
+
+def polygons_of(faces, points):
+    """Triangles merged back into the quads they were split from: consecutive triangle pairs when every
+    pair shares an edge (:func:`_paired_quads`; MakeHuman), else two triangles sharing an edge that is
+    the longest of both (the quad's diagonal; lengths averaged over ``points (M,V,3)``).  A triangulated
+    quad mesh splits mirror-image quads along either diagonal, so only its quads are mirror symmetric.
+    Returns a list of vertex tuples (3 or 4 vertices, orientation kept)."""
+    f = np.asarray(faces, dtype=np.int64)
+    quads = _paired_quads(f)
+    if quads is not None:
+        return [tuple(q) for q in quads.tolist()]
+    pts = np.asarray(points, dtype=np.float64)
+    pts = pts if pts.ndim == 3 else pts[None]
+    nxt = f[:, [1, 2, 0]]
+    length = np.mean(np.linalg.norm(pts[:, nxt] - pts[:, f], axis=3), axis=0)      # edge (f_i, f_i+1)
+    r = np.argmax(length, axis=1)                                                  # longest: f_r -> f_r+1
+    tri = np.take_along_axis(f, (r[:, None] + np.array([2, 0, 1])) % 3, axis=1)   # (x0, x1, x2), x2 -> x0 longest
+    V = int(f.max()) + 1 if len(f) else 0
+    owner = {}
+    for i, (x0, x1, x2) in enumerate(tri.tolist()):
+        owner.setdefault(x2 * V + x0, []).append(i)
+    done = np.zeros(len(f), dtype=bool)
+    polys = []
+    for i, (x0, x1, x2) in enumerate(tri.tolist()):
+        if done[i]:
+            continue
+        other = owner.get(x0 * V + x2, [])
+        j = other[0] if len(other) == 1 and len(owner[x2 * V + x0]) == 1 else -1
+        if j >= 0 and not done[j]:
+            polys.append((x0, x1, x2, int(tri[j, 1])))                             # j is (x2, y, x0)
+            done[j] = True
+        else:
+            polys.append((x0, x1, x2))
+        done[i] = True
+    return polys
+
+
+def _halfedges(polys, V):
+    """``{p·V + q: (the polygon's other vertices after q, in order)}`` for every directed edge (p, q) of
+    the polygons; directed edges used by more than one polygon (non-manifold or inconsistently oriented
+    meshes) are left out."""
+    H, bad = {}, set()
+    for poly in polys:
+        n = len(poly)
+        for i in range(n):
+            key = poly[i] * V + poly[(i + 1) % n]
+            if key in H:
+                bad.add(key)
+            H[key] = tuple(poly[(i + 2 + j) % n] for j in range(n - 2))
+    for key in bad:
+        del H[key]
+    return H
+
+
+def propagate_mirror(H, V, seed):
+    """Extend a mirror correspondence of one polygon over the mesh.  A reflection reverses orientation,
+    so polygon (p, q, x1..xj) maps to (m(p), m(xj), .., m(x1), m(q)): the vertices after directed edge
+    (m(q), m(p)) are m(xj), .., m(x1).  From ``seed`` = ((vertices), (their images)) every polygon
+    reachable over manifold edges is mapped, depth first (``H``: :func:`_halfedges`).  Returns the map
+    ``(V,)`` int64, or None when two polygons disagree on a vertex's image (or a polygon's image has
+    another vertex count), some vertex is not reached, or the map is not an involution (m(m(v)) = v):
+    the mesh topology is not mirror symmetric, or the seed was wrong."""
+    m = [-1] * V
+    for v, w in zip(*seed):
+        if m[v] not in (-1, w):
+            return None
+        m[v] = w
+    src = list(seed[0])
+    stack = [(p, q) for p in src for q in src if p != q]
+    seen = set()
+    while stack:
+        p, q = stack.pop()
+        key = p * V + q
+        if key in seen:
+            continue
+        seen.add(key)
+        xs = H.get(key)
+        ys = H.get(m[q] * V + m[p])
+        if xs is None or ys is None:
+            continue
+        if len(xs) != len(ys):
+            return None
+        for x, y in zip(xs, reversed(ys)):
+            if m[x] < 0:
+                m[x] = y
+            elif m[x] != y:
+                return None
+        ring = (p, q) + xs
+        n = len(ring)
+        stack += [(ring[(i + 1) % n], ring[i]) for i in range(n)] + [(ring[i], ring[(i + 1) % n]) for i in range(n)]
+    m = np.array(m, dtype=np.int64)
+    if m.min() < 0 or not np.array_equal(m[m], np.arange(V)):
+        return None
+    return m
+
+
+def _length_seeds(polys, shapes, count=MIRROR_SEED_POLYGONS, tol=MIRROR_SIGNATURE_TOL):
+    """Pose-independent seed correspondences for :func:`propagate_mirror`: a mirror map keeps lengths, so a
+    quad's image is a quad with the same side and diagonal lengths in reversed order.  Lengths are
+    medians over ``shapes (S,V,3)`` (far from joints they do not change with the pose).  For ``count``
+    quads with the least length variation over the shapes (spread over the mesh), every quad and
+    orientation-reversing rotation whose 6 lengths agree within ``tol`` (relative, largest difference) is
+    a hypothesis.  Yields ``(quad, images of its vertices)``, best agreement first within each quad."""
+    quads = np.array([q for q in polys if len(q) == 4], dtype=np.int64)
+    if len(quads) < 2:
+        return
+    pairs = [(0, 1), (1, 2), (2, 3), (3, 0), (0, 2), (1, 3)]
+    L = np.stack([np.linalg.norm(shapes[:, quads[:, i]] - shapes[:, quads[:, j]], axis=2) for i, j in pairs], 2)
+    med = np.median(L, axis=0)                                             # (Q, 6)
+    spread = np.max((L.max(axis=0) - L.min(axis=0)) / np.maximum(med, 1e-300), axis=1)
+    order = np.argsort(spread, kind="stable")
+    picks = order[np.linspace(0, max(len(order) // 4 - 1, 0), count).astype(np.int64)]
+    # lengths of every quad re-listed as the image of quad p under rotation r: side i of p = side
+    # (r - i - 1) mod 4 of q, diagonal (0, 2) of p = diagonal r mod 2 of q, (1, 3) -> (r - 1) mod 2
+    images = []
+    for r in range(4):
+        idx = [(r - i - 1) % 4 for i in range(4)] + [4 + r % 2, 4 + (r - 1) % 2]
+        images.append(med[:, idx])
+    images = np.stack(images, 1)                                           # (Q, 4, 6)
+    for p in picks:
+        diff = np.max(np.abs(images - med[p]) / np.maximum(med[p], 1e-300), axis=2)     # (Q, 4)
+        qs, rs = np.nonzero(diff <= tol)
+        for j in np.argsort(diff[qs, rs], kind="stable"):
+            q, r = quads[qs[j]], rs[j]
+            yield quads[p].tolist(), [int(q[(r - i) % 4]) for i in range(4)]
+
+
+def mirror_map(rest, scans, faces, max_scans=MIRROR_SCANS):
+    """Vertex mirror map ``(V,)`` int64 (each vertex → its mirror image; -1: none known) or None.
+
+    * topological (meshes whose polygon topology is mirror symmetric, as MakeHuman's): the triangles are
+      merged back into quads (:func:`polygons_of`); seed correspondences of one quad (:func:`_length_seeds`:
+      a quad and a quad with the same side and diagonal lengths in reversed order, lengths as medians over
+      the rest and up to ``max_scans`` − 1 evenly spaced scans) are extended over the mesh by
+      :func:`propagate_mirror`, which fails on a wrong seed; the first complete, consistent involution
+      that also keeps the edges' mean lengths (median relative difference within MIRROR_EDGE_TOL:
+      regular meshes have other automorphisms, e.g. a grid flipped along the wrong axis) is returned;
+      at most MIRROR_TRIES seeds;
+    * geometric (no topological map, e.g. a non-manifold mesh): in the most symmetric of those shapes
+      (:func:`solver.learn.skeleton.symmetry_planes`), the mutual reflected nearest-vertex matches within
+      MIRROR_GEOMETRIC_TOL of the median edge length (exactly symmetric geometry only; elsewhere -1).
+    Returns None when neither finds anything (no symmetry plane, or no vertex matched)."""
+    from ..geometry.mesh_graph import edges_of
+    from .skeleton import _nn_tree, _reflect, symmetry_planes
+    rest = np.asarray(rest, dtype=np.float64)
+    scans = np.asarray(scans, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    V = len(rest)
+    step = max(1, int(np.ceil(len(scans) / max(1, max_scans - 1))))
+    shape_arr = np.concatenate([rest[None], scans[::step][:max_scans - 1]])       # (S, V, 3)
+    polys = polygons_of(faces, shape_arr)
+    H = _halfedges(polys, V)
+    e = edges_of(faces)
+    edge = float(np.median(np.linalg.norm(rest[e[:, 0]] - rest[e[:, 1]], axis=1))) if len(e) else 0.0
+    mean_length = np.mean(np.linalg.norm(shape_arr[:, e[:, 0]] - shape_arr[:, e[:, 1]], axis=2), axis=0)
+
+    def isometric(m):
+        """The map keeps the edges' lengths (mean over the shapes): not some other automorphism of a
+        regular mesh (a grid flipped along the wrong axis)."""
+        other = np.mean(np.linalg.norm(shape_arr[:, m[e[:, 0]]] - shape_arr[:, m[e[:, 1]]], axis=2), axis=0)
+        return np.median(np.abs(mean_length - other) / np.maximum(np.maximum(mean_length, other), 1e-300)) \
+            <= MIRROR_EDGE_TOL
+
+    tries = 0
+    for poly, img in _length_seeds(polys, shape_arr):
+        m = propagate_mirror(H, V, (poly, img))
+        if m is not None and isometric(m):
+            return m
+        tries += 1
+        if tries >= MIRROR_TRIES:
+            break
+    best = None
+    for pts in shape_arr:
+        planes = symmetry_planes(pts)
+        if not planes:
+            continue
+        n, d, score = planes[0]
+        dist, idx = _nn_tree(pts).query(_reflect(pts, n, d))
+        mutual = idx[idx] == np.arange(V)
+        if best is None or score < best[0]:
+            best = (score, np.where(mutual & (dist <= MIRROR_GEOMETRIC_TOL * edge), idx, -1))
+    if best is None or best[1].max() < 0:
+        return None
+    return best[1]

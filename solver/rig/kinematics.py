@@ -1,0 +1,47 @@
+"""Forward kinematics of the part chain (ARCHITECTURE.md, deformation step 4; spec §1.2).
+
+Every joint rotates about its *rest* centre ``heads[b]``; rotations are converted from bone-local
+axes to world axes with the rest frame: ``R_b = F_b R(q_b) F_bᵀ``.  The chain of part b is
+``M_b = M_parent(b) ∘ Rot(R_b about heads[b])`` and the root is the similarity
+``M_0(x) = s R_0 (x − heads[0]) + heads[0] + t``.  ``M_b(x) = Rm[b] x + tm[b]``.
+"""
+import numpy as np
+
+from ..geometry.rotations import quat_to_matrix
+
+
+def to_world(frames, R_local):
+    """``F R Fᵀ``: local-axes rotations ``(..., B, 3, 3)`` to world axes with frames ``(B, 3, 3)``."""
+    return frames @ R_local @ np.swapaxes(frames, -1, -2)
+
+
+def world_rotations(skeleton, rotations):
+    """World-axes joint rotations ``(N, B, 3, 3)`` from quaternions ``(N, B, 4)`` in bone-local axes."""
+    return to_world(skeleton.frames, quat_to_matrix(rotations))
+
+
+def chain_from_world(skeleton, R, translations, scales):
+    """Chain maps from world-axes joint rotations.
+
+    R ``(N, B, 3, 3)``, translations ``(N, 3)``, scales ``(N,)``.  Returns ``Rm (N, B, 3, 3)`` and
+    ``tm (N, B, 3)`` with part b mapping x -> Rm[:, b] x + tm[:, b] (Rm includes the scale)."""
+    h = skeleton.heads
+    N, B = R.shape[:2]
+    Rm = np.empty((N, B, 3, 3))
+    tm = np.empty((N, B, 3))
+    s = np.asarray(scales, dtype=np.float64)[:, None, None]
+    Rm[:, 0] = s * R[:, 0]
+    tm[:, 0] = h[0] - Rm[:, 0] @ h[0] + np.asarray(translations, dtype=np.float64)
+    for b in range(1, B):
+        p = skeleton.parents[b]
+        Rm[:, b] = Rm[:, p] @ R[:, b]
+        # M_p(R_b (x - h_b) + h_b) = Rm_p R_b x + Rm_p (h_b - R_b h_b) + tm_p
+        tm[:, b] = (Rm[:, p] @ (h[b] - R[:, b] @ h[b])[..., None])[..., 0] + tm[:, p]
+    return Rm, tm
+
+
+def forward_kinematics(skeleton, poses):
+    """Rigid chain maps of every part: ``(Rm (N, B, 3, 3), tm (N, B, 3))``, x -> Rm x + tm,
+    root scale and translation included."""
+    R = world_rotations(skeleton, poses.rotations)
+    return chain_from_world(skeleton, R, poses.translations, poses.scales)

@@ -1,0 +1,128 @@
+"""``demo`` end to end, small: 4 MakeHuman scans, 2 depth frames, a learned rig of few parts and one
+outer round, a small picture.  Run as users run it (``python batch.py demo ...`` in a fresh process),
+then the saved ``demo.blend`` is opened here and checked: the learned rig is there beside the scans
+with one baked key per scan, its report's error is small, its mesh carries the heat map, and the
+picture shows heat-map colours (which no palette colour of the other exhibits reaches)."""
+import json
+import os
+import subprocess
+import sys
+
+import bpy
+import numpy as np
+import pytest
+
+from ...conftest import REPO
+
+SCANS = 4
+
+
+def _demo(tmp, *args):
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp / "user"), ARTICULA_HOME=str(tmp / "home"))
+    return subprocess.run([sys.executable, os.path.join(REPO, "batch.py"), "demo", "--out", str(tmp / "out"), *args],
+                          capture_output=True, text=True, env=env, timeout=1800)
+
+
+@pytest.fixture(scope="module")
+def demo_run(tmp_path_factory):
+    """(stdout, output folder) of one small demo run, shared by the tests of this module."""
+    tmp = tmp_path_factory.mktemp("demo")
+    res = _demo(tmp, "--scans", str(SCANS), "--depth-frames", "2", "--parts", "6", "--learn-iterations", "1",
+                "--resolution", "480x270")
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-3000:]
+    return res.stdout, tmp / "out"
+
+
+def _key_frames(pkg, arm):
+    compat = pkg("addon.compat")
+    frames = set()
+    for fc in compat.object_action_fcurves(arm, arm.animation_data.action):
+        co = np.empty(2 * len(fc.keyframe_points), np.float32)
+        fc.keyframe_points.foreach_get("co", co)
+        frames.update(co[0::2].astype(int).tolist())
+    return frames
+
+
+def _centre_x(ob):
+    mw = np.array(ob.matrix_world)
+    return float((np.array(ob.bound_box) @ mw[:3, :3].T + mw[:3, 3])[:, 0].mean())
+
+
+def test_demo_learns_a_rig_beside_the_scans(pkg, demo_run):
+    stdout, out = demo_run
+    learn = pkg("addon.learn.learning")
+    demo = pkg("addon.cli.demo")
+    line = next((ln for ln in stdout.splitlines() if ln.startswith("demo: learned rig")), "")
+    assert "6 parts" in line and "mean" in line and "max" in line, stdout[-2000:]
+
+    bpy.ops.wm.open_mainfile(filepath=str(out / "demo.blend"))
+    arms = [ob for ob in bpy.data.objects if ob.type == 'ARMATURE' and learn.REPORT_PROPERTY in ob]
+    assert [ob.name for ob in arms] == [demo.LEARNED_NAME]
+    arm = arms[0]
+    report = json.loads(arm[learn.REPORT_PROPERTY])
+    err = learn.error_summary(report)
+    assert report["parts"] == 6 and report["input"]["scans"] == SCANS
+    assert f"mean {err['mean']:.2f}" in line
+
+    scans = next(ob for ob in bpy.data.objects if ob.type == 'MESH' and ob.articula.kind == 'SCAN_SEQUENCE')
+    frames, _ = pkg("addon.sequences.scans").scan_frames(scans)
+    # What a rig that does not move would score: the mean vertex distance of the scans to the best single
+    # scan (about 200 mm for these 4 range-of-motion poses).  6 parts after one round of the learner
+    # measured 15.5 mm mean, 9.8 mm median; the bounds leave room for the learner's changes.
+    static_mm = min(1e3 * np.linalg.norm(frames - frames[r], axis=2).mean() for r in range(len(frames)))
+    assert static_mm > 100.0
+    assert 0.0 < err["mean"] < min(30.0, 0.15 * static_mm) and err["median"] < 20.0, (err, static_mm)
+
+    start = scans.articula.frame_start
+    assert _key_frames(pkg, arm) == set(range(start, start + SCANS))      # one baked pose per scan
+
+    meshes = [ob for ob in bpy.data.objects if ob.type == 'MESH' and ob.parent == arm]
+    assert len(meshes) == 1
+    me = meshes[0].data
+    assert me.color_attributes.active_color_name == learn.COLOR_ATTRIBUTE
+    heat = np.empty(len(me.vertices), np.float32)
+    me.attributes[learn.ERROR_ATTRIBUTE].data.foreach_get("value", heat)
+    assert abs(float(heat.mean()) - err["mean"]) < 0.05 * err["mean"] + 1e-3   # same distances, averaged
+
+    # Its own exhibit: one spacing to the right of the scans, at the frame the picture shows.
+    bpy.context.scene.frame_set(bpy.context.scene.frame_current)
+    dx = _centre_x(meshes[0]) - _centre_x(scans)
+    assert abs(dx - demo.SPACING) < 0.1, dx
+    labels = {ob.data.body for ob in bpy.data.objects if ob.type == 'FONT'}
+    assert demo.TITLES["scans"] in labels
+    assert demo.learned_title(me[learn.SCALE_PROPERTY]) in labels          # the heat map's scale in its title
+
+
+def test_demo_picture_shows_the_heat_map(pkg, demo_run):
+    """Saturated colours (the heat map's blue/cyan/green/yellow/red) in the learned rig's part of the
+    picture only: the palette colours of the other exhibits are pastel."""
+    _, out = demo_run
+    img = bpy.data.images.load(str(out / "demo.png"))
+    w, h = img.size
+    px = np.empty(w * h * 4, np.float32)
+    img.pixels.foreach_get(px)
+    rgb = px.reshape(h, w, 4)[:, :, :3]
+    saturated = (rgb.max(axis=2) - rgb.min(axis=2)) > 0.45
+    cols = np.nonzero(saturated.any(axis=0))[0]
+    assert saturated.sum() > 0.002 * w * h, saturated.sum()
+    # the learned rig is the rightmost exhibit: its saturated pixels sit in the right part of the picture
+    assert np.percentile(cols, 5) > 0.55 * w, (cols.min(), cols.max(), w)
+
+
+def test_demo_no_learn_keeps_the_three_exhibits(pkg, tmp_path):
+    res = _demo(tmp_path, "--no-learn", "--scans", "3", "--depth-frames", "2", "--resolution", "160x90")
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-3000:]
+    assert not [ln for ln in res.stdout.splitlines() if ln.startswith("demo: learn")]
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "out" / "demo.blend"))
+    learn, demo = pkg("addon.learn.learning"), pkg("addon.cli.demo")
+    assert not [ob for ob in bpy.data.objects if learn.REPORT_PROPERTY in ob]
+    assert {ob.data.body for ob in bpy.data.objects if ob.type == 'FONT'} == set(demo.TITLES.values())
+    assert bpy.context.scene.display.shading.color_type == 'OBJECT'     # palette colours only
+
+
+def test_demo_refuses_too_few_scans_to_learn_from(tmp_path):
+    res = _demo(tmp_path, "--scans", "2")
+    assert res.returncode == 2
+    last = res.stderr.strip().splitlines()[-1]
+    assert last.startswith("articula demo: error: --scans 2") and "--no-learn" in last
+    assert not (tmp_path / "out" / "demo_data").exists()                 # refused before any work

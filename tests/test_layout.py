@@ -1,0 +1,128 @@
+"""The source tree keeps the shape docs/DEVELOPING.md describes: small modules and functions, no import
+cycles, product code that does not depend on sample-data generators or benchmarks, and docstrings that
+cite the project's own docs rather than files outside the checkout."""
+import ast
+import os
+import re
+
+import pytest
+
+from .conftest import REPO
+
+PRODUCT = ("solver", "addon", "operators")
+MAX_MODULE_LINES = 700
+MAX_FUNCTION_LINES = 100
+# Batch commands and the demo may build sample data; nothing else in the product may.
+MAY_IMPORT_SAMPLES = {"addon/cli/main.py", "addon/cli/demo.py"}
+
+
+def _sources(*tops):
+    for top in tops:
+        for folder, _, names in os.walk(os.path.join(REPO, top)):
+            for name in sorted(names):
+                if name.endswith(".py"):
+                    path = os.path.join(folder, name)
+                    yield os.path.relpath(path, REPO).replace(os.sep, "/"), path
+
+
+def _module_name(rel):
+    mod = rel[:-3].replace("/", ".")
+    return mod[:-len(".__init__")] if mod.endswith(".__init__") else mod
+
+
+def _imports(rel, tree):
+    """Absolute (extension-relative) names of the modules ``rel`` imports at module level or inside
+    functions, resolving relative imports; ``from package import module`` yields the module."""
+    package = _module_name(rel) if rel.endswith("__init__.py") else _module_name(rel).rpartition(".")[0]
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.level:
+            base = package.split(".") if package else []
+            base = base[:len(base) - (node.level - 1)] if node.level > 1 else base
+            target = ".".join(base + ([node.module] if node.module else []))
+            yield target
+            for alias in node.names:
+                yield f"{target}.{alias.name}" if target else alias.name
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.startswith("articula."):
+                    yield alias.name[len("articula."):]
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("articula."):
+            yield node.module[len("articula."):]
+
+
+def _trees(*tops):
+    return {rel: ast.parse(open(path, encoding="utf-8").read(), rel) for rel, path in _sources(*tops)}
+
+
+def test_modules_and_functions_are_short():
+    long_modules, long_functions = [], []
+    for rel, path in _sources(*PRODUCT):
+        text = open(path, encoding="utf-8").read()
+        if text.count("\n") > MAX_MODULE_LINES:
+            long_modules.append(f"{rel}: {text.count(chr(10))} lines")
+        for node in ast.walk(ast.parse(text, rel)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                first = node.body[0]
+                if (isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant)
+                        and isinstance(first.value.value, str) and len(node.body) > 1):
+                    first = node.body[1]                      # the body starts after the docstring
+                lines = node.end_lineno - first.lineno + 1
+                if lines > MAX_FUNCTION_LINES:
+                    long_functions.append(f"{rel}:{node.lineno} {node.name}: {lines} lines")
+    assert not long_modules, f"modules over {MAX_MODULE_LINES} lines: {long_modules}"
+    assert not long_functions, f"function bodies over {MAX_FUNCTION_LINES} lines: {long_functions}"
+
+
+def test_no_import_cycles():
+    trees = _trees(*PRODUCT, "sample_scenes")
+    modules = {_module_name(rel): rel for rel in trees}
+    graph = {}
+    for rel, tree in trees.items():
+        deps = {name for name in _imports(rel, tree) if name in modules}
+        graph[_module_name(rel)] = deps - {_module_name(rel)}
+    # A package's __init__ is imported by each of its modules; cycles through an __init__ that only holds
+    # a docstring are not cycles, so __init__ modules without imports have no edges (they have none).
+    state, stack, cycles = {}, [], []
+
+    def visit(node):
+        state[node] = 1
+        stack.append(node)
+        for dep in sorted(graph[node]):
+            if state.get(dep) == 1:
+                cycles.append(stack[stack.index(dep):] + [dep])
+            elif dep not in state:
+                visit(dep)
+        stack.pop()
+        state[node] = 2
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node)
+    assert not cycles, "import cycles: " + "; ".join(" -> ".join(c) for c in cycles)
+
+
+def test_product_code_does_not_import_samples_or_benchmarks():
+    bad = []
+    for rel, tree in _trees(*PRODUCT).items():
+        for name in _imports(rel, tree):
+            top = name.split(".")[0]
+            if top == "bench" or (top == "sample_scenes" and rel not in MAY_IMPORT_SAMPLES):
+                bad.append(f"{rel} imports {name}")
+    assert not bad, bad
+
+
+def test_solver_never_imports_blender():
+    bad = [f"{rel} imports {name}" for rel, tree in _trees("solver").items() for name in _imports(rel, tree)
+           if name.split(".")[0] in ("addon", "operators")]
+    for rel, path in _sources("solver"):
+        if re.search(r"^\s*(import|from)\s+(bpy|mathutils|bmesh)\b", open(path, encoding="utf-8").read(), re.M):
+            bad.append(f"{rel} imports Blender")
+    assert not bad, bad
+
+
+@pytest.mark.parametrize("top", PRODUCT + ("sample_scenes",))
+def test_docstrings_cite_the_project_not_outside_files(top):
+    """The project reads on its own: no ``../shared`` paths in the code (cite the dissertation's chapter
+    and equation, or docs/)."""
+    bad = [rel for rel, path in _sources(top) if "../shared" in open(path, encoding="utf-8").read()]
+    assert not bad, f"these files cite ../shared: {bad}"
