@@ -84,7 +84,7 @@ def main(argv=()) -> int:
         rest = os.path.join(DEM, "Bone_Geom_rest.obj")
         npy = os.path.join(DEM, "Bone_Anim_positions_400x754x3.npy")
         if os.path.isfile(rest) and os.path.isfile(npy):
-            from articula.solver.formats.meshes import read_obj
+            from articula.solver.formats.obj import read_obj
             base = read_obj(rest)
             faces = base.corner_verts.reshape(-1, 3) if (base.face_sizes == 3).all() else base.triangles()
             frames = np.load(npy)[:args.frames]

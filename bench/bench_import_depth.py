@@ -84,7 +84,7 @@ def main(argv=None) -> int:
         op_module = sys.modules[bpy.types.ARTICULA_OT_import_depth.__module__]
         tm = dict(op_module.LAST_TIMINGS)
         ob = bpy.context.view_layer.objects.active
-        seq = sys.modules[op_module.__name__].pcs.load_sequence(cache)
+        seq = sys.modules[op_module.__name__.rsplit(".", 2)[0] + ".addon.sequences.points"].load_sequence(cache)
         sizes = np.diff(seq.offsets)
         n = args.frames
         _common.report("import_depth operator, total", total, "s", f"{n} frames 640x480, target < 10 s; "

@@ -325,7 +325,7 @@ def rmse_and_seconds(out):
 
 def read_obj(path):
     """``(vertices (V,3), triangles (T,3), polygons list)`` of an OBJ file."""
-    from articula.solver.formats.meshes import read_obj as read
+    from articula.solver.formats.obj import read_obj as read
     mesh = read(path)
     return mesh.vertices, mesh.triangles(), np.split(mesh.corner_verts, mesh.face_starts[1:])
 

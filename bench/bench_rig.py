@@ -51,10 +51,8 @@ def _best(fn, repeats, reset):
 
 
 def exactness(bpy, pkg, n=100):
-    tube = _mod(pkg, "sample_scenes.tube_body")
-    Poses = _mod(pkg, "solver.rig.model").Poses
-    model = tube.model()
-    poses = Poses(*tube.random_poses(model.skeleton.num_bones, n, seed=11))
+    model = _mod(pkg, "sample_scenes.synthetic").tube_body()
+    poses = _mod(pkg, "solver.rig.pose_sampling").random_poses(n, model.skeleton.num_bones, seed=11)
     rig = _mod(pkg, "addon.rig.builder").build_rig(bpy.context, model, "Exact")
     _mod(pkg, "addon.rig.actions").write_action(rig.armature, model.skeleton.names, poses)
     ref = _mod(pkg, "solver.rig.skinning").hybrid_skin(model, poses)
@@ -95,7 +93,7 @@ def _plain_rig(bpy, pkg, model, preserve_volume, w):
 
 
 def candy_wrapper(bpy, pkg):
-    tube = _mod(pkg, "sample_scenes.tube_body")
+    tube = _mod(pkg, "sample_scenes.synthetic")
     model, ratio = tube.cylinder(41, 24, 0.3), tube.min_ring_radius_ratio
     evaluated = _mod(pkg, "addon.scene.mesh_io").evaluated_positions
     twist = (np.cos(np.pi / 2), 0, np.sin(np.pi / 2), 0)            # 180° about the bone's Y
@@ -115,7 +113,7 @@ def candy_wrapper(bpy, pkg):
 
 
 def build_speed(bpy, pkg, repeats):
-    model = _mod(pkg, "sample_scenes.tube_body").model(rings=26, segments=26)
+    model = _mod(pkg, "sample_scenes.synthetic").tube_body(rings=26, segments=26)
     build = _mod(pkg, "addon.rig.builder").build_rig
     wall, cpu = _best(lambda: build(bpy.context, model, "Big"), repeats,
                       lambda: bpy.ops.wm.read_homefile(use_empty=True))
@@ -172,8 +170,7 @@ def chain_model(pkg, bones=60):
 
 def bake_speed(bpy, pkg, repeats, frames=5000, bones=60):
     model = chain_model(pkg, bones)
-    tube = _mod(pkg, "sample_scenes.tube_body")
-    poses = _mod(pkg, "solver.rig.model").Poses(*tube.random_poses(bones, frames, seed=2))
+    poses = _mod(pkg, "solver.rig.pose_sampling").random_poses(frames, bones, seed=2)
     rig = _mod(pkg, "addon.rig.builder").build_rig(bpy.context, model, "Chain")
     write = _mod(pkg, "addon.rig.actions").write_action
     wall, cpu = _best(lambda: write(rig.armature, model.skeleton.names, poses), repeats, lambda: None)

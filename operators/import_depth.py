@@ -1,21 +1,18 @@
 """``articula.import_depth``: a depth recording (16-bit PNG / EXR frames) or a point-cloud sequence
 (PLY / XYZ / NPY frames) -> a point-cloud object that follows the frame, plus a matching camera.
 
-Thin: gathers the inputs (files, intrinsics, colour frames read by Blender) in ``prepare``, runs
-``solver.depth.recording`` in ``work`` and builds the scene with ``addon.sequences.points`` in
-``finish``.  Scripts: ``bpy.ops.articula.import_depth(directory=..., preset='KINECT_V1', ...)``.
+Thin: ``prepare`` turns the options into a plan (``addon/depth/plan.py``: frames, intrinsics, colour
+frames read by Blender), the worker runs it (``solver/depth/recording.py``) and ``finish`` builds the
+scene (``addon/sequences/points.py``) and reports.  docs/import_depth.md describes the options.
+Scripts: ``bpy.ops.articula.import_depth(directory=..., preset='KINECT_V1', ...)``.
 """
-import os
 import time
 
 import bpy
 
-from ..addon.sequences import points as pcs
+from ..addon.depth import plan as depth_plan
 from ..addon.jobs import JobOperator
-from ..solver.depth import camera
 from ..solver.depth import frames as dp
-from ..solver.depth import recording as ps
-from ..solver.errors import ArticulaInputError
 
 PRESET_ITEMS = (
     ('FOLDER', "From Folder", "Read intrinsics.json from the depth folder (required for depth images "
@@ -26,17 +23,6 @@ PRESET_ITEMS = (
     ('REALSENSE_D435', "RealSense D435", "Nominal Intel RealSense D435: 848x480, 87 x 58 degrees"),
 )
 LAST_TIMINGS = {}  # seconds of the last successful import: decode, processing, solver, cache, blender
-
-PRESET_NAMES = {'KINECT_V1': "kinect_v1", 'KINECT_V2': "kinect_v2", 'AZURE_KINECT': "azure_kinect_nfov",
-                'REALSENSE_D435': "realsense_d435"}
-
-
-def _depth_frame(path: str) -> ps.DepthFrame:
-    """PNG frames are decoded in the worker thread; EXR frames need Blender, so they are read now."""
-    if path.lower().endswith(".exr"):
-        data = pcs.load_exr_depth(path)
-        return ps.DepthFrame(path, lambda: data, metres=True)
-    return ps.png_frames([path])[0]
 
 
 class ARTICULA_OT_import_depth(JobOperator, bpy.types.Operator):
@@ -154,100 +140,25 @@ class ARTICULA_OT_import_depth(JobOperator, bpy.types.Operator):
         col.prop(self, "cache_file")
 
     # -- job ------------------------------------------------------------------------------------
-    def _intrinsics(self, directory, needed):
-        if self.intrinsics:
-            return camera.load_intrinsics(bpy.path.abspath(self.intrinsics))
-        if self.preset != 'FOLDER':
-            return camera.preset(PRESET_NAMES[self.preset])
-        path = os.path.join(directory, "intrinsics.json")
-        if os.path.isfile(path):
-            return camera.load_intrinsics(path)
-        if needed:
-            raise ArticulaInputError(f"{directory}: no intrinsics.json; give an intrinsics file or choose a "
-                                     "camera preset (e.g. Kinect v1)")
-        return None
-
     def prepare(self, context):
-        directory = os.path.normpath(bpy.path.abspath(self.directory)) if self.directory else ""
-        if not directory or not os.path.isdir(directory):
-            raise ArticulaInputError(f"{self.directory or '(no folder given)'}: not a folder")
-        try:
-            paths = ps.list_frames(directory, ps.DEPTH_EXTENSIONS)
-            clouds = False
-        except ArticulaInputError:
-            try:
-                paths = ps.list_frames(directory, ps.CLOUD_EXTENSIONS)
-            except ArticulaInputError:
-                raise ArticulaInputError(
-                    f"{directory}: no frames found (expected depth images {', '.join(ps.DEPTH_EXTENSIONS)} "
-                    f"or point clouds {', '.join(ps.CLOUD_EXTENSIONS)})") from None
-            clouds = True
-        intr = self._intrinsics(directory, needed=not clouds)
-        scale = self.depth_scale
-        if intr is not None and not self.properties.is_property_set("depth_scale"):
-            scale = intr.depth_unit_m  # 0.001 for the presets
         opts = dp.DepthOptions(
-            depth_scale=scale, depth_min=self.depth_min, depth_max=self.depth_max,
+            depth_scale=self.depth_scale, depth_min=self.depth_min, depth_max=self.depth_max,
             remove_floor=self.remove_floor, floor_tolerance=self.floor_tolerance,
             subtract_background=self.subtract_background, background_frames=self.background_frames,
             background_tolerance=self.background_tolerance, depth_noise=self.depth_noise,
-            voxel_size=self.voxel_size,
-            estimate_normals=self.estimate_normals)
-        opts.validate()
-        name = self.collection_name or os.path.basename(directory.rstrip(os.sep)) or "Depth"
-        frames = None if clouds else [_depth_frame(p) for p in paths]
-        background = None
-        if self.background and not clouds:
-            background = _depth_frame(os.path.normpath(bpy.path.abspath(self.background)))
-        colors = None
-        if self.color_directory:
-            if clouds:
-                raise ArticulaInputError("colour frames go with depth images; point-cloud files carry their "
-                                         "own colours (NPY/XYZ with 6 columns)")
-            cdir = os.path.normpath(bpy.path.abspath(self.color_directory))
-            cpaths = ps.list_frames(cdir, ps.COLOR_EXTENSIONS)
-            if len(cpaths) != len(paths):
-                raise ArticulaInputError(f"{cdir}: {len(cpaths)} colour frames for {len(paths)} depth frames; "
-                                         "the counts must match")
-            images = [pcs.load_color(p) for p in cpaths]
-            colors = [(lambda im=im: im) for im in images]
-        cache = self.cache_file or pcs.default_cache_path(name)
-        cache_abs = os.path.normpath(bpy.path.abspath(cache))
-
-        def work(progress):
-            t0 = time.perf_counter()
-            if clouds:
-                seq = ps.import_clouds(paths, opts, progress, intr)
-            else:
-                seq = ps.import_depth(frames, intr, opts, progress, background, colors)
-            t1 = time.perf_counter()
-            seq.save(cache_abs)
-            seq.timings.update(solver=t1 - t0, cache=time.perf_counter() - t1)
-            return seq, cache, cache_abs, name, directory
-
-        return work
+            voxel_size=self.voxel_size, estimate_normals=self.estimate_normals)
+        plan = depth_plan.plan_import(
+            self.directory, opts, scale_given=self.properties.is_property_set("depth_scale"),
+            intrinsics=self.intrinsics, preset=self.preset, background=self.background,
+            color_directory=self.color_directory, cache_file=self.cache_file, name=self.collection_name)
+        return lambda progress: (plan, plan.run(progress))
 
     def finish(self, context, result):
-        seq, cache, cache_abs, name, directory = result
+        plan, seq = result
         t0 = time.perf_counter()
-        scene, render = context.scene, context.scene.render
-        settings = (scene.camera, scene.frame_start, scene.frame_end, render.resolution_x, render.resolution_y,
-                    render.resolution_percentage, render.pixel_aspect_x, render.pixel_aspect_y)
-        try:
-            ob, cam = pcs.create_sequence_objects(context, name, seq, cache, directory, self.frame_start,
-                                                  self.point_radius)
-            LAST_TIMINGS.clear()
-            LAST_TIMINGS.update(seq.timings, blender=time.perf_counter() - t0)
-        except BaseException:
-            # scene_guard removes the new datablocks; put the scene settings back as well
-            if scene.camera is not settings[0] and (settings[0] is None or settings[0].name in bpy.data.objects):
-                scene.camera = settings[0]
-            (scene.frame_start, scene.frame_end, render.resolution_x, render.resolution_y,
-             render.resolution_percentage, render.pixel_aspect_x, render.pixel_aspect_y) = settings[1:]
-            pcs.forget_cache(cache_abs)
-            if os.path.exists(cache_abs):
-                os.remove(cache_abs)
-            raise
+        ob, _ = plan.build(context, seq, self.frame_start, self.point_radius)
+        LAST_TIMINGS.clear()
+        LAST_TIMINGS.update(seq.timings, blender=time.perf_counter() - t0)
         counts = seq.offsets[1:] - seq.offsets[:-1]
         msg = (f"{ob.name}: {seq.frame_count} frames, {int(counts.min())}-{int(counts.max())} points per frame"
                + (f"; {'; '.join(seq.notes)}" if seq.notes else ""))

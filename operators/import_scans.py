@@ -11,7 +11,6 @@ Sources (first match wins):
 import bpy
 from bpy_extras.io_utils import ImportHelper
 
-from ..addon.sequences import scans as scan_sequence
 from ..addon.sequences import scan_sources
 from ..addon.jobs import JobOperator
 
@@ -84,27 +83,11 @@ class ARTICULA_OT_import_scans(JobOperator, bpy.types.Operator, ImportHelper):
             source_object=self.source_object, base_mesh=self.base_mesh, name=self.name,
             require_registered=self.require_registered, object_frames=self.object_frames,
             source_range=(self.source_frame_start, self.source_frame_end))
-        read, name, source = plan.read, plan.name, plan.source
-        # The cache path is chosen here (bpy); the worker (no bpy) writes the file.
-        cache_paths = {True: scan_sequence.new_cache_path(name, True),
-                       False: scan_sequence.new_cache_path(name, False)}
-
-        def work(progress):
-            seq = read(progress)
-            progress(0.95, "writing frame cache")
-            path = cache_paths[seq.registered]
-            scan_sequence.write_cache(path, seq)
-            return seq, path, name, source
-
-        return work
+        return lambda progress: (plan, *plan.run(progress))
 
     def finish(self, context, result):
-        seq, path, name, source = result
-        try:
-            ob = scan_sequence.create_object(context, name, seq, path, self.frame_start, source)
-        except BaseException:
-            scan_sequence.remove_cache(path)
-            raise
+        plan, seq, path = result
+        ob = plan.create_object(context, seq, path, self.frame_start)
         note = "registered" if seq.registered else f"unregistered ({seq.why_unregistered})"
         self.report({'INFO'}, f"{ob.name}: {len(seq)} frames of {len(seq.topology.vertices)} vertices, {note}")
 

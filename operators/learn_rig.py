@@ -3,18 +3,20 @@ registered scans, bake one pose per scan and show the per-vertex error as a heat
 
 Input (first match wins): ``files`` in ``directory`` or the folder ``directory`` (mesh files read with
 the solver's readers, coordinates as written); the scan-sequence object named ``source_object``; the
-active object.  The work is in :mod:`addon.learn.learning`.
+active object.  The work is in :mod:`addon.learn`; the settings' defaults and bounds come from
+:class:`solver.learn.options.LearnOptions`.
 """
 import os
+from dataclasses import replace
 
 import bpy
 
-from ..addon.learn import learning as learn
 from ..addon import preferences
 from ..addon.jobs import JobOperator
+from ..addon.learn import inputs, result, solve
+from ..addon.learn.report import summary_text
 from ..solver.errors import ArticulaInputError
-from ..solver.learn.key_scans import KEY_SCANS
-from ..solver.learn.pipeline import JOINT_PRIOR
+from ..solver.learn.options import LearnOptions, property_range
 
 
 class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
@@ -35,32 +37,32 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
     name: bpy.props.StringProperty(name="Name", options={'SKIP_SAVE'},
                                    description="Name of the new rig (empty: after the scans)")
     parts: bpy.props.IntProperty(
-        name="Parts", default=0, min=0, max=64,
+        name="Parts", **property_range("parts"),
         description="Number of body parts (bones); 0 chooses it from the motion in the scans")
     alpha: bpy.props.FloatProperty(
-        name="Shape Weight (alpha)", default=100.0, min=0.0, soft_max=1000.0,
+        name="Shape Weight (alpha)", **property_range("alpha"),
         description="Weight of the local-shape (Laplacian) term against the absolute position error; "
                     "dimensionless. 100 (for metre-scale human scans) makes a 1 mm error of the local shape "
                     "cost as much as a 10 mm offset: higher keeps surface detail, lower fits positions")
     symmetry: bpy.props.BoolProperty(
-        name="Symmetry", default=True,
+        name="Symmetry", **property_range("symmetry"),
         description="Find the mirror plane, pair left/right parts (.L/.R names) and keep them symmetric")
     max_iterations: bpy.props.IntProperty(
-        name="Max Iterations", default=4, min=0, max=1000,
+        name="Max Iterations", **property_range("max_iterations"),
         description="Outer rounds of the alternating optimisation (joints and poses, weights, rest mesh), after two "
                     "warm-start rounds; "
                     "it stops earlier once the objective no longer decreases. 0: initialisation only")
     key_scans: bpy.props.IntProperty(
-        name="Key Scans", default=KEY_SCANS, min=0, max=100000,
+        name="Key Scans", **property_range("key_scans"),
         description="Learn the skeleton, weights and rest mesh from at most this many scans (the most "
                     "different poses) and fit the poses of the other scans with the learned rig: long "
                     "sequences learn in a fraction of the time. 0: learn from every scan")
     joint_prior: bpy.props.FloatProperty(
-        name="Joint Prior", default=JOINT_PRIOR, min=0.0, soft_max=1.0, precision=3,
+        name="Joint Prior", **property_range("joint_prior"), precision=3,
         description="How strongly the joints stay near their first estimates where the motion hardly "
                     "determines them (e.g. along a knee's hinge axis), as a fraction of the data's own pull "
                     "on each joint. 0: no prior (with a small Shape Weight: the closest fit to the scans)")
-    seed: bpy.props.IntProperty(name="Seed", default=0, min=0,
+    seed: bpy.props.IntProperty(name="Seed", **property_range("seed"),
                                 description="Random seed of the segmentation (same seed, same result)")
     initial_armature: bpy.props.StringProperty(
         name="Initial Armature", options={'SKIP_SAVE'},
@@ -101,22 +103,23 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
 
     # -- job parts -----------------------------------------------------------------------------------
     def prepare(self, context):
-        options = learn.LearnOptions(self.parts, self.alpha, self.symmetry, self.max_iterations, self.seed,
-                                     key_scans=self.key_scans, workers=preferences.threads(context),
-                                     joint_prior=self.joint_prior)
+        options = LearnOptions(parts=self.parts, alpha=self.alpha, symmetry=self.symmetry,
+                               max_iterations=self.max_iterations, seed=self.seed, key_scans=self.key_scans,
+                               workers=preferences.threads(context), joint_prior=self.joint_prior)
+        options.validate()
         if self.initial_armature:
             arm = bpy.data.objects.get(self.initial_armature)
             if arm is None:
                 raise ArticulaInputError(f"initial armature: no object named {self.initial_armature!r}")
-            options.initial_skeleton = learn.skeleton_from_armature(arm)
+            options = replace(options, initial_skeleton=inputs.skeleton_from_armature(arm))
         out = bpy.path.abspath(self.output_bundle) if self.output_bundle else ""
-        learn.check_output_path(out)
+        result.check_output_path(out)
         names = [f.name for f in self.files if f.name]
         if self.directory or names:
-            paths = learn.scan_paths(bpy.path.abspath(self.directory), names)
+            paths = inputs.scan_paths(bpy.path.abspath(self.directory), names)
 
             def read(progress):
-                return learn.input_from_files(paths)
+                return inputs.input_from_files(paths)
         else:
             if self.source_object:
                 ob = bpy.data.objects.get(self.source_object)
@@ -124,7 +127,7 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
                     raise ArticulaInputError(f"no object named {self.source_object!r}")
             else:
                 ob = context.active_object
-            inp = learn.input_from_object(ob)
+            inp = inputs.input_from_object(ob)
 
             def read(progress):
                 return inp
@@ -132,20 +135,20 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
 
         def work(progress):
             progress(0.0, "reading scans")
-            return learn.learn(read(progress), options, progress)
+            return solve.learn(read(progress), options, progress)
         return work
 
     def finish(self, context, outcome):
-        rig, action = learn.build(context, outcome, self.name)
+        rig, action = result.build(context, outcome, self.name)
         if self._output:
-            learn.save(self._output, outcome)
+            result.save(self._output, outcome)
         for text in rig.warnings:
             self.report({'WARNING'}, text)
         saved = f"; saved {os.path.basename(self._output)}" if self._output else ""
         self.report({'INFO'}, f"Learned rig {rig.armature.name!r}: {outcome.model.skeleton.num_bones} bones, "
                               f"{len(outcome.poses)} poses on frames {outcome.input.frame_start}.."
                               f"{outcome.input.frame_start + len(outcome.poses) - 1}; "
-                              f"{learn.summary_text(outcome)}{saved}")
+                              f"{summary_text(outcome)}{saved}")
 
 
 classes = (ARTICULA_OT_learn_rig,)

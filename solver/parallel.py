@@ -15,10 +15,8 @@ computes that half itself.  The child sees a copy of the memory at the fork and 
 
 ``with using(n): ...`` sets the number of workers for solver calls made in the block (``None`` or 0 = one
 per CPU core); outside any such block the solver runs on one thread.  Calls from inside a worker run
-serially (no nested pools).  Measured on the 2-core machine, two workers vs one, same inputs, same
-process: Gauss–Newton blocks of MakeHuman 13,380 v × 30 scans 1.6-2.0 s → 1.1-1.2 s; hybrid skin of those
-scans 0.14-0.16 → 0.08-0.10 s; the weight candidates of 4,149 vertices 0.34-0.36 → 0.28 s; pose fits of 360
-Bone_Anim frames 4.8 → 2.7 s; surface distances of 400 Bone_Anim frames 4.2 → 3.0 s.
+serially (no nested pools).  :func:`map_in_order` is for callers that choose their own thread count and
+report progress as results arrive (the depth-recording import).
 """
 import functools
 import os
@@ -87,6 +85,36 @@ def map_pieces(fn, pieces):
     return list(_pool(n).map(fn, pieces))
 
 
+def map_in_order(fn, pieces, workers, on_result=None):
+    """``[fn(p) for p in pieces]`` on ``workers`` threads of a pool of its own (serially in the calling
+    thread when ``workers`` <= 1, there is one piece, or the caller is itself a worker).  ``on_result(i,
+    result)`` runs in the calling thread as each result is ready, in order: progress reports, which may
+    raise to stop (e.g. ``Cancelled``).  When ``fn`` or ``on_result`` raises, the pieces not yet started
+    are cancelled and the running ones finish before the exception propagates, so no thread outlives the
+    call.  Unlike :func:`map_pieces` the thread count is the caller's, not :func:`using`'s."""
+    pieces = list(pieces)
+    n = min(int(workers), len(pieces)) if not getattr(_LOCAL, "inside", False) else 1
+    results = []
+    if n <= 1:
+        for i, p in enumerate(pieces):
+            results.append(fn(p))
+            if on_result is not None:
+                on_result(i, results[-1])
+        return results
+    with ThreadPoolExecutor(n, thread_name_prefix="articula-solver", initializer=_mark_worker) as pool:
+        futures = [pool.submit(fn, p) for p in pieces]
+        try:
+            for i, fut in enumerate(futures):
+                results.append(fut.result())
+                if on_result is not None:
+                    on_result(i, results[-1])
+        except BaseException:
+            for fut in futures:
+                fut.cancel()
+            raise
+    return results
+
+
 def shutdown():
     """Stop the pool's idle threads (a later :func:`map_pieces` starts a new pool); e.g. when the add-on
     is disabled."""
@@ -136,10 +164,8 @@ def fork_map(fn, pieces):
     (:class:`ForkedCall`; fn's results must pickle) while this process computes the first half, each
     serially; :func:`map_pieces` where :func:`can_fork` is False or there is only one piece.  A failed
     child's half is computed here.  For pieces whose work holds the interpreter lock for much of the
-    time: a Gauss–Newton build of MakeHuman game_engine (30 scans, 8 chunks of 4) took 1.19-1.30 s this
-    way, 1.36-1.85 s on two threads and 2.0-2.1 s on one (one session), 1.11-1.27 s vs 1.18-1.32 s on
-    two threads (another, alternating); surface-distance batches gained nothing over threads (4.3-4.7 s
-    vs 4.0-4.8 s), so they stay on threads."""
+    time (the Gauss–Newton systems of the joints-and-poses step); work that releases it (surface
+    distances) gains as much on threads."""
     pieces = list(pieces)
     if len(pieces) < 2 or not can_fork():
         return map_pieces(fn, pieces)
@@ -274,10 +300,9 @@ def single_blas_thread():
     active block ends; nesting and several Python threads are fine).
 
     For the Gauss–Newton solvers, which make hundreds of mid-size BLAS calls between other numpy work:
-    with several threads, every call waits for the worker threads and the workers spin between calls.
-    Measured on the shared 2-core machine under load (numpy 2.x, OpenBLAS 0.3.34): ``X.T @ X`` for
-    X (12,000 × 30) took 331 ms process CPU time with 2 threads and 1 ms with one.  Does nothing when
-    numpy's BLAS is not a bundled OpenBLAS."""
+    with several threads, every call waits for the worker threads and the workers spin between calls,
+    which costs far more CPU time than the products themselves.  Does nothing when numpy's BLAS is not a
+    bundled OpenBLAS."""
     threads = _openblas_threads()
     if threads is None:
         yield

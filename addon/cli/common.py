@@ -1,4 +1,5 @@
-"""Helpers shared by the batch command modules: calling operators and saving the .blend."""
+"""Helpers shared by the batch command modules: calling operators, saving the .blend and ending a
+command with its summary."""
 import os
 
 import bpy
@@ -33,3 +34,24 @@ def save_blend_again() -> None:
     finally:
         prefs.save_version = versions
     print(f"saved {bpy.data.filepath}")
+
+
+def save_blend_as(path: str) -> None:
+    """Save the scene as ``path`` (a new file, or over the opened one); its folder must exist."""
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise ArticulaInputError(f"{path}: folder {folder!r} does not exist")
+    bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(path))
+
+
+def finish(summary: str, blend: str = "", saved_first: bool = False) -> int:
+    """End a command: print its one-line ``summary``; with ``blend``, save the scene and say where —
+    in place when :func:`save_blend_first` already saved it at that path (``saved_first``: prints the
+    absolute path), else with :func:`save_blend_as` (prints ``blend`` as given).  Returns exit code 0."""
+    print(summary)
+    if blend and saved_first:
+        save_blend_again()
+    elif blend:
+        save_blend_as(blend)
+        print(f"saved {blend}")
+    return 0

@@ -26,7 +26,9 @@ import numpy as np
 from ...sample_scenes.depth_recording import generate_depth
 from ...sample_scenes.registered import generate_registered, posed_sequence
 from ...solver.errors import ArticulaInputError
-from ..learn import learning as learn
+from ...solver.learn.options import MIN_SCANS
+from ..learn import heat_map
+from ..learn import report as learn_report
 from ..scene import render
 from ..sequences import scans as scan_sequence
 from .common import save_blend_again, save_blend_first
@@ -106,22 +108,22 @@ def learn_scene(scans: list, parts: int = 0, iterations: int = 2, seed: int = 0)
         raise ArticulaInputError("demo: the scan import made no scan-sequence object to learn from")
     objects = _call(bpy.ops.articula.learn_rig, source_object=seqs[0].name, name=LEARNED_NAME, parts=parts,
                     max_iterations=iterations, seed=seed)
-    arms = [ob for ob in objects if ob.type == 'ARMATURE' and learn.REPORT_PROPERTY in ob]
+    arms = [ob for ob in objects if ob.type == 'ARMATURE' and learn_report.REPORT_PROPERTY in ob]
     if len(arms) != 1:
         raise ArticulaInputError(f"demo: articula.learn_rig made {len(arms)} armatures with a report, expected 1")
     # The learner works in the scans' own coordinates; the scans object sits at +SPACING.
     _shift(objects, float(seqs[0].matrix_world.translation.x) + SPACING)
-    return objects, json.loads(arms[0][learn.REPORT_PROPERTY])
+    return objects, json.loads(arms[0][learn_report.REPORT_PROPERTY])
 
 
 def _heat_scale(objects) -> float:
     """The error (mm) the top (red) colour of the learned mesh's heat map stands for."""
-    return max(float(ob.data.get(learn.SCALE_PROPERTY, 0.0)) for ob in objects if ob.type == 'MESH')
+    return max(float(ob.data.get(heat_map.SCALE_PROPERTY, 0.0)) for ob in objects if ob.type == 'MESH')
 
 
 def learned_summary(report: dict) -> str:
     """One line about a learned rig: parts, rounds and its error statistics (mm)."""
-    s = learn.error_summary(report)
+    s = learn_report.error_summary(report)
     err = ", ".join(f"{k} {s[k]:.2f}" for k in ("mean", "median", "max") if k in s)
     return (f"{report.get('parts', '?')} parts, {report.get('iterations', '?')} rounds; "
             f"error (scan vertex to learned surface, mm) {err or 'n/a'}")
@@ -141,8 +143,8 @@ def run(args) -> int:
     os.makedirs(out, exist_ok=True)
     width, height = _resolution(args.resolution)
     if not args.no_learn:
-        if args.scans < learn.MIN_SCANS:
-            raise ArticulaInputError(f"--scans {args.scans}: learning a rig needs at least {learn.MIN_SCANS} scans "
+        if args.scans < MIN_SCANS:
+            raise ArticulaInputError(f"--scans {args.scans}: learning a rig needs at least {MIN_SCANS} scans "
                                      f"(or --no-learn)")
         if args.parts < 0 or args.learn_iterations < 0:
             raise ArticulaInputError("--parts and --learn-iterations must be 0 or more")

@@ -12,7 +12,7 @@ import os
 
 import bpy
 
-from .common import call_operator, save_blend_first, save_blend_again
+from .common import call_operator, finish, save_blend_first
 
 PRESETS = ("KINECT_V1", "KINECT_V2", "AZURE_KINECT", "REALSENSE_D435")
 
@@ -43,11 +43,8 @@ def run(args) -> int:
         props["collection_name"] = args.name
     call_operator(bpy.ops.articula.import_depth, **props)
     ob = bpy.context.view_layer.objects.active
-    data = ob.articula
-    print(f"{ob.name}: {data.frame_count} frames, cache {data.cache_file}")
-    if args.blend:
-        save_blend_again()
-    return 0
+    return finish(f"{ob.name}: {ob.articula.frame_count} frames, cache {ob.articula.cache_file}", args.blend,
+                  saved_first=True)
 
 
 def add_commands(sub):

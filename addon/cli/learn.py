@@ -17,11 +17,11 @@ import bpy
 import numpy as np
 
 from ...solver.errors import ArticulaInputError
-from ...solver.learn.key_scans import KEY_SCANS
-from ...solver.learn.pipeline import JOINT_PRIOR
+from ...solver.learn.options import LearnOptions
 from .. import jobs
-from ..learn import learning as learn
-from .common import call_operator, save_blend_again
+from ..learn import inputs, result, solve
+from ..learn.report import error_summary, jsonable, report_json, summary_text
+from .common import call_operator, save_blend_again, save_blend_first
 
 
 def report_document(outcome) -> dict:
@@ -29,8 +29,8 @@ def report_document(outcome) -> dict:
     as the solver names them), plus ``error_mm`` {mean, std, median, mad, iqr, max} of the
     vertex-to-surface distance over all scans, ``vertex_error_mm`` {mean, median, max} of the heat map
     (per-vertex mean over the scans), ``input`` and ``options``."""
-    doc = learn.report_json(outcome)
-    doc["error_mm"] = learn._jsonable(learn.error_summary(outcome.report))
+    doc = report_json(outcome)
+    doc["error_mm"] = jsonable(error_summary(outcome.report))
     v = outcome.vertex_error_mm
     doc["vertex_error_mm"] = {"mean": float(np.mean(v)), "median": float(np.median(v)), "max": float(np.max(v))}
     return doc
@@ -39,14 +39,14 @@ def report_document(outcome) -> dict:
 def _scan_paths(items) -> list:
     items = [os.path.abspath(p) for p in items]
     if len(items) == 1 and os.path.isdir(items[0]):
-        return learn.scan_paths(items[0])
+        return inputs.scan_paths(items[0])
     folders = {os.path.dirname(p) for p in items}
     if len(folders) > 1:
         raise ArticulaInputError("give scan files from one folder (or the folder itself)")
     for p in items:
         if not os.path.isfile(p):
             raise ArticulaInputError(f"{p}: file or folder not found")
-    return learn.scan_paths(folders.pop(), [os.path.basename(p) for p in items])
+    return inputs.scan_paths(folders.pop(), [os.path.basename(p) for p in items])
 
 
 def _write_json(path: str, doc: dict) -> None:
@@ -60,14 +60,14 @@ def _save_blend(blend: str, paths, outcome) -> None:
     """Save a .blend with the scans (scan-sequence object, frames 1..N, cache beside the file) and the
     learned rig; a .blend this command created is removed again if a step fails."""
     existed = os.path.exists(blend)
-    bpy.ops.wm.save_as_mainfile(filepath=blend)            # the scans' frame cache goes beside it
+    save_blend_first(blend)                                # the scans' frame cache goes beside it
     try:
         call_operator(bpy.ops.articula.import_scans, directory=os.path.dirname(paths[0]),
                       files=[{"name": os.path.basename(p)} for p in paths],
                       require_registered=True, frame_start=1)
         outcome.input.frame_start = 1
         with jobs.scene_guard():
-            learn.build(bpy.context, outcome, f"{outcome.input.name} Rig")
+            result.build(bpy.context, outcome, f"{outcome.input.name} Rig")
         save_blend_again()
     except BaseException:
         if not existed:
@@ -80,16 +80,18 @@ def _save_blend(blend: str, paths, outcome) -> None:
 
 def run(args) -> int:
     for path in (args.out, args.report, args.blend):
-        learn.check_output_path(path or "")
+        result.check_output_path(path or "")
+    options = LearnOptions(parts=args.parts, alpha=args.alpha, symmetry=not args.no_symmetry,
+                           max_iterations=args.iterations, seed=args.seed, key_scans=args.key_scans,
+                           workers=args.threads, joint_prior=args.joint_prior)
+    options.validate()
     paths = _scan_paths(args.scans)
-    options = learn.LearnOptions(args.parts, args.alpha, not args.no_symmetry, args.iterations, args.seed,
-                                 key_scans=args.key_scans, workers=args.threads, joint_prior=args.joint_prior)
     progress = jobs.Progress("learn-rig", echo=True)
-    inp = learn.input_from_files(paths, progress)
-    outcome = learn.learn(inp, options, progress)
-    learn.save(args.out, outcome)
+    inp = inputs.input_from_files(paths, progress)
+    outcome = solve.learn(inp, options, progress)
+    result.save(args.out, outcome)
     print(f"wrote {args.out}: {outcome.model.num_vertices} vertices, {outcome.model.skeleton.num_bones} bones, "
-          f"{len(outcome.poses)} poses; {learn.summary_text(outcome)}")
+          f"{len(outcome.poses)} poses; {summary_text(outcome)}")
     if args.report:
         _write_json(args.report, report_document(outcome))
         print(f"wrote {args.report}")
@@ -100,25 +102,28 @@ def run(args) -> int:
 
 
 def add_commands(sub):
+    default = LearnOptions()
     p = sub.add_parser("learn-rig", help="learn a rig (armature, swing/twist skin, rest mesh) from registered scans")
     p.add_argument("--scans", nargs="+", required=True, metavar="PATH",
                    help="a folder of registered OBJ/PLY/STL/OFF scans, or such files (natural order)")
-    p.add_argument("--parts", type=int, default=0, help="number of body parts (default 0: chosen from the motion)")
-    p.add_argument("--alpha", type=float, default=100.0,
-                   help="weight of the local-shape (Laplacian) term, dimensionless (default 100)")
-    p.add_argument("--joint-prior", type=float, default=JOINT_PRIOR,
+    p.add_argument("--parts", type=int, default=default.parts,
+                   help=f"number of body parts (default {default.parts}: chosen from the motion)")
+    p.add_argument("--alpha", type=float, default=default.alpha,
+                   help=f"weight of the local-shape (Laplacian) term, dimensionless (default {default.alpha:g})")
+    p.add_argument("--joint-prior", type=float, default=default.joint_prior,
                    help=f"weight of the prior that keeps joints near their first estimates where the motion "
                         f"hardly determines them, relative to the data's pull on each joint (default "
-                        f"{JOINT_PRIOR}; 0: none, which with a small --alpha fits the scans most closely)")
+                        f"{default.joint_prior}; 0: none, which with a small --alpha fits the scans most closely)")
     p.add_argument("--no-symmetry", action="store_true", help="do not pair and symmetrise left/right parts")
-    p.add_argument("--iterations", type=int, default=4,
-                   help="outer rounds of the alternating optimisation after two warm-start rounds (default 4; "
-                        "0: initialisation only)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--key-scans", type=int, default=KEY_SCANS,
+    p.add_argument("--iterations", type=int, default=default.max_iterations,
+                   help=f"outer rounds of the alternating optimisation after {len(default.warm_start)} warm-start "
+                        f"rounds (default {default.max_iterations}; 0: initialisation only)")
+    p.add_argument("--seed", type=int, default=default.seed, help=f"random seed (default {default.seed})")
+    p.add_argument("--key-scans", type=int, default=default.key_scans,
                    help=f"learn the rig from at most this many scans (the most different poses) and fit the "
-                        f"other scans' poses with it (default {KEY_SCANS}; 0: learn from every scan)")
-    p.add_argument("--threads", type=int, default=0, help="solver threads (default 0: one per CPU core)")
+                        f"other scans' poses with it (default {default.key_scans}; 0: learn from every scan)")
+    p.add_argument("--threads", type=int, default=default.workers,
+                   help=f"solver threads (default {default.workers}: one per CPU core)")
     p.add_argument("--out", required=True, help="model bundle to write (.npz)")
     p.add_argument("--report", help="write the error statistics, stage times and objective log as JSON")
     p.add_argument("--blend", help="also save a .blend with the scans and the learned rig")

@@ -11,19 +11,13 @@ import bpy
 from ...solver.errors import ArticulaInputError
 from ..rig import bundle_io as rig_io
 from ..rig import reader as rig_reader
+from .common import finish, save_blend_as
 
 
 def _open(path: str) -> None:
     if not os.path.isfile(path):
         raise ArticulaInputError(f"{path}: no such .blend file")
     bpy.ops.wm.open_mainfile(filepath=os.path.abspath(path))
-
-
-def _save(path: str) -> None:
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise ArticulaInputError(f"{path}: folder {folder!r} does not exist")
-    bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(path))
 
 
 def build_rig(args) -> int:
@@ -33,12 +27,8 @@ def build_rig(args) -> int:
     for text in rig.warnings:
         print(f"warning: {text}")
     frames = f", action {action.name!r}" if action is not None else ""
-    print(f"built rig {rig.armature.name!r}: {len(rig.mesh.data.vertices)} vertices, "
-          f"{len(rig_reader.control_names(rig.armature))} control bones{frames}")
-    if args.blend:
-        _save(args.blend)
-        print(f"saved {args.blend}")
-    return 0
+    return finish(f"built rig {rig.armature.name!r}: {len(rig.mesh.data.vertices)} vertices, "
+                  f"{len(rig_reader.control_names(rig.armature))} control bones{frames}", args.blend)
 
 
 def bake(args) -> int:
@@ -46,9 +36,8 @@ def bake(args) -> int:
     action = rig_io.bake_bundle(bpy.context, args.bundle, args.armature, args.nla, args.frame_start,
                                 args.action_name)
     out = args.out or args.blend
-    _save(out)
-    print(f"baked action {action.name!r}; saved {out}")
-    return 0
+    save_blend_as(out)
+    return finish(f"baked action {action.name!r}; saved {out}")
 
 
 def export_bundle(args) -> int:
@@ -56,8 +45,7 @@ def export_bundle(args) -> int:
     model, poses = rig_io.export_bundle(args.out, args.armature, args.action,
                                         'NONE' if args.no_poses else 'ACTIVE', bpy.context)
     frames = f", {len(poses)} poses" if poses is not None else ""
-    print(f"wrote {args.out}: {model.num_vertices} vertices, {model.skeleton.num_bones} bones{frames}")
-    return 0
+    return finish(f"wrote {args.out}: {model.num_vertices} vertices, {model.skeleton.num_bones} bones{frames}")
 
 
 def add_commands(sub):

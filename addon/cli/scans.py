@@ -13,7 +13,7 @@ import os
 import bpy
 
 from ...solver.errors import ArticulaInputError
-from .common import call_operator, save_blend_first, save_blend_again
+from .common import call_operator, finish, save_blend_first
 
 
 def run(args) -> int:
@@ -36,11 +36,9 @@ def run(args) -> int:
     call_operator(bpy.ops.articula.import_scans, **props)
     ob = bpy.context.view_layer.objects.active
     data = ob.articula
-    print(f"{ob.name}: {data.frame_count} frames of {len(ob.data.vertices)} vertices, "
-          f"{'registered' if data.registered else 'unregistered'}, cache {data.cache_file}")
-    if args.blend:
-        save_blend_again()
-    return 0
+    return finish(f"{ob.name}: {data.frame_count} frames of {len(ob.data.vertices)} vertices, "
+                  f"{'registered' if data.registered else 'unregistered'}, cache {data.cache_file}",
+                  args.blend, saved_first=True)
 
 
 def add_commands(sub):

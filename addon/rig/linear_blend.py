@@ -1,6 +1,6 @@
 """Build the plain linear-blend version of an Articula rig in the scene (the Blender half of
-:mod:`lbs_export`): an armature with the control bones, swing helpers and twist segment bones, and a
-copy of the rig mesh with one plain Armature modifier, sharing the rig's active action.
+``solver.rig.linear_blend``): an armature with the control bones, swing helpers and twist segment
+bones, and a copy of the rig mesh with one plain Armature modifier, sharing the rig's active action.
 
 Twist segment bones are driven like the twist bones of the hybrid rig (SWING_TWIST_Y, local space) with
 the simple expression ``twist * k / n``, which Blender evaluates without Python.
@@ -10,13 +10,13 @@ from dataclasses import dataclass
 import bpy
 from mathutils import Matrix
 
-from ...solver.rig.model import Poses
-from .. import compat
-from ...solver.rig import linear_blend as lbs_export
-from . import builder as rig_builder
+from ...solver.rig import linear_blend as lbs
 from ...solver.rig import names as rig_names
-from . import reader as rig_reader
+from ...solver.rig import pose_sampling
+from .. import compat
 from ..scene.mesh_io import write_vertex_groups
+from . import builder as rig_builder
+from . import reader as rig_reader
 
 MAX_DEVIATION_PROP = "articula_lbs_max_mm"
 
@@ -64,19 +64,19 @@ def _drive_segments(arm, layout, segments):
 
 
 def _measure_poses(arm, model, count=100):
-    """The rig's action poses, or ``count`` random poses (twists up to ±90°) when it has none."""
+    """The rig's action poses, or ``count`` random poses (seeded; swings up to 110°, twists up to ±90°,
+    see ``pose_sampling``) when it has none."""
     if arm.animation_data is not None and arm.animation_data.action is not None:
         return rig_reader.read_poses(arm), 'ACTION'
-    from ...sample_scenes.tube_body import random_poses
-    return Poses(*random_poses(model.skeleton.num_bones, count, seed=0, max_twist_deg=90.0)), 'RANDOM'
+    return pose_sampling.random_poses(count, model.skeleton.num_bones, seed=0, max_twist_deg=90.0), 'RANDOM'
 
 
 def build_lbs_rig(context, arm, segments: int = 4) -> LbsRig:
     """Create the LBS version of the rig whose main armature is ``arm``; returns :class:`LbsRig`."""
     model = rig_reader.read_model(arm)
-    layout, weights = lbs_export.lbs_weights(model, segments)      # validates names and segments
+    layout, weights = lbs.lbs_weights(model, segments)      # validates names and segments
     poses, source = _measure_poses(arm, model)
-    worst, mean = lbs_export.deviation(model, poses, segments)
+    worst, mean = lbs.deviation(model, poses, segments)
     src_mesh = rig_reader.find_mesh(arm)
     sk = model.skeleton
     with rig_builder.object_mode(context):

@@ -16,13 +16,11 @@ What an import creates (in a collection named after the recording folder):
   A Geometry Nodes modifier ("Articula Points": Mesh to Points + material) turns the vertices into
   renderable points of ``point_radius`` for Cycles, EEVEE and Workbench.
 
-Playback: every frame of the recording lives in ONE cache file (``solver.depth.recording``, path in
-``ob.articula.cache_file``; ``//`` = relative to the .blend).  A persistent ``frame_change_pre``
-handler (pre, so the new positions are part of the frame's own evaluation, also when rendering an
-animation) rewrites the mesh of each point-cloud object from the cached arrays: the frame shown is
-``scene.frame_current - ob.articula.frame_start`` clamped to the recording.  The cache is read once
-per file and kept in memory (re-read when the file changes).  The mesh saved in the .blend holds the
-frame shown when saving, so a file opened without the add-on still shows one frame.
+Playback (:mod:`.playback`: handlers, frame index, cache paths): every frame of the recording lives in
+ONE cache file (``solver/formats/point_files.py``, path in ``ob.articula.cache_file``); a frame change
+rewrites the mesh from the cached arrays.  The cache is read once per file and kept in memory (re-read
+when the file changes).  The mesh saved in the .blend holds the frame shown when saving, so a file
+opened without the add-on still shows one frame.  docs/import_depth.md describes the whole import.
 """
 from __future__ import annotations
 
@@ -30,72 +28,48 @@ import os
 
 import bpy
 import numpy as np
-from bpy.app.handlers import persistent
 
+from ...solver.depth import camera
 from ...solver.errors import ArticulaInputError
+from ...solver.formats.point_files import PointSequence
 from .. import compat
-from ...solver.depth.recording import PointSequence
+from . import playback
 
-SENSOR_TO_BLENDER_CAMERA = np.diag([1.0, -1.0, -1.0, 1.0])  # its own inverse
+SENSOR_TO_BLENDER_CAMERA = camera.blender_from_cv(np.eye(4))  # diag(1, -1, -1, 1): points in the camera
 NODE_GROUP = "Articula Points"
 MATERIAL = "Articula Points"
 SENSOR_WIDTH_MM = 36.0
 
-_sequences: dict = {}   # abspath -> (mtime_ns, size, PointSequence)
-_shown: dict = {}       # mesh pointer -> (abspath, frame index) last written
-
 
 # ---------------------------------------------------------------------------------------- camera
 
-def set_camera_intrinsics(cam_data, scene, width, height, fx, fy, cx, cy) -> None:
-    """Make a Blender camera reproduce a pinhole depth camera exactly (checked with
-    ``world_to_camera_view`` in the tests, to 1e-4 px).
-
-    Pixel centres are at integer (u, v) (column right, row down), so normalised view coordinates
-    are ``x = (u + 0.5) / W`` and ``y = 1 - (v + 0.5) / H``.
-    * sensor fit HORIZONTAL, sensor width 36 mm, ``lens = fx * 36 / W`` (mm);
-    * non-square pixels (fx != fy): pixel aspect ``ax / ay = fy / fx`` (the larger one is 1);
-    * principal point: ``shift_x = ((W - 1) / 2 - cx) / W``, ``shift_y = (cy - (H - 1) / 2) ay / (W ax)``
-      (shifts are fractions of the sensor width; a principal point below the centre shifts the view up);
-    * render resolution W x H at 100 %.
-    """
-    cam_data.sensor_fit = 'HORIZONTAL'
-    cam_data.sensor_width = SENSOR_WIDTH_MM
-    cam_data.lens = fx * SENSOR_WIDTH_MM / width
-    ax, ay = (fy / fx, 1.0) if fy >= fx else (1.0, fx / fy)
-    cam_data.shift_x = ((width - 1) / 2 - cx) / width
-    cam_data.shift_y = (cy - (height - 1) / 2) * ay / (width * ax)
+def set_camera_intrinsics(cam_data, scene, intr: camera.Intrinsics) -> None:
+    """Make a Blender camera (and the scene's render size) reproduce the pinhole depth camera ``intr``
+    exactly (``camera.blender_camera_settings``: lens, sensor, shift, resolution, pixel aspect)."""
+    settings = camera.blender_camera_settings(intr, SENSOR_WIDTH_MM)
+    for key in ("sensor_fit", "sensor_width", "lens", "shift_x", "shift_y"):
+        setattr(cam_data, key, settings[key])
     r = scene.render
-    r.resolution_x, r.resolution_y, r.resolution_percentage = int(width), int(height), 100
-    r.pixel_aspect_x, r.pixel_aspect_y = ax, ay
+    r.resolution_x, r.resolution_y, r.resolution_percentage = settings["resolution_x"], settings["resolution_y"], 100
+    r.pixel_aspect_x, r.pixel_aspect_y = settings["pixel_aspect_x"], settings["pixel_aspect_y"]
 
 
 # ----------------------------------------------------------------------------------- cache files
 
-def cache_abspath(ob) -> str:
-    return os.path.normpath(bpy.path.abspath(ob.articula.cache_file)) if ob.articula.cache_file else ""
+_sequences = playback.FileCache(PointSequence.load)
 
 
 def load_sequence(path: str) -> PointSequence:
     """The cached :class:`PointSequence` of ``path`` (read once, re-read when the file changed)."""
     try:
-        st = os.stat(path)
+        return _sequences.get(path)
     except OSError as exc:
         raise ArticulaInputError(f"{path}: point cache missing ({exc.strerror or exc})") from exc
-    hit = _sequences.get(path)
-    if hit and hit[0] == st.st_mtime_ns and hit[1] == st.st_size:
-        return hit[2]
-    seq = PointSequence.load(path)
-    _sequences[path] = (st.st_mtime_ns, st.st_size, seq)
-    return seq
 
 
 def forget_cache(path: str | None = None) -> None:
-    if path is None:
-        _sequences.clear()
-        _shown.clear()
-    else:
-        _sequences.pop(path, None)
+    """Drop the loaded cache of ``path`` (all when None); the next frame change reads the file again."""
+    _sequences.forget(path)
 
 
 # ------------------------------------------------------------------------------------ frame data
@@ -129,71 +103,17 @@ def write_frame(mesh, seq: PointSequence, k: int) -> None:
     mesh.update()
 
 
-def frame_index(ob, scene, count: int) -> int:
-    return int(min(max(scene.frame_current - ob.articula.frame_start, 0), count - 1))
-
-
-def sequence_objects(scene):
-    return [ob for ob in scene.objects
-            if ob.type == 'MESH' and ob.articula.kind == 'POINT_CLOUD_SEQUENCE' and ob.articula.cache_file
-            and ob.data.library is None and ob.mode != 'EDIT']  # linked / edited meshes are left alone
-
-
-def update_scene(scene, force: bool = False) -> None:
-    """Show the current frame on every point-cloud object of ``scene`` (missing caches are skipped
-    with one message each: the mesh keeps the last frame it showed)."""
-    for ob in sequence_objects(scene):
-        path = cache_abspath(ob)
-        try:
-            seq = load_sequence(path)
-        except ArticulaInputError as exc:
-            if _shown.get(ob.data.as_pointer(), (None,))[0] != ("missing", path):
-                print(f"Articula: {ob.name}: {exc}")
-                _shown[ob.data.as_pointer()] = (("missing", path), -1)
-            continue
-        if seq.frame_count == 0:
-            continue
-        k = frame_index(ob, scene, seq.frame_count)
-        key = ob.data.as_pointer()
-        if not force and _shown.get(key) == (path, k):
-            continue
-        write_frame(ob.data, seq, k)
-        _shown[key] = (path, k)
-
-
-@persistent
-def _on_frame_change(scene, depsgraph=None):
-    update_scene(scene)
-
-
-@persistent
-def _on_load(*_args):
-    _shown.clear()
-    for scene in bpy.data.scenes:
-        update_scene(scene, force=True)
-
-
-_HANDLERS = ((bpy.app.handlers.frame_change_pre, _on_frame_change),
-             (bpy.app.handlers.load_post, _on_load),
-             (bpy.app.handlers.undo_post, _on_load),   # undo/redo restore a mesh holding some frame:
-             (bpy.app.handlers.redo_post, _on_load))   # show the current one again
+def show_frame(ob, k: int) -> None:
+    """Put frame ``k`` of the object's cache into its mesh (the player of :mod:`.playback`)."""
+    write_frame(ob.data, load_sequence(playback.cache_abspath(ob)), k)
 
 
 def register_extra():
-    for hlist, fn in _HANDLERS:
-        # remove stale copies from an earlier load of this module (add-on reload)
-        for old in [h for h in hlist if getattr(h, "__name__", "") == fn.__name__
-                    and getattr(h, "__module__", "") == fn.__module__]:
-            hlist.remove(old)
-        hlist.append(fn)
+    playback.add_player('POINT_CLOUD_SEQUENCE', playback.Player("point-cloud", show_frame, forget_cache))
 
 
 def unregister_extra():
-    for hlist, fn in _HANDLERS:
-        for old in [h for h in hlist if getattr(h, "__name__", "") == fn.__name__
-                    and getattr(h, "__module__", "") == fn.__module__]:
-            hlist.remove(old)
-    forget_cache()
+    playback.remove_player('POINT_CLOUD_SEQUENCE')
 
 
 # ----------------------------------------------------------------------------------- display
@@ -275,8 +195,8 @@ def create_sequence_objects(context, name: str, seq: PointSequence, cache_file: 
         cam_data.clip_start, cam_data.clip_end = 0.05, 100.0
         cam_ob = bpy.data.objects.new(f"{name} Camera", cam_data)
         coll.objects.link(cam_ob)
-        cam_ob.matrix_world = _matrix(world @ SENSOR_TO_BLENDER_CAMERA)
-        set_camera_intrinsics(cam_data, scene, int(w), int(h), fx, fy, cx, cy)
+        cam_ob.matrix_world = _matrix(camera.blender_from_cv(world))
+        set_camera_intrinsics(cam_data, scene, camera.Intrinsics(int(w), int(h), fx, fy, cx, cy))
         if set_scene and scene.camera is None:
             scene.camera = cam_ob
     me = bpy.data.meshes.new(f"{name} Points")
@@ -298,11 +218,9 @@ def create_sequence_objects(context, name: str, seq: PointSequence, cache_file: 
     if set_scene:
         scene.frame_start = frame_start
         scene.frame_end = frame_start + max(seq.frame_count, 1) - 1
-    path = cache_abspath(ob)
-    _sequences[path] = (os.stat(path).st_mtime_ns, os.stat(path).st_size, seq)
-    k = frame_index(ob, scene, seq.frame_count)
-    write_frame(me, seq, k)
-    _shown[me.as_pointer()] = (path, k)
+    _sequences.put(playback.cache_abspath(ob), seq)
+    if seq.frame_count:
+        playback.show(ob, scene.frame_current, force=True)
     for o in context.view_layer.objects:
         o.select_set(False)
     ob.select_set(True)
@@ -316,58 +234,17 @@ def _matrix(m):
 
 
 def default_cache_path(name: str) -> str:
-    """Where a new cache goes: beside the saved .blend (``//<name>.points.npz``, relative), else in the
-    extension's user folder (absolute; survives restarts)."""
-    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name) or "points"
+    """Absolute path for a new cache: beside the saved .blend (stored as ``//<name>.points.npz``), else
+    in the extension's user folder (survives restarts); ``<name>.2.points.npz`` ... when taken."""
+    safe = playback.safe_name(name, "points")
     if bpy.data.filepath:
-        base = f"//{safe}.points.npz"
-        k = 1
-        while os.path.exists(bpy.path.abspath(base)):
-            k += 1
-            base = f"//{safe}.{k}.points.npz"
-        return base
-    from .. import package_name
-    folder = bpy.utils.extension_path_user(package_name(), path="point_clouds", create=True)
+        folder = os.path.dirname(os.path.abspath(bpy.data.filepath))
+    else:
+        from .. import package_name
+        folder = bpy.utils.extension_path_user(package_name(), path="point_clouds", create=True)
     k = 1
     path = os.path.join(folder, f"{safe}.points.npz")
     while os.path.exists(path):
         k += 1
         path = os.path.join(folder, f"{safe}.{k}.points.npz")
     return path
-
-
-# ----------------------------------------------------------------------------- images via Blender
-
-def load_image_pixels(path: str, what: str) -> np.ndarray:
-    """(H, W, 4) float32 pixels of an image file read by Blender (rows top to bottom, as stored in
-    the file), values as stored (no colour management).  Main thread only."""
-    if not os.path.isfile(path):
-        raise ArticulaInputError(f"{path}: {what} file missing")
-    try:
-        img = bpy.data.images.load(path, check_existing=False)
-    except RuntimeError as exc:
-        raise ArticulaInputError(f"{path}: cannot read {what} ({exc})") from exc
-    try:
-        try:
-            img.colorspace_settings.is_data = True
-        except (AttributeError, TypeError):
-            pass
-        w, h = img.size
-        if w == 0 or h == 0:
-            raise ArticulaInputError(f"{path}: cannot read {what} (empty or unsupported image)")
-        buf = np.empty(w * h * 4, np.float32)
-        img.pixels.foreach_get(buf)
-        return buf.reshape(h, w, 4)[::-1]
-    finally:
-        bpy.data.images.remove(img)
-
-
-def load_exr_depth(path: str) -> np.ndarray:
-    """Depth from an OpenEXR (or other float) image: the first channel, in metres, (H, W) float32."""
-    return np.ascontiguousarray(load_image_pixels(path, "EXR depth")[:, :, 0])
-
-
-def load_color(path: str) -> np.ndarray:
-    """An 8-bit colour frame (PNG/JPG) as (H, W, 3) uint8 (sRGB values as stored)."""
-    px = load_image_pixels(path, "colour frame")
-    return np.clip(px[:, :, :3] * 255 + 0.5, 0, 255).astype(np.uint8)

@@ -16,18 +16,18 @@ from __future__ import annotations
 
 import contextlib
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 import bpy
 import numpy as np
 
 from ...solver.errors import ArticulaInputError
-from ...solver.formats.meshes import MESH_EXTENSIONS, read_mesh
+from ...solver.formats.mesh_files import MESH_EXTENSIONS, read_mesh
 from ...solver.formats.pointcache import CACHE_EXTENSIONS, read_point_cache
 from ...solver.formats.scan_files import (ScanSequence, SequenceAssembler, list_scan_files, natural_sorted,
                                     read_scan_files, sequence_from_cache)
-from .scans import read_polymesh
+from . import scans
 
 _ID_COLLECTIONS = ("objects", "meshes", "cache_files", "materials", "collections", "curves", "pointclouds",
                    "cameras", "lights", "images", "actions", "node_groups", "armatures")
@@ -75,7 +75,7 @@ def _evaluated_polymesh(ob, depsgraph):
     ev = ob.evaluated_get(depsgraph)
     me = ev.to_mesh()
     try:
-        return read_polymesh(me, ev.matrix_world)
+        return scans.read_polymesh(me, ev.matrix_world)
     finally:
         ev.to_mesh_clear()
 
@@ -142,7 +142,7 @@ def sample_shape_keys(ob) -> ScanSequence:
     keys = ob.data.shape_keys
     if keys is None or not keys.key_blocks:
         raise ArticulaInputError(f"{ob.name}: has no shape keys")
-    topo = read_polymesh(ob.data)
+    topo = scans.read_polymesh(ob.data)
     m = np.array(ob.matrix_world, np.float64)
     frames = np.empty((len(keys.key_blocks), len(topo.vertices), 3), np.float32)
     buf = np.empty(3 * len(topo.vertices), np.float32)
@@ -181,6 +181,26 @@ class ImportPlan:
     read: Callable          # read(progress) -> ScanSequence; no bpy (runs in the worker thread)
     name: str               # name for the new object
     source: str             # what was imported, for ``ob.articula.source``
+    caches: dict = field(init=False)   # registered? -> path of the new cache (bpy: chosen on the main thread)
+
+    def __post_init__(self):
+        self.caches = {registered: scans.new_cache_path(self.name, registered) for registered in (True, False)}
+
+    def run(self, progress) -> tuple:
+        """Read the frames and write their cache (no bpy: the worker thread); ``(sequence, cache path)``."""
+        seq = self.read(progress)
+        progress(0.95, "writing frame cache")
+        path = self.caches[seq.registered]
+        scans.write_cache(path, seq)
+        return seq, path
+
+    def create_object(self, context, seq, path: str, frame_start: int):
+        """The scan-sequence object (``scans.create_object``); the cache is deleted if that fails."""
+        try:
+            return scans.create_object(context, self.name, seq, path, frame_start, self.source)
+        except BaseException:
+            scans.remove_cache(path)
+            raise
 
 
 def resolve_files(filepath: str, directory: str, names) -> tuple:
@@ -259,7 +279,7 @@ def _plan_point_cache(context, cache: str, base_mesh: str, source_object: str, n
         if base_ob is None or base_ob.type != 'MESH':
             raise ArticulaInputError(f"{cache_name}: a point cache has no faces; give a base mesh file or "
                                      f"select the mesh it belongs to")
-        base = (read_polymesh(base_ob.data), base_ob.name)
+        base = (scans.read_polymesh(base_ob.data), base_ob.name)
 
     def read(progress):
         progress(0.1, f"reading {cache_name}")

@@ -11,17 +11,12 @@ Storage
     * unregistered sequences (topology changes between frames): a folder ``<name>-<id>.scans/`` of
       memory-mapped ``.npy`` arrays (concatenated positions, face sizes and corner vertices, and their
       per-frame offsets); a frame change rebuilds the mesh geometry from one frame's slices.
-      Chosen over one mesh datablock per frame (swapped into the object: ~0.1 ms) because the .blend
-      stays small and both kinds share one storage path; the price is 25-60 ms per frame change at
-      50k vertices (``./run bench import``).
+      Chosen over one mesh datablock per frame (swapped into the object) because the .blend stays
+      small and both kinds share one storage path; the price is a slower frame change.
 
-Playback
-    A persistent ``frame_change_post`` handler writes the current frame into every scan-sequence
-    object of the scene through the position attribute (the fast path).  Blender re-evaluates after
-    frame_change_post when a handler tagged data, so after ``scene.frame_set(k)`` the evaluated mesh is
-    frame k.  Objects in edit mode are left alone.  Before the first frame / after the last one the
-    first / last frame is held.  The frame a mesh shows is kept in its ID property
-    ``articula_frame`` so unchanged frames cost nothing.
+Playback (:mod:`.playback`: handlers, frame index, cache paths)
+    A registered frame is written through the position attribute (the fast path); an unregistered one
+    rebuilds the mesh's geometry.  docs/scans.md has the measured costs.
 
 :func:`scan_frames` hands all frames to the solver as one array (no source files re-read).
 """
@@ -35,12 +30,11 @@ import bpy
 import numpy as np
 
 from ...solver.errors import ArticulaInputError
-from ...solver.formats.meshes import PolyMesh
+from ...solver.formats.polymesh import PolyMesh
 from ...solver.formats.scan_files import ScanSequence
 from ..scene import mesh_io
 from .. import preferences
-
-SHOWN = "articula_frame"   # ID property on the mesh: sequence index it currently shows
+from . import playback
 
 # -- Blender mesh <-> PolyMesh ----------------------------------------------------------------------
 
@@ -90,22 +84,8 @@ def new_cache_path(name: str, registered: bool) -> str:
         folder = os.path.join(os.path.dirname(bpy.data.filepath), f"{stem}_articula")
     else:
         folder = os.path.join(preferences.cache_dir(), "scan_cache")
-    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in name) or "scans"
+    safe = playback.safe_name(name, "scans")
     return os.path.join(folder, f"{safe}-{uuid.uuid4().hex[:8]}.{'npy' if registered else 'scans'}")
-
-
-def stored_path(abs_path: str, blend_path: str = None) -> str:
-    """``//relative`` when ``abs_path`` is inside the folder of the .blend, else the absolute path."""
-    blend_path = bpy.data.filepath if blend_path is None else blend_path
-    if blend_path:
-        base = os.path.dirname(os.path.abspath(blend_path))
-        try:
-            rel = os.path.relpath(abs_path, base)
-        except ValueError:  # another drive
-            return abs_path
-        if not rel.startswith(os.pardir):
-            return "//" + rel.replace(os.sep, "/")
-    return abs_path
 
 
 def write_cache(path: str, seq: ScanSequence) -> None:
@@ -129,7 +109,7 @@ def write_cache(path: str, seq: ScanSequence) -> None:
 
 def remove_cache(path: str) -> None:
     """Delete a cache (file or folder) that no object uses, e.g. after a failed import."""
-    _loaded.pop(path, None)
+    _loaded.forget(path)
     if os.path.isdir(path):
         shutil.rmtree(path, ignore_errors=True)
         return
@@ -150,38 +130,26 @@ def _unregistered_arrays(meshes) -> dict:
             "corner_offsets": offsets([len(m.corner_verts) for m in meshes])}
 
 
-_loaded = {}   # absolute path -> (mtime, data): np.memmap (.npy) or dict of memmaps (.scans folder)
-
-
 def _load(path: str):
-    try:
-        mtime = os.path.getmtime(path)
-    except OSError:
-        return None
-    hit = _loaded.get(path)
-    if hit and hit[0] == mtime:
-        return hit[1]
-    try:
-        if os.path.isdir(path):
-            data = {k: np.load(os.path.join(path, k + ".npy"), mmap_mode="r")
-                    for k in ("positions", "vertex_offsets", "face_sizes", "face_offsets", "corner_verts",
-                              "corner_offsets")}
-        else:
-            data = np.load(path, mmap_mode="r")
-    except (OSError, ValueError):
-        return None
-    _loaded[path] = (mtime, data)
-    return data
+    """np.memmap (.npy) or dict of memmaps (.scans folder)."""
+    if os.path.isdir(path):
+        return {k: np.load(os.path.join(path, k + ".npy"), mmap_mode="r")
+                for k in ("positions", "vertex_offsets", "face_sizes", "face_offsets", "corner_verts",
+                          "corner_offsets")}
+    return np.load(path, mmap_mode="r")
+
+
+_loaded = playback.FileCache(_load)
 
 
 def cache_data(ob: bpy.types.Object):
     """The loaded cache of a scan-sequence object (memmap or dict), or raise naming the object."""
-    path = bpy.path.abspath(ob.articula.cache_file)
-    data = _load(path) if ob.articula.cache_file else None
-    if data is None:
+    path = playback.cache_abspath(ob)
+    try:
+        return _loaded.get(path)
+    except (OSError, ValueError):
         raise ArticulaInputError(f"{ob.name}: its frame cache {path or '(none)'} is missing or unreadable; "
-                                 f"import the scans again")
-    return data
+                                 f"import the scans again") from None
 
 
 def _frame_mesh(data, k: int) -> PolyMesh:
@@ -201,7 +169,7 @@ def create_object(context, name: str, seq: ScanSequence, cache_path: str, frame_
     me = bpy.data.meshes.new(name)
     topo = seq.topology
     set_geometry(me, topo.vertices, topo.face_sizes, topo.corner_verts)
-    me[SHOWN] = 0
+    me[playback.SHOWN] = 0
     ob = bpy.data.objects.new(name, me)
     context.collection.objects.link(ob)
     data = ob.articula
@@ -210,7 +178,7 @@ def create_object(context, name: str, seq: ScanSequence, cache_path: str, frame_
     data.source = source
     data.frame_start = frame_start
     data.frame_count = len(seq)
-    set_cache_path(ob, stored_path(cache_path))
+    data.cache_file = playback.stored_path(cache_path)
     scene = context.scene
     scene.frame_start = frame_start
     scene.frame_end = frame_start + len(seq) - 1
@@ -218,48 +186,30 @@ def create_object(context, name: str, seq: ScanSequence, cache_path: str, frame_
         other.select_set(False)
     context.view_layer.objects.active = ob
     ob.select_set(True)
-    show_frame(ob, scene.frame_current)
+    playback.show(ob, scene.frame_current)
     return ob
-
-
-def set_cache_path(ob, path: str) -> None:
-    """Store the cache path (``//``-relative when saved; resolved with bpy.path.abspath)."""
-    ob.articula.cache_file = path
 
 
 def is_scan_sequence(ob) -> bool:
     return ob is not None and ob.type == 'MESH' and ob.articula.kind == 'SCAN_SEQUENCE'
 
 
-def frame_index(ob, scene_frame: int) -> int:
-    """Sequence index shown at ``scene_frame`` (held at the ends)."""
-    n = ob.articula.frame_count
-    return min(max(int(scene_frame) - ob.articula.frame_start, 0), max(n - 1, 0))
-
-
-def show_frame(ob: bpy.types.Object, scene_frame: int, force: bool = False) -> bool:
-    """Put the frame for ``scene_frame`` into ``ob``'s mesh; False when the cache is unusable."""
+def show_frame(ob: bpy.types.Object, k: int) -> None:
+    """Put sequence frame ``k`` into ``ob``'s mesh (the player of :mod:`.playback`); raises when the
+    cache is missing or does not match the mesh (its topology was edited, or it belongs to another)."""
     me = ob.data
-    k = frame_index(ob, scene_frame)
-    if not force and me.get(SHOWN) == k:
-        return True
-    try:
-        data = cache_data(ob)
-    except ArticulaInputError:
-        return False
+    data = cache_data(ob)
     if ob.articula.registered:
         if data.ndim != 3 or data.shape[1] != len(me.vertices) or k >= len(data):
-            return False     # topology was edited or the cache belongs to something else
+            raise ArticulaInputError(f"frame cache {ob.articula.cache_file} not matching the mesh")
         if len(me.vertices):
             me.attributes["position"].data.foreach_set("vector", np.ascontiguousarray(data[k]).reshape(-1))
             me.update()
     else:
         if k + 1 >= len(data["vertex_offsets"]):
-            return False
+            raise ArticulaInputError(f"frame cache {ob.articula.cache_file} has no frame {k + 1}")
         m = _frame_mesh(data, k)
         set_geometry(me, m.vertices, m.face_sizes, m.corner_verts)
-    me[SHOWN] = k
-    return True
 
 
 def scan_frames(ob: bpy.types.Object):
@@ -289,74 +239,15 @@ def scan_frame_meshes(ob: bpy.types.Object) -> list:
             for m in (_frame_mesh(data, k) for k in range(len(data["vertex_offsets"]) - 1))]
 
 
-# -- handlers -----------------------------------------------------------------------------------------
-
-
-_failed = set()   # objects whose playback failed once (reported once, not every frame)
-
-
-@bpy.app.handlers.persistent
-def on_frame_change(scene, depsgraph=None):
-    frame = scene.frame_current
-    for ob in scene.objects:
-        if ob.type == 'MESH' and ob.articula.kind == 'SCAN_SEQUENCE' and ob.mode != 'EDIT' \
-                and ob.articula.cache_file:
-            try:
-                ok = show_frame(ob, frame)
-            except Exception as exc:   # never let one object break playback of the others
-                ok, why = False, f"{type(exc).__name__}: {exc}"
-            else:
-                why = f"frame cache {ob.articula.cache_file} missing or not matching the mesh"
-            if not ok and ob.name not in _failed:
-                _failed.add(ob.name)
-                print(f"Articula: {ob.name}: cannot show scan frame {frame} ({why})")
-
-
-@bpy.app.handlers.persistent
-def on_load_post(*_args):
-    _loaded.clear()
-    _failed.clear()
-
-
-@bpy.app.handlers.persistent
-def on_undo_redo(*_args):
-    """Undo restores meshes as they were when the step was pushed; show the current frame again."""
-    if bpy.context.scene:
-        on_frame_change(bpy.context.scene)
-
-
-@bpy.app.handlers.persistent
-def on_save_pre(filepath="", *_args):
-    """Keep cache paths valid when the .blend is saved somewhere else: re-derive them relative to
-    the new file (or absolute when the cache is outside its folder)."""
-    if not filepath:
-        return
-    for ob in bpy.data.objects:
-        if ob.type == 'MESH' and ob.articula.kind == 'SCAN_SEQUENCE' and ob.articula.cache_file \
-                and not ob.library:
-            set_cache_path(ob, stored_path(bpy.path.abspath(ob.articula.cache_file), filepath))
-
-
-_HANDLERS = (("frame_change_post", on_frame_change), ("load_post", on_load_post), ("save_pre", on_save_pre),
-             ("undo_post", on_undo_redo), ("redo_post", on_undo_redo))
+# -- playback ------------------------------------------------------------------------------------------
 
 
 def register_extra():
-    for name, fn in _HANDLERS:
-        lst = getattr(bpy.app.handlers, name)
-        for h in [h for h in lst if getattr(h, "__name__", "") == fn.__name__
-                  and getattr(h, "__module__", "") == fn.__module__]:
-            lst.remove(h)
-        lst.append(fn)
+    playback.add_player('SCAN_SEQUENCE', playback.Player("scan", show_frame, _loaded.forget))
 
 
 def unregister_extra():
-    for name, fn in _HANDLERS:
-        lst = getattr(bpy.app.handlers, name)
-        for h in [h for h in lst if getattr(h, "__name__", "") == fn.__name__
-                  and getattr(h, "__module__", "") == fn.__module__]:
-            lst.remove(h)
-    _loaded.clear()
+    playback.remove_player('SCAN_SEQUENCE')
 
 
 classes = ()

@@ -264,14 +264,18 @@ def blender_from_cv(cam_to_world: np.ndarray) -> np.ndarray:
 
 def blender_camera_settings(intr: Intrinsics, sensor_width_mm: float = 36.0) -> dict:
     """Blender camera/render settings that reproduce ``intr`` (checked against Blender's own
-    projection in ``tests/blender/test_camera_blender.py``): ``lens`` (mm) with
-    ``sensor_fit = 'HORIZONTAL'`` and ``sensor_width``, ``shift_x``/``shift_y`` (fractions of the
-    image width) for an off-centre principal point, the render resolution, and the pixel aspect for
-    fx != fy.  Use with ``matrix_world = blender_from_cv(cam_to_world)``."""
-    shift_x = ((intr.width - 1) / 2 - intr.cx) / intr.width
-    shift_y = (intr.cy - (intr.height - 1) / 2) / intr.width * intr.fx / intr.fy
-    aspect = intr.fx / intr.fy
-    return {"lens": intr.fx * sensor_width_mm / intr.width, "sensor_width": sensor_width_mm,
-            "sensor_fit": "HORIZONTAL", "shift_x": shift_x, "shift_y": shift_y,
-            "resolution_x": intr.width, "resolution_y": intr.height,
-            "pixel_aspect_x": max(1.0, 1.0 / aspect), "pixel_aspect_y": max(1.0, aspect)}
+    projection in ``tests/blender/sequences/test_depth_camera.py``, to 1e-3 px).  Pixel centres are at
+    integer (u, v), so normalised view coordinates are ``x = (u + 0.5) / W``, ``y = 1 - (v + 0.5) / H``:
+
+    * ``sensor_fit = 'HORIZONTAL'``, ``sensor_width`` (mm), ``lens = fx * sensor_width / W`` (mm);
+    * non-square pixels (fx != fy): pixel aspect ``ax / ay = fy / fx``, the larger one 1;
+    * principal point: ``shift_x = ((W - 1) / 2 - cx) / W``, ``shift_y = (cy - (H - 1) / 2) ay / (W ax)``
+      (fractions of the sensor width; a principal point below the centre shifts the view up);
+    * render resolution W x H (at 100 %).
+
+    Use with ``matrix_world = blender_from_cv(cam_to_world)``."""
+    w, h = intr.width, intr.height
+    ax, ay = (intr.fy / intr.fx, 1.0) if intr.fy >= intr.fx else (1.0, intr.fx / intr.fy)
+    return {"lens": intr.fx * sensor_width_mm / w, "sensor_width": sensor_width_mm, "sensor_fit": "HORIZONTAL",
+            "shift_x": ((w - 1) / 2 - intr.cx) / w, "shift_y": (intr.cy - (h - 1) / 2) * ay / (w * ax),
+            "resolution_x": int(w), "resolution_y": int(h), "pixel_aspect_x": ax, "pixel_aspect_y": ay}

@@ -1,5 +1,7 @@
 """Depth frames -> per-frame point sets: range clip, background subtraction, floor removal, voxel
-downsampling, normals.  Pure numpy/scipy; the Blender half is ``addon/sequences/points.py``.
+downsampling, normals.  Pure numpy/scipy; the recording-wide steps are in ``recording.py``, the Blender
+half in ``addon/sequences/points.py``.  The steps are the preprocessing of the depth-camera tracking
+dissertation (ch. 4 depth thresholds, ch. 5 ground-plane and background removal; docs/import_depth.md).
 
 Conventions
 -----------

@@ -1,8 +1,8 @@
 """Evaluation metrics of learned rigs: reconstruction error, its statistics in millimetres, joint-centre
 error against a reference rig, and Dem Bones' RMSE.
 
-* :func:`scan_to_model_distances` — the thesis' reconstruction metric (spec §4.1, §6.1): for every vertex
-  of every target scan, the Euclidean distance to the closest point of the posed model's *surface*
+* :func:`scan_to_model_distances` — the reconstruction metric (dissertation (model-adaptive mocap) §4.1,
+  §6.1): for every vertex of every target scan, the Euclidean distance to the closest point of the posed model's *surface*
   (triangles, not vertices), one direction (scan → model).  Exact, by
   :func:`solver.geometry.surface_distance.distance_to_surface`.
 * :func:`statistics_mm` — mean, std, median, MAD, IQR, max of metre values, in mm

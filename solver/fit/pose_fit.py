@@ -4,7 +4,8 @@ learned rig; the per-frame core of tracking).
 For every frame n it minimises ``E_n(p) = Σ_v w_v ‖hybrid_skin(model, p)_v − y_n,v‖²`` (m²) over the pose
 parameters of :func:`solver.rig.jacobians.pose_layout` — root translation t, optionally the subject scale s,
 and a bone-local rotation increment δ_b for every bone (``q_b ← q_b · exp(δ_b)``) — by Levenberg–Marquardt
-with the analytic Jacobian of :mod:`solver.rig.jacobians` (in factored per-anchor-group form,
+(dissertation (model-adaptive mocap) §5.7 (a); :func:`solver.fit.least_squares.levenberg_marquardt`) with
+the analytic Jacobian of :mod:`solver.rig.jacobians` (in factored per-anchor-group form,
 :func:`solver.rig.jacobians.group_jacobian`; BLAS on one thread):
 
     (JᵀWJ + μ (diag(JᵀWJ) + ε·mean diag)) δ = −JᵀW r,   accept if E decreases (μ ← μ/3), else μ ← 4μ.
@@ -27,8 +28,8 @@ Initialisation (``init``):
   restart rather than a wrong fit.
 * a :class:`Poses` with N frames: start from those poses (e.g. a tracker's prediction).
 
-This is the pose-only fit; the rig learner's ``joint_pose_gn`` optimises joints *and* poses together
-(with the Laplacian term), which is a different problem.
+This is the pose-only fit; the rig learner's :mod:`solver.learn.joints_poses` optimises joints *and* poses
+together (with the Laplacian term), which is a different problem on the same Levenberg–Marquardt core.
 """
 from dataclasses import dataclass
 
@@ -43,6 +44,7 @@ from .pose_init import poses_from_part_fits
 from ..geometry.procrustes import fit_rigid_soft
 from ..geometry.rotations import quat_canonical, quat_normalize
 from ..rig.skinning import AnchorGroups, check_pose_shapes, hybrid_skin
+from .least_squares import FixedRatioDamping, Limits, levenberg_marquardt, solve_damped
 
 MIN_SUPPORT = 4.0              # rigid-vertex weight a part needs for its own Procrustes fit
 BLOCK_BYTES = 40e6             # memory budget of one block of frames (~8 arrays (V, 3) per frame)
@@ -158,7 +160,7 @@ class _Problem:
         return H[:, :P, :P][:, free][:, :, free], H[:, :P, P][:, free], E
 
 
-def gauss_newton_system(model, poses, targets, vertex_weights=None, fit_scale=False):
+def normal_equations(model, poses, targets, vertex_weights=None, fit_scale=False):
     """Normal equations of the pose fit at ``poses``: ``H = JᵀWJ (N, P, P)``, gradient ``g = JᵀW r (N, P)``
     (half the gradient of E) and ``E (N,)``, in the parameter order of :func:`jacobians.pose_layout`
     without the scale column unless ``fit_scale``.  For tests and diagnostics."""
@@ -175,50 +177,46 @@ def _free_columns(B, fit_scale):
     return free
 
 
-def _lm_block(prob, poses, idx, max_iterations, tol):
-    """Levenberg–Marquardt on the frames ``idx`` (all together).  Returns (poses, E, iterations, converged)."""
-    n = len(idx)
-    if max_iterations <= 0:
-        E = prob.energy(poses, idx)
-        return poses, E, np.zeros(n, dtype=np.int64), E <= 0.0
-    free = prob.free
-    P = len(free)
-    H, g, E = prob.system(poses, idx)
-    mu = np.full(n, MU0)
-    iters = np.zeros(n, dtype=np.int64)
-    done = E <= 0.0
-    converged = done.copy()
-    for it in range(max_iterations):
-        act = np.flatnonzero(~done)
-        if not len(act):
-            break
-        d = np.diagonal(H[act], axis1=1, axis2=2)
-        D = d + DAMP_FLOOR * np.maximum(d.mean(axis=1, keepdims=True), 1e-300)
-        A = H[act] + (mu[act, None] * D)[:, :, None] * np.eye(d.shape[1])
-        step = np.linalg.solve(A, -g[act][..., None])[..., 0]
-        delta = np.zeros((len(act), P))
-        delta[:, free] = step
-        trial = apply_pose_increment(_take(poses, act), delta)
-        E_new = prob.energy(trial, idx[act])
-        iters[act] += 1
-        ok = E_new < E[act]
-        acc = act[ok]
-        decrease = E[acc] - E_new[ok]
-        small = (decrease <= tol * E[acc]) | (np.linalg.norm(step[ok], axis=1) <= tol)
-        _put(poses, acc, _take(trial, np.flatnonzero(ok)))
-        E[acc] = E_new[ok]
-        mu[acc] = np.maximum(mu[acc] / 3.0, MU_MIN)
-        rej = act[~ok]
-        mu[rej] *= 4.0
-        stuck = rej[mu[rej] > MU_MAX]                    # no decrease even for tiny steps: a minimum
-        converged[acc[small]] = True
-        converged[stuck] = True
-        done[acc[small]] = True
-        done[stuck] = True
-        refresh = acc[~small]
-        if len(refresh) and it + 1 < max_iterations:        # no system for an iteration that will not run
-            H[refresh], g[refresh], E[refresh] = prob.system(_take(poses, refresh), idx[refresh])
-    return poses, E, iters, converged
+class _FrameBlock:
+    """The frames ``frames`` of a :class:`_Problem`, starting at ``poses``, as independent problems of
+    :func:`solver.fit.least_squares.levenberg_marquardt` (their normal equations held as ``H``, ``g``)."""
+
+    def __init__(self, prob, poses, frames):
+        self.prob, self.poses, self.frames = prob, poses, frames
+        self.size = len(frames)
+        P = int(prob.free.sum())
+        self.H, self.g = np.empty((self.size, P, P)), np.empty((self.size, P))
+
+    def energy(self, idx):
+        return self.prob.energy(_take(self.poses, idx), self.frames[idx])
+
+    def build(self, idx):
+        self.H[idx], self.g[idx], E = self.prob.system(_take(self.poses, idx), self.frames[idx])
+        return E
+
+    def solve(self, idx, mu):
+        return solve_damped(self.H[idx], self.g[idx], mu, DAMP_FLOOR)
+
+    def try_steps(self, idx, steps):
+        delta = np.zeros((len(idx), len(self.prob.free)))
+        delta[:, self.prob.free] = steps
+        self.trial_idx, self.trial = idx, apply_pose_increment(_take(self.poses, idx), delta)
+        return self.prob.energy(self.trial, self.frames[idx])
+
+    def accept(self, which):
+        _put(self.poses, self.trial_idx[which], _take(self.trial, np.flatnonzero(which)))
+
+    def step_norm(self, steps):
+        return np.linalg.norm(steps, axis=1)
+
+
+def _lm_block(prob, poses, frames, max_iterations, tol):
+    """Levenberg–Marquardt on ``frames`` (all together) from ``poses``, ÷3 / ×4 damping from μ = MU0 per
+    frame.  Returns (poses, E, iterations, converged)."""
+    block = _FrameBlock(prob, poses, frames)
+    damping = FixedRatioDamping(np.full(len(frames), MU0), mu_min=MU_MIN, mu_max=MU_MAX)
+    out = levenberg_marquardt(block, damping, Limits(trials=max_iterations, decrease_tol=tol, step_tol=tol))
+    return block.poses, out.energy, out.trials, out.converged
 
 
 def _block_size(V):

@@ -1,4 +1,4 @@
-"""Initial per-scan poses from per-part rigid fits (spec §3.2 step 6).
+"""Initial per-scan poses from per-part rigid fits (dissertation (model-adaptive mocap) §3.2 step 6).
 
 Part b's chain map is ``M_b = M_parent ∘ Rot(R_b about heads[b])`` so its linear part is
 ``W_b = W_parent R_b``: the world-axes joint rotation is ``R_b = W_parentᵀ W_b`` and the bone-local

@@ -1,7 +1,11 @@
 """The model bundle: one ``.npz`` file (format "articula-model/1") holding a model and, optionally,
-poses and provenance.  Keys exactly as the table in ../shared/ARCHITECTURE.md; provenance is stored
-as a JSON string under ``provenance``.  Files are read with ``allow_pickle=False``; a broken file
-raises :class:`ArticulaInputError` naming the key and the problem, a missing file names the path.
+poses and provenance (docs/skinning.md).  Keys: ``format``; the model's :data:`MODEL_KEYS`
+(``rest_vertices`` (V, 3) float64, ``faces`` (F, 3) int32, ``bone_names`` (B,) str, ``parents`` (B,)
+int32, ``heads``/``tails`` (B, 3) and ``frames`` (B, 3, 3) float64, ``anchor`` (V,) int32,
+``twist_weights``/``swing_weights`` (V, B) float32, as in :class:`~..rig.model.Model`); the poses'
+:data:`POSE_KEYS` (``pose_rotations`` (N, B, 4), ``pose_translations`` (N, 3), ``pose_scales`` (N,));
+``provenance``, a JSON string.  Files are read with ``allow_pickle=False``; a broken file raises
+:class:`ArticulaInputError` naming the key and the problem, a missing file names the path.
 """
 import json
 import os

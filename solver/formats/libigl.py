@@ -1,5 +1,5 @@
-"""Readers of libigl's plain-text rig formats, as used by public skinning ground-truth data
-(``../shared/data/skinning_gt``: a mesh, its skeleton, exact weights and per-pose bone transforms).
+"""Readers of libigl's plain-text rig formats, as used by public skinning ground-truth data (a mesh,
+its skeleton, exact weights and per-pose bone transforms).
 
 * ``.tgf`` skeleton graph: lines ``index x y z`` (1-based joint positions), a ``#`` line, then lines
   ``i j`` (one bone per edge, from joint i to joint j, 1-based), optionally another ``#`` and more lines.

@@ -17,10 +17,8 @@ specification (§9: None, Sub, Up, Average, Paeth) are undone:
   of H·W scalar ones;
 * the remaining Up rows are a segmented cumulative sum down the columns.
 
-:func:`read_png16_many` unfilters several frames in one wavefront (fewer, larger numpy steps).
-Measured (``./run bench depth``, CPU time on a shared machine): ~5 ms per 640x480 frame written by
-:func:`write_png16` (Up filter); libpng-encoded Kinect frames (mixed Sub/Up/Paeth rows) ~18 ms
-one by one, ~11 ms per frame through :func:`read_png16_many`.
+:func:`read_png16_many` unfilters several frames in one wavefront (fewer, larger numpy steps), which
+pays off on files with Average/Paeth rows (libpng-encoded Kinect frames); ``./run bench depth`` times it.
 
 Writer (:func:`write_png16`): uint16 (or uint8) (H, W) arrays as grayscale PNG with a chosen
 filter per row (any of the five, vectorised because forward filtering only reads raw bytes).
@@ -53,12 +51,15 @@ def read_png16(path) -> np.ndarray:
     millimetres with 0 meaning "no measurement".
     """
     path = os.fspath(path)
+    return decode_png(_read_bytes(path), name=path)
+
+
+def _read_bytes(path: str) -> bytes:
     try:
         with open(path, "rb") as f:
-            data = f.read()
+            return f.read()
     except OSError as exc:
         raise ArticulaInputError(f"{path}: cannot read PNG ({exc.strerror or exc})") from exc
-    return decode_png(data, name=path)
 
 
 def decode_png(data: bytes, name: str = "<bytes>") -> np.ndarray:
@@ -72,15 +73,7 @@ def read_png16_many(paths, batch: int = 8) -> list:
     ``[read_png16(p) for p in paths]``, but frames of equal width and pixel format are unfiltered
     together, ``batch`` at a time, which amortises the per-step cost of the Average/Paeth wavefront
     (several times faster on libpng-encoded frames)."""
-    parsed = []
-    for path in paths:
-        path = os.fspath(path)
-        try:
-            with open(path, "rb") as f:
-                data = f.read()
-        except OSError as exc:
-            raise ArticulaInputError(f"{path}: cannot read PNG ({exc.strerror or exc})") from exc
-        parsed.append(_inflate(data, path))
+    parsed = [_inflate(_read_bytes(os.fspath(p)), os.fspath(p)) for p in paths]
     out = [None] * len(parsed)
     groups = {}
     for i, (info, filtered, ftypes) in enumerate(parsed):

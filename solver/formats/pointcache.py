@@ -21,7 +21,7 @@ import struct
 import numpy as np
 
 from ..errors import ArticulaInputError
-from .meshes import read_bytes
+from .polymesh import read_bytes
 
 CACHE_EXTENSIONS = (".mdd", ".pc2")
 

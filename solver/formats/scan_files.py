@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ArticulaInputError
-from .meshes import MESH_EXTENSIONS, PolyMesh, read_mesh
+from .mesh_files import MESH_EXTENSIONS, read_mesh
+from .polymesh import PolyMesh
 
 _DIGITS = re.compile(r"(\d+)")
 
@@ -26,6 +27,7 @@ def natural_key(name: str):
 
 
 def natural_sorted(names):
+    """``names`` in natural order (:func:`natural_key`); the one natural sort of Articula's file lists."""
     return sorted(names, key=natural_key)
 
 

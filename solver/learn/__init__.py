@@ -1,4 +1,5 @@
-"""Rig learning from registered scans (dissertation on model-adaptive motion capture, chapter 3):
-key scans, segmentation by motion, skeleton, joints and poses, swing/twist weights, rest shape, and the
-pipeline that alternates them (``pipeline.learn_rig``).
+"""Rig learning from registered scans (dissertation (model-adaptive mocap) chapter 3): key scans,
+segmentation by motion, mirror symmetry, skeleton, joints and poses, swing/twist weights, rest shape, the
+pipeline that alternates them (``pipeline.learn_rig``), its settings (``options.LearnOptions``) and its
+report (``report.make_report``).
 """

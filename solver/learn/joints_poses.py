@@ -1,4 +1,5 @@
-"""Joints and per-scan poses by Levenberg–Marquardt with a Schur complement (spec §3.4 (C)).
+"""Joints and per-scan poses by Levenberg–Marquardt with a Schur complement (dissertation
+(model-adaptive mocap) §3.4 (C); step (a) of the rig learner, docs/learn_rig_solver.md).
 
 Parameters (all increments, applied by :func:`apply_increment`):
 
@@ -11,22 +12,22 @@ Parameters (all increments, applied by :func:`apply_increment`):
   The root head and frame are gauge (they only re-parameterise the global motion) and stay fixed.
 
 Residuals: data ``p − s`` and ``√α (L p − L s)`` of every scan, and the left/right bone-length symmetry
-residuals ``√λ (‖h_suc(l) − h_l‖ − ‖h_suc(r) − h_r‖)`` (spec Eq. 3.23 with the recommended
-length-difference form), and an optional weak joint prior ``√κ (h_b − h⁰_b)`` (not in the spec: a
-proposal of ours, off by default, see :class:`JointPoseProblem`).  The Jacobian has the arrow-head
-structure ``[S_m | O_m]`` per scan; the normal equations are reduced to the shared block by the Schur complement
+residuals ``√λ (‖h_suc(l) − h_l‖ − ‖h_suc(r) − h_r‖)`` (dissertation (model-adaptive mocap) Eq. 3.23 in
+the length-difference form), and an optional weak joint prior ``√κ (h_b − h⁰_b)`` (not in the
+dissertation, off by default, see :class:`JointPoseProblem`).  The Jacobian has the arrow-head structure
+``[S_m | O_m]`` per scan; the normal equations are reduced to the shared block by the Schur complement
 ``(H_ss − Σ_m H_so,m H_oo,m⁻¹ H_os,m) δs = −g_s + Σ_m H_so,m H_oo,m⁻¹ g_o,m`` and back-substituted.
-Damping: Levenberg–Marquardt ``μ (diag H_data + ε)`` (the diagonal of the data part: the symmetry
-weight λ ≈ 1e10 would otherwise freeze the joints it couples); a step is accepted only if the objective
-decreases.
+The iterations are those of :func:`solver.fit.least_squares.levenberg_marquardt` with the gain-ratio
+damping rule, damping ``μ (diag H_data + ε)`` (the diagonal of the data part: the symmetry weight
+λ ≈ 1e10 would otherwise freeze the joints it couples); a step is accepted only if the objective decreases.
 
 Jacobian of the posed vertices: analytic, from :mod:`solver.rig.jacobians`.  The solver never forms it
 densely: a vertex depends only on its anchor's chain and children, so each anchor group's Jacobian is
 ``R T`` (per-vertex columns R, per-scan combination T, :func:`jacobians.group_jacobian`) and the
-normal-equation blocks are assembled from the small Gram matrices of R (:func:`gauss_newton_blocks`,
+normal-equation blocks are assembled from the small Gram matrices of R (:func:`normal_equation_blocks`,
 BLAS on one thread).  :func:`posed_jacobians` gives the dense Jacobian, :func:`posed_jacobians_fd` the
-same by central differences through :func:`apply_increment`, :func:`normal_blocks` the blocks from dense
-Jacobians (the tests compare them).
+same by central differences through :func:`apply_increment`, :func:`dense_normal_blocks` the blocks from
+dense Jacobians (the tests compare them).
 """
 import copy
 
@@ -36,6 +37,7 @@ from .. import parallel
 from ..errors import Cancelled  # noqa: F401  (raised by progress callbacks)
 from ..rig.model import Poses, Skeleton
 from ..geometry.rotations import matrix_to_quat, quat_conj, quat_mul, quat_normalize, rotvec_to_matrix, rotvec_to_quat
+from ..fit.least_squares import GainRatioDamping, Limits, levenberg_marquardt
 from ..parallel import single_blas_thread
 from ..rig.jacobians import _chain_of, dense_jacobian, expand_gram, gram, group_jacobian, jacobian_terms
 from ..rig.skinning import AnchorGroups, hybrid_skin
@@ -96,7 +98,7 @@ def posed_jacobians(model, poses, own_only=False):
     """Analytic Jacobians of the posed vertices ``(J_shared (M,3V,n_s), J_own (M,3V,n_o))`` in this
     module's layout, from :mod:`solver.rig.jacobians` (pose, joint-centre and frame Jacobians; the frame
     columns are rotations about the frame's X and Z axes).  own_only: poses only, ``J_shared`` has no
-    columns.  Dense (for tests; the solver uses the compact blocks of :func:`gauss_newton_blocks`)."""
+    columns.  Dense (for tests; the solver uses the compact blocks of :func:`normal_equation_blocks`)."""
     M, V = len(poses), model.num_vertices
     cols, n_s = _columns(model.skeleton.num_bones, own_only)
     n = n_s + sizes(model.skeleton.num_bones)[1]
@@ -145,8 +147,8 @@ def symmetry_residuals(skeleton, sym_pairs):
     return r, J
 
 
-def normal_blocks(Js, Jo, rd, rl, L, alpha):
-    """Gauss–Newton blocks from dense posed-vertex Jacobians and residuals (reference for tests).
+def dense_normal_blocks(Js, Jo, rd, rl, L, alpha):
+    """Normal-equation blocks from dense posed-vertex Jacobians and residuals (reference for tests).
 
     Js (M,3V,n_s), Jo (M,3V,n_o); rd, rl (M,V,3) data and Laplacian residuals; L (V,V).
     Returns ``H_ss (n_s,n_s), H_so (M,n_s,n_o), H_oo (M,n_o,n_o), g_s (n_s,), g_o (M,n_o)``."""
@@ -249,7 +251,7 @@ def _chunk_system(st, model, poses, sl, own_only):
         posed[:, group[2]:group[3]] = xp
         RT.append((R, T))
     rl = (st.L @ posed.transpose(1, 0, 2).reshape(V, -1)).reshape(V, N, 3).transpose(1, 0, 2) - st.scan_lap[sl]
-    H = np.zeros((st.n + 1, st.n + 1, N))        # scans last: each scatter moves whole N-vectors (4-5x faster)
+    H = np.zeros((st.n + 1, st.n + 1, N))        # scans last: each scatter moves whole N-vectors
     for (R, T), group, index, (L_in, inner) in zip(RT, groups, st.index, st.interior):
         R[..., -1] = posed[:, group[2]:group[3]] - st.scans[sl, group[2]:group[3]]
         G = gram(R)
@@ -282,21 +284,21 @@ def _boundary_gram(RT, sources, rl, width):
     return np.matmul(Z, np.swapaxes(Z, 1, 2))
 
 
-CHUNK_VERTEX_SCANS = 54000   # vertex-scans whose compact Jacobians are held at once: 4 scans of 13,380 v
-                             # (2 scans: +35 % CPU, 8: the same); small meshes take many scans per chunk
+CHUNK_VERTEX_SCANS = 54000   # vertex-scans whose compact Jacobians are held at once: 4 scans of 13,380 v;
+                             # small meshes take many scans per chunk
 
 
 def scan_chunk(num_vertices):
-    """Scans per chunk of :func:`gauss_newton_blocks` for meshes of ``num_vertices`` vertices (≥ 1)."""
+    """Scans per chunk of :func:`normal_equation_blocks` for meshes of ``num_vertices`` vertices (≥ 1)."""
     return max(1, CHUNK_VERTEX_SCANS // max(int(num_vertices), 1))
 
 
-def gauss_newton_blocks(model, poses, objective, chunk=None, own_only=False, structure=None):
-    """Gauss–Newton blocks (those of :func:`normal_blocks`) at ``(model, poses)`` for ``objective``,
+def normal_equation_blocks(model, poses, objective, chunk=None, own_only=False, structure=None):
+    """Normal-equation blocks (those of :func:`dense_normal_blocks`) at ``(model, poses)`` for ``objective``,
     accumulated over chunks of scans (default :func:`scan_chunk`) from compact per-anchor-group Jacobians
-    (:class:`_Structure`; pass ``structure`` to reuse one built for this model's anchors and weights), so that only ``chunk`` scans'
-    blocks are in memory at once.  Returns ``H_ss, H_so (M,..), H_oo (M,..), g_s, g_o (M,..)``; with
-    own_only (poses only) the shared blocks have size 0."""
+    (:class:`_Structure`; pass ``structure`` to reuse one built for this model's anchors and weights), so
+    that only ``chunk`` scans' blocks are in memory at once.  Returns ``H_ss, H_so (M,..), H_oo (M,..),
+    g_s, g_o (M,..)``; with own_only (poses only) the shared blocks have size 0."""
     st = _Structure(model, objective, own_only) if structure is None else structure
     M = len(poses)
     if chunk is None:                                   # at least one chunk per thread
@@ -370,120 +372,100 @@ def relative_joint_prior(model, poses, objective, rho):
     ~ tr/3) feel the prior as a ρ-fraction; a near-hinge joint's axis direction (curvature ≈ 0) is held
     by it.  Scale-free: the same ρ suits any scan count, vertex count and unit."""
     B = model.skeleton.num_bones
-    H_ss = gauss_newton_blocks(model, poses, objective)[0]
+    H_ss = normal_equation_blocks(model, poses, objective)[0]
     heads = 5 * np.arange(B - 1)[:, None] + np.arange(3)
     return rho * np.diag(H_ss)[heads].sum(axis=1) / 3.0
 
 
-class Damping:
-    """Levenberg–Marquardt damping ``μ`` (at least 1e-9).  After an accepted step with gain ratio ρ
-    (actual / predicted decrease) ``μ ← μ · max(1/3, 1 − (2ρ − 1)³)`` (the decrease of H. B. Nielsen,
-    *Damping parameter in Marquardt's method*, 1999: by 3 only for steps the quadratic model predicted
-    well), after a rejected one ``μ ← 4μ``.  A caller that optimises the same problem again passes the
-    same object, so that the next call starts where this one ended."""
+class _JointPoseLeastSquares:
+    """The joints-and-poses step as one problem of :func:`solver.fit.least_squares.levenberg_marquardt`:
+    normal-equation blocks (:func:`normal_equation_blocks` plus the problem's shared terms), damping
+    ``μ (diag H_data + 10⁻⁶ mean diag H_data)`` per block from the data part only (the symmetry weight
+    λ ≈ 1e10 would otherwise freeze the joints it couples), steps by the Schur complement
+    (:func:`schur_solve`; per scan with fix_joints).  ``log``: E after every accepted step."""
+    size = 1
 
-    def __init__(self, mu=1e-3):
-        self.mu = float(mu)
+    def __init__(self, model, poses, problem, fix_joints, value):
+        self.model, self.poses, self.problem, self.fix_joints = model, poses, problem, fix_joints
+        self.structure = _Structure(model, problem.objective, fix_joints)      # anchors and weights stay fixed
+        self.value = value
+        self.log = []
 
-    def accepted(self, rho=1.0):
-        self.mu = max(self.mu * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-9)
+    def energy(self, idx):
+        if self.value is None:
+            self.value = self.problem.value(self.model, self.poses, self.structure.groups)
+        return np.array([self.value], dtype=np.float64)
 
-    def rejected(self):
-        self.mu *= 4.0
+    def build(self, idx):
+        H_ss, self.H_so, self.H_oo, g_s, self.g_o = normal_equation_blocks(
+            self.model, self.poses, self.problem.objective, own_only=self.fix_joints, structure=self.structure)
+        self.diag_s = np.diag(H_ss).copy()
+        if not self.fix_joints:
+            H_ss, g_s = self.problem.add_shared_terms(self.model.skeleton, H_ss, g_s)
+        self.H_ss, self.g_s = H_ss, g_s
+        self.scale_s = self.diag_s.mean() if self.diag_s.size else 1.0
+        self.scale_o = np.diagonal(self.H_oo, axis1=1, axis2=2).mean()
+        return None
+
+    def solve(self, idx, mu):
+        mu = mu[0]
+        Ds = mu * (self.diag_s + 1e-6 * self.scale_s)
+        Do = mu * (np.diagonal(self.H_oo, axis1=1, axis2=2) + 1e-6 * self.scale_o)
+        H_oo_d = self.H_oo + Do[:, :, None] * np.eye(self.H_oo.shape[1])
+        if self.fix_joints:
+            x_o = np.linalg.solve(H_oo_d, -self.g_o[..., None])[..., 0]
+            return np.zeros(sizes(self.model.skeleton.num_bones)[0]), x_o
+        return schur_solve(self.H_ss + np.diag(Ds), self.H_so, H_oo_d, -self.g_s, -self.g_o)
+
+    def try_steps(self, idx, steps):
+        skeleton, poses = apply_increment(self.model.skeleton, self.poses, *steps)
+        self.trial = _with(self.model, skeleton), poses
+        self.trial_value = self.problem.value(*self.trial, self.structure.groups)
+        return np.array([self.trial_value], dtype=np.float64)
+
+    def accept(self, which):
+        if which[0]:
+            self.model, self.poses = self.trial
+            self.log.append(self.trial_value)
+
+    def predicted_decrease(self, idx, steps):
+        """Decrease of the Gauss–Newton model ``E + 2gᵀx + xᵀHx`` at the step (m²); the shared part is
+        left out when its blocks are empty (poses only)."""
+        x_s, x_o = steps
+        xHx = np.einsum("mi,mij,mj->", x_o, self.H_oo, x_o)
+        linear = np.sum(self.g_o * x_o)
+        if len(self.g_s):
+            xHx += x_s @ self.H_ss @ x_s + 2.0 * np.einsum("i,mij,mj->", x_s, self.H_so, x_o)
+            linear += self.g_s @ x_s
+        return np.array([-2.0 * linear - xHx])
+
+    def step_norm(self, steps):
+        x_s, x_o = steps
+        return np.array([np.sqrt(x_s @ x_s + np.sum(x_o * x_o))])
 
 
-def optimise_joints_and_poses(model, poses, problem, iterations=10, mu=1e-3, step_tol=1e-9, progress=None,
-                              fix_joints=False, damping=None, value=None, gain_tol=0.0):
-    """Levenberg–Marquardt on joints (centres + twist axes) and all per-scan poses.
+def optimise_joints_and_poses(model, poses, problem, iterations=10, damping=None, step_tol=1e-9, progress=None,
+                              fix_joints=False, value=None, gain_tol=0.0):
+    """Levenberg–Marquardt on joints (centres + twist axes) and all per-scan poses (module docstring).
 
     model: current :class:`Model` (its skin and rest mesh are held fixed); poses: current poses;
     problem: :class:`JointPoseProblem`.  fix_joints: keep joint centres and axes (poses only).
+    iterations: normal-equation builds at most, each followed by up to 12 trial steps with rising damping.
+    damping: a :class:`solver.fit.least_squares.GainRatioDamping` to start from (μ = 1e-3 if None), updated
+    in place so that the next round continues from it.  value: the problem's value at (model, poses) if
+    the caller knows it (else computed).  step_tol: stop after a step ``‖δ‖ ≤ step_tol``.  gain_tol (not in
+    the dissertation): stop when the next iteration is expected to gain less than ``gain_tol · E``
+    (:func:`solver.fit.least_squares.stalls`); 0: always run ``iterations``.
+    ``progress(fraction, stage, objective)`` after each iteration.
     Returns ``(model, poses, log)`` with log the objective after every accepted step (never increasing).
-    Damping ``μ (diag H_data + ε)`` (:class:`Damping`).  damping: a :class:`Damping` to start from
-    (μ = mu if None), updated in place.  value: the problem's value at (model, poses) if the caller
-    knows it (else computed).  Measured on MakeHuman (19 parts, 30 scans, the first two main
-    rounds): every call starting at μ = 1e-3 with ÷3 / ×4 took 15 objective evaluations for 6 iterations
-    (the first steps of a call overshooting to 2-3x E), ending at E 28.789 / 26.276; carrying μ over
-    with ÷3 / ×4: 12, 28.789 / 26.238; with the gain-ratio decrease: 9, 28.815 / 26.210.  Nielsen's
-    ×2, ×4, ×8 … increase instead of ×4 left the symmetry term of the second warm-start round at 132
-    instead of 11 (not kept).
-    gain_tol (not in the spec): after two accepted iterations with decreases d₁, d₂, stop when the next
-    one's expected decrease d₂²/d₁ (linear convergence at the observed rate) is below gain_tol · E, so
-    that a call does not pay a system build (the bulk of an iteration) for almost nothing; 0: always run
-    ``iterations``.  Measured relative decreases of learn_rig's three iterations per round: MakeHuman
-    game_engine (19 parts) main rounds 3e-3-8e-3, 2e-4-2e-3, 4e-5-2e-4; Bone_Anim (20 parts, α = 1)
-    2e-2-5e-2, 8e-3-7e-2, 2e-3-3e-2.
-    ``progress(fraction, stage, objective)`` after each iteration.  Runs with numpy's BLAS on one thread
-    (:func:`solver.parallel.single_blas_thread`)."""
-    damping = Damping(mu) if damping is None else damping
+    Runs with numpy's BLAS on one thread (:func:`solver.parallel.single_blas_thread`)."""
+    damping = GainRatioDamping() if damping is None else damping
+    lsq = _JointPoseLeastSquares(model, poses, problem, fix_joints, value)
+    limits = Limits(steps=iterations, rejections=12, step_tol=step_tol, gain_tol=gain_tol)
+    report = None
+    if progress is not None:
+        def report(idx, used, energy):
+            progress(used[0] / iterations, "joints and poses (Levenberg-Marquardt)", float(energy[0]))
     with single_blas_thread():
-        return _levenberg_marquardt(model, poses, problem, iterations, damping, step_tol, progress, fix_joints,
-                                    value, gain_tol)
-
-
-def _predicted_decrease(H_ss, H_so, H_oo, g_s, g_o, x_s, x_o):
-    """Decrease of the Gauss–Newton model ``E + 2gᵀx + xᵀHx`` at the step (x_s, x_o) (m²); the shared
-    part is left out when its blocks are empty (poses only)."""
-    xHx = np.einsum("mi,mij,mj->", x_o, H_oo, x_o)
-    linear = np.sum(g_o * x_o)
-    if len(g_s):
-        xHx += x_s @ H_ss @ x_s + 2.0 * np.einsum("i,mij,mj->", x_s, H_so, x_o)
-        linear += g_s @ x_s
-    return -2.0 * linear - xHx
-
-
-def _levenberg_marquardt(model, poses, problem, iterations, damping, step_tol, progress, fix_joints, E,
-                         gain_tol=0.0):
-    """The iterations of :func:`optimise_joints_and_poses` (E: the value at the start, or None)."""
-    st = _Structure(model, problem.objective, fix_joints)           # anchors and weights stay fixed
-    n_s, _ = sizes(model.skeleton.num_bones)
-    E = problem.value(model, poses, st.groups) if E is None else float(E)
-    E_start = E
-    log = []
-    for it in range(iterations):
-        H_ss, H_so, H_oo, g_s, g_o = gauss_newton_blocks(model, poses, problem.objective, own_only=fix_joints,
-                                                         structure=st)
-        # damping from the data part only: the huge symmetry weight must not freeze the joints it couples
-        diag_s = np.diag(H_ss).copy()
-        if not fix_joints:
-            H_ss, g_s = problem.add_shared_terms(model.skeleton, H_ss, g_s)
-        scale_s = diag_s.mean() if diag_s.size else 1.0
-        scale_o = np.diagonal(H_oo, axis1=1, axis2=2).mean()
-        accepted = False
-        for _ in range(12):
-            Ds = damping.mu * (diag_s + 1e-6 * scale_s)
-            Do = damping.mu * (np.diagonal(H_oo, axis1=1, axis2=2) + 1e-6 * scale_o)
-            H_oo_d = H_oo + Do[:, :, None] * np.eye(H_oo.shape[1])
-            if fix_joints:
-                x_s, x_o = np.zeros(n_s), np.linalg.solve(H_oo_d, -g_o[..., None])[..., 0]
-            else:
-                x_s, x_o = schur_solve(H_ss + np.diag(Ds), H_so, H_oo_d, -g_s, -g_o)
-            sk_new, poses_new = apply_increment(model.skeleton, poses, x_s, x_o)
-            model_new = _with(model, sk_new)
-            E_new = problem.value(model_new, poses_new, st.groups)
-            if E_new < E:
-                accepted = True
-                predicted = _predicted_decrease(H_ss, H_so, H_oo, g_s, g_o, x_s, x_o)
-                damping.accepted((E - E_new) / predicted if predicted > 0 else 1.0)
-                step = np.sqrt(x_s @ x_s + np.sum(x_o * x_o))
-                model, poses, E = model_new, poses_new, E_new
-                break
-            damping.rejected()
-        if progress is not None:
-            progress((it + 1) / iterations, "joints and poses (Gauss-Newton)", E)
-        if not accepted:
-            break
-        log.append(E)
-        if step < step_tol or _stalling(log, E_start, gain_tol):
-            break
-    return model, poses, log
-
-
-def _stalling(log, E_start, gain_tol):
-    """Whether the next iteration is expected to gain less than ``gain_tol · E``: the last two decreases
-    of ``[E_start] + log`` are d₁, d₂ and the next is expected to be d₂²/d₁."""
-    if gain_tol <= 0 or len(log) < 2:
-        return False
-    seq = [E_start] + log
-    d1, d2 = seq[-3] - seq[-2], seq[-2] - seq[-1]
-    return d1 > 0 and d2 * d2 / d1 < gain_tol * seq[-1]
+        levenberg_marquardt(lsq, damping, limits, report)
+    return lsq.model, lsq.poses, lsq.log

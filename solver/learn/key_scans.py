@@ -3,9 +3,10 @@
 The parameters that all scans share (skeleton, swing/twist weights, rest vertices) are fixed by far fewer
 scans than an animation holds: consecutive frames of a 400-frame clip differ by a few degrees, so most of
 them repeat what their neighbours say about the rig while multiplying the cost of every step of the
-alternation.  This goes beyond the spec (§3 learns from all scans; it has ≤ 100 scans in mind):
-:func:`solver.learn.pipeline.learn_rig` learns from ``select_key_scans(scans, K)`` and then fits the pose of every
-other scan with the learned model fixed (:func:`solver.fit.pose_fit.fit_poses`, the held-out fit).
+alternation.  This goes beyond dissertation (model-adaptive mocap) chapter 3, which learns from all scans
+(it has ≤ 100 scans in mind): :func:`solver.learn.pipeline.learn_rig` learns from
+``select_key_scans(scans, K)`` (K = ``LearnOptions.key_scans``) and then fits the pose of every other scan
+with the learned model fixed (:func:`solver.fit.pose_fit.fit_poses`, the held-out fit).
 
 Selection: farthest-point sampling over the scans' shapes with their rigid motion taken out.  Each scan is
 rigidly aligned to the first key (Procrustes over a vertex subsample) and the scans are compared by the RMS
@@ -13,17 +14,12 @@ distance of the aligned subsample; starting from the first key, the scan farthes
 is added until there are K.  This picks the extreme poses first (the ones that pin joints and weights) and
 never two near-identical frames.  Deterministic; units are those of the input (metres).
 
-Measured on Dem Bones' Bone_Anim (400 frames × 754 vertices, α = 1, 2 threads; ``./run bench learn --order
-dembones``, bench/results/learn-dembones.txt): at 5 / 10 / 20 parts, from 40 key scans with the other 360
-poses fitted, RMSE over all 400 frames 0.0279 / 0.0181 / 0.0139 in 12.9 / 18.8 / 28.9 s; from every scan
-0.0277 / 0.0203 / 0.0134 in 40.7 / 50.9 / 68.1 s.  (Fitting a frame's pose alone minimises its data term
-without the Laplacian's pull, which is why 10 parts even gains.)  20 keys at 10 parts: 0.0195-0.0201.
+docs/learn_rig_solver.md has the accuracy and time measured with and without key scans.
 """
 import numpy as np
 
 from ..geometry.procrustes import fit_rigid
 
-KEY_SCANS = 40        # learn_rig's default: learn from at most this many scans
 SUBSAMPLE = 1000      # vertices compared per scan (evenly spaced indices)
 
 

@@ -1,4 +1,4 @@
-"""The rig-learning objective (spec §3.3, Eq. 3.19-3.20).
+"""The rig-learning objective (dissertation (model-adaptive mocap) §3.3, Eq. 3.19-3.20).
 
 ``Q = Σ_m Σ_v ‖s_m,v − p_m,v‖² + α ‖L(s_m)_v − L(p_m)_v‖²`` with s the scans, p the posed model
 (``hybrid_skin``), L the uniform Laplacian of the shared topology.  Units: m² (positions in metres).

@@ -1,4 +1,4 @@
-"""Rest vertices by one sparse linear least-squares solve (spec §3.4 (B)).
+"""Rest vertices by one sparse linear least-squares solve (dissertation (model-adaptive mocap) §3.4 (B)).
 
 With weights, joints and poses fixed every posed vertex is affine in its rest position,
 ``p_m,v = A_m,v x_v + b_m,v`` (:func:`solver.rig.skinning.affine_form`).  Q is then quadratic in x:
@@ -8,25 +8,17 @@ With weights, joints and poses fixed every posed vertex is affine in its rest po
 ``C_vw = Σ_m A_m,vᵀ A_m,w``: the C blocks of the upper triangle of G's pattern are computed at once
 (batched 3×(3M) by (3M)×3 products), the lower ones are their transposes.  The system is solved by
 sparse LU with a symmetric ordering and diagonal pivots (scipy's SuperLU, ``MMD_AT_PLUS_A``,
-``SymmetricMode``; no CHOLMOD); SuperLU's default COLAMD column ordering fills 3.6x more.
-MakeHuman 13,380 vertices, 30 scans, α = 100 (CPU, loaded 2-core machine): assembly 2.8-3.4 s with a
-sparse product per scan -> 0.22-0.29 s, factorisation + solve 7.5-8.2 s -> 0.56-0.65 s; the solutions
-agree to 3e-13 m.  Timed in bench/bench_learn_speed.py.
+``SymmetricMode``; no CHOLMOD): SuperLU's default COLAMD column ordering fills several times more.
 
-Repeated solves (:class:`ShapePreconditioner`, beyond the spec: learn_rig solves for the rest vertices in
-every round with the same mesh and α): conjugate gradients on the same normal equations, started from
-the current rest vertices and preconditioned by the factorisation of the scalar matrix ``I + α G``
-(V×V, factored once) scaled per vertex by ``c_v = tr(C_vv) / 3``: where neighbouring vertices move alike
-``C_vw ≈ √(c_v c_w) I``, so the preconditioned spectrum is close to 1.  It stops at a residual of
-``CG_RTOL`` × the right-hand side (Q then differs from the direct solution's by ``rᵀN⁻¹r``: at 1e-9
-on MakeHuman game_engine, Q 40.112 m², the rest vertices moved by 1.1e-9 m and Q by 1.4e-14 against the
-1e-12 solution)
-and falls back to the direct solve if that is not reached in ``CG_MAX_ITERATIONS``.  Measured on
-MakeHuman (13,380 vertices × 30 scans, α = 100, from the rest scan): 36 iterations, 0.48 s vs 1.15 s
-for SuperLU on the 3V system (0.14 s for the scalar factorisation, once per α); largest difference to
-the direct solution 1.3e-12 m.  Many scans: the pair products are computed in
-cache-sized chunks (:func:`_pair_products`); Dem Bones' Bone_Anim (754 vertices × 400 frames, 10 parts,
-α = 1), all rest-vertex solves of one learn_rig: 6.8 s -> 1.07 s CPU, the same solutions bit for bit.
+Repeated solves (:class:`ShapePreconditioner`, beyond the dissertation: learn_rig solves for the rest
+vertices in every round with the same mesh and α): conjugate gradients on the same normal equations,
+started from the current rest vertices and preconditioned by the factorisation of the scalar matrix
+``I + α G`` (V×V, factored once) scaled per vertex by ``c_v = tr(C_vv) / 3``: where neighbouring
+vertices move alike ``C_vw ≈ √(c_v c_w) I``, so the preconditioned spectrum is close to 1.  It stops at
+a residual of ``CG_RTOL`` × the right-hand side (Q then differs from the direct solution's by
+``rᵀN⁻¹r``, far below the objective's own rounding) and falls back to the direct solve if that is not
+reached in ``CG_MAX_ITERATIONS``.  Many scans: the pair products are computed in cache-sized chunks
+(:func:`_pair_products`).  docs/learn_rig_solver.md has the timings.
 """
 import numpy as np
 import scipy.sparse as sp
@@ -41,11 +33,8 @@ def _pair_products(A, v, w):
     """``C (n,3,3)`` with ``C[k] = Σ_m A[m, v[k]]ᵀ A[m, w[k]]`` for A (M,V,3,3) and pairs v, w (n,).
 
     The pairs are processed in chunks of ``CHUNK_BYTES / (72 M)`` pairs (each gathered operand
-    ``(chunk, 3M, 3)`` float64 ~2 MiB), so the gathers are written to cache-resident buffers; with a
-    fixed 8192 pairs per chunk the gathers (up to 236 MB each at M = 400) ran at memory/page-fault speed.
-    Measured (process CPU, 2-core shared machine, one BLAS thread): Dem Bones' Bone_Anim, 754 vertices ×
-    400 frames, 8,969 pairs: 1.33-1.45 s -> 0.075-0.095 s; MakeHuman 13,380 vertices × 30 scans,
-    135,042 pairs: 0.17-0.18 s -> 0.10-0.11 s.  The products themselves are unchanged (bitwise the same C)."""
+    ``(chunk, 3M, 3)`` float64 ~2 MiB), so the gathers are written to cache-resident buffers: with a
+    fixed chunk of pairs the gathers of many scans grow to hundreds of MB and run at memory speed."""
     M, V = A.shape[:2]
     stacked = np.ascontiguousarray(A.transpose(1, 0, 2, 3).reshape(V, 3 * M, 3))     # rows (m, j)
     stacked_t = np.ascontiguousarray(stacked.transpose(0, 2, 1))
@@ -106,9 +95,7 @@ def _solve_spd(N, rhs):
     return x
 
 
-CG_RTOL = 1e-9           # ‖N x − rhs‖ / ‖rhs‖ at which conjugate gradients stop (MakeHuman game_engine, a
-                         # main round: 32 iterations at 1e-12, 26 at 1e-10, 20 at 1e-8, which moves the
-                         # rest vertices by at most 8e-9 m)
+CG_RTOL = 1e-9           # ‖N x − rhs‖ / ‖rhs‖ at which conjugate gradients stop
 CG_MAX_ITERATIONS = 200  # then the direct solve
 
 

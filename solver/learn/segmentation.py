@@ -1,7 +1,7 @@
-"""Segmentation of a registered mesh sequence into k rigid parts by their motion (spec §3.2 step 2).
+"""Segmentation of a registered mesh sequence into k rigid parts by their motion (dissertation
+(model-adaptive mocap) §3.2, step 2; docs/learn_rig_solver.md).
 
-Method (rigid-transform clustering in the spirit of Le & Deng's rigid-bone initialisation, written
-from the spec's description):
+Method (rigid-transform clustering in the spirit of Le & Deng's rigid-bone initialisation):
 
 1. seeding: k-means++ on vertex trajectories (the concatenated 3M positions of a vertex over the M
    scans), applied hierarchically: the k-part solution is built from the (k−1)-part one by splitting
@@ -15,33 +15,15 @@ from the spec's description):
    part but its largest) are removed smallest first, each by the cheaper of merging it into the
    adjacent part whose refitted motion fits the union best, or (islands of at least
    MIN_PART_VERTICES) making it a part of its own and merging instead the two adjacent parts whose
-   union fits best.  The second case occurs when two distant pieces with alike motion ended in one
-   part; then 2-3 and 5 alternate (at most CONNECT_ROUNDS times).
+   union fits best (two distant pieces with alike motion in one part); 2-3 and 5 alternate (at most
+   CONNECT_ROUNDS times);
+6. mirror symmetry (when the mesh has a vertex mirror map, :mod:`solver.learn.mirror_map`): 2-3 and 5
+   alternate once more with step 3 replaced by :func:`solver.learn.symmetry.mirrored_labels`: a vertex
+   and its mirror vertex go together to the compatible pair of parts that fits both best, so that
+   mirror-image parts are cut alike, where the motion of both sides together puts each boundary rather
+   than wherever each side's noise and skin blending put it.  Meshes without a map skip this step.
 
-6. mirror symmetry (when the mesh has a vertex mirror map, :func:`mirror_map`): parts that are mirror
-   images of each other are re-cut alike.  Steps 3 and 5 alternate once more with step 3 replaced by
-   :func:`mirrored_labels`: a vertex v and its mirror vertex m(v) go together to the compatible pair of
-   parts (c, d) — mirror partners, a part and itself for a part symmetric in itself, or a part and the
-   pieces of its mirror image when one side is split in more parts (:func:`mirror_compatible`) — that
-   minimises ``err[v, c] + err[m(v), d]``, the fit cost of both sides under their own rigid motions.
-   Each boundary then lies where the motion of both sides together puts it, instead of wherever each
-   side's noise and skin blending put it (MakeHuman cmu_mb at 16-19 parts cut the left foot inside the
-   Foot bone and the right one at the ankle).  learn_rig, MakeHuman, 19 parts, the 8 cases of
-   ``bench/bench_learn.py --order makehuman`` (means over the cases, mm): joint-centre error mean 15.0 →
-   14.1, median 9.9 → 9.7, max 57.5 → 52.7 (cmu_mb female,heavy hybrid: max 51.7 → 25.8; male,thin lbs
-   34.9 → 26.7; game_engine cases within ±1 mm); training / held-out surface error 1.942 / 2.039 →
-   1.925 / 2.023.  The segmentation's own fit error rises a little (RMS 7.11 → 7.29 mm, cmu_mb
-   female,heavy lbs); segment(k=19) costs 0.5-0.8 s more CPU (0.4 s of it the map).
-   The map comes from the mesh topology: MakeHuman's quad mesh is mirror
-   symmetric (its triangulation is not: mirror-image quads are split along either diagonal), and a map
-   propagated from one quad over the whole mesh either is consistent or proves the seed wrong; seeds are
-   quads paired by their side and diagonal lengths, which do not depend on the pose.  Posed scans are
-   too asymmetric for a symmetry plane to give the map (range-of-motion scans: 100-400 mm median
-   mismatch even under the true map).  Meshes without such a map keep steps 1-5 unchanged (a geometric
-   map from an exactly symmetric scan is used where there is one).
-
-Speed.  MakeHuman body, 13,380 vertices × 30 scans, CPU time on numpy 2.x: segment(k=19) 0.7-1.6 s
-instead of 13-17 s, the whole curve k = 1..20 (choose_num_parts) 0.3-0.5 s instead of 110-170 s.
+Speed:
 
 * steps 1-4 run on about SAMPLES vertices: the rest mesh is binned in cubic cells and every occupied
   cell contributes one vertex, weighted by the number of vertices in its cell, so that the weighted
@@ -56,25 +38,14 @@ instead of 13-17 s, the whole curve k = 1..20 (choose_num_parts) 0.3-0.5 s inste
   their sums are updated by the moments of the vertices that moved;
 * the hierarchy makes every k cost one refinement started close to its optimum: the curve
   k = 1..k_max is one run, and ``segment(k)`` with the same seed finishes the curve's k-th solution.
-  It also fits better than the best of 4 independent k-means++ restarts per k did: RMS at 19 parts
-  6.7 / 6.3 / 8.9 mm instead of 9.1 / 9.2 / 11.2 mm (MakeHuman cmu_mb 30 and 12 scans, game_engine).
 
 ``choose_num_parts`` reads k from the curve E(k) (RMS rigid-fit error on the samples, metres): the
 smallest k whose error is at most RESIDUAL_FRACTION (3 %) of the one-part error E(1), i.e. the parts
 reproduce all but 3 % (RMS) of the motion that a single rigid transform cannot; or, if that is never
 reached, the smallest k within PLATEAU (10 %) of the best error on the curve (noise or skin
-deformation that no number of rigid parts removes).  Curves (E in mm, k = 1, 2, ...):
-
-* MakeHuman cmu_mb (31 bones, 30 move), hybrid skin, 30 scans: 322 227 167 114 43 33 29 25 21 18 13
-  12 11 10 9.7 8.7 7.6 7.1 6.7 6.0 → k = 16; 12 scans → 15; game_engine (53 bones), lbs, 30 scans:
-  365 267 214 121 43 36 32 27 23 18 16 15 13.9 12.9 11.2 10.8 10.0 9.0 8.8 8.5 → 16; seeds 0-2 give
-  15-17.  After the torso and the four limbs (k = 5) the curve falls smoothly: every further split
-  (hands, feet, head, upper/lower limbs) still takes off 5-15 %.  The knee of log E(k) used before
-  picked 5-6 parts there, and a threshold relative to the body size cannot serve both these bodies
-  and the tube below (7 exact tube parts leave 0.34 % of the diagonal, 19 MakeHuman parts 0.4 %).
-* the tests' tube body, exactly articulated (8 parts): E(7) = 8-10 % of E(1), E(8) = 0 → k = 8; the
-  same tube with smooth (hybrid-skinned) joints: 78 … 8.8 3.8 2.7 2.2 → k = 10 (E(8) = 4.9 % of E(1)).
-* Gaussian noise on the 30-scan MakeHuman: σ = 2 mm → k = 16; σ = 10 mm → 14 (plateau, E ≥ 23 mm).
+deformation that no number of rigid parts removes).  A human body's curve falls smoothly after the
+torso and limbs (k = 5), every further split still taking off 5-15 %, so neither the knee of log E(k)
+nor a threshold relative to the body size serves (curves: docs/learn_rig_solver.md).
 
 Units: positions in metres, errors in metres (squared errors in m²).
 """
@@ -85,6 +56,8 @@ from scipy.sparse.csgraph import connected_components
 from ..errors import ArticulaInputError, Cancelled  # noqa: F401  (Cancelled raised by callbacks)
 from ..geometry.mesh_graph import adjacency
 from ..geometry.procrustes import rotation_from_covariance
+from .mirror_map import mirror_map
+from .symmetry import mirror_compatible, mirrored_labels
 
 
 MIN_PART_VERTICES = 4       # a rigid part needs a few non-collinear points to have a defined motion
@@ -95,14 +68,6 @@ POLISH_ROUNDS = 10          # at most this many full-resolution rounds of steps 
 CONNECT_ROUNDS = 3          # at most this many alternations of full-resolution refinement and step 5
 RESIDUAL_FRACTION = 0.03    # choose_num_parts: smallest k with E(k) <= this fraction of E(1) ...
 PLATEAU = 0.10              # ... or within this fraction of the curve's best error
-MIRROR_SCANS = 6            # mirror map: at most this many scans (rest first, then evenly spaced) used
-MIRROR_MATCH = 0.5          # mirror parts: most (this fraction) of a part's mirrored vertices in the other
-MIRROR_CONTAIN = 0.7        # compatible parts: this fraction of one part's mirrored vertices in the other
-MIRROR_GEOMETRIC_TOL = 0.25  # geometric fallback map: reflected vertex within this × median edge length
-MIRROR_SEED_POLYGONS = 8    # topological mirror map: seed quads (their mirror images found by lengths) ...
-MIRROR_SIGNATURE_TOL = 0.01  # ... whose image quads have lengths within this fraction
-MIRROR_TRIES = 200          # ... and at most this many propagations in all
-MIRROR_EDGE_TOL = 0.05      # topological map: median relative difference of mirrored edges' mean lengths
 
 
 # ----------------------------------------------------------------------------- moments and fits
@@ -315,9 +280,11 @@ class Clustering:
         self.labels = new
         return True
 
-    def best_labels(self):
-        """Step 3: every point to its best part; empty parts get the worst-fitting points."""
-        new = np.argmin(self.err, axis=1)
+    def best_labels(self, mirror=None, compatible=None):
+        """Step 3: every point to its best part, or with a vertex ``mirror (V,)`` map and the ``compatible
+        (k,k)`` parts, every vertex and its mirror vertex together to their best compatible pair of parts
+        (step 6, :func:`solver.learn.symmetry.mirrored_labels`); empty parts get the worst-fitting points."""
+        new = np.argmin(self.err, axis=1) if mirror is None else mirrored_labels(self.err, mirror, compatible)
         counts = np.bincount(new, minlength=self.k)
         if counts.min() == 0:
             new = _reseed_empty(new, self.err[np.arange(len(new)), new], self.k)
@@ -327,10 +294,11 @@ class Clustering:
         """Weighted total squared error (m²)."""
         return float(self.points.w @ self.err[np.arange(len(self.labels)), self.labels])
 
-    def refine(self, iterations):
-        """Steps 2-3 until no label changes (at most ``iterations`` rounds)."""
+    def refine(self, iterations, mirror=None, compatible=None):
+        """Steps 2-3 until no label changes (at most ``iterations`` rounds; mirror: see
+        :meth:`best_labels`)."""
         for _ in range(iterations):
-            if not self.relabel(self.best_labels()):
+            if not self.relabel(self.best_labels(mirror, compatible)):
                 break
         return self
 
@@ -465,88 +433,31 @@ def make_parts_connected(mesh, labels, A):
             n[j] += n_i[0]
 
 
-def mirror_partners(labels, mirror, k, match=MIRROR_MATCH):
-    """Mirror image of every part under the vertex map ``mirror (V,)`` (-1: unknown): ``partner (k,)``
-    with partner[a] = b when most (``match``) of a's mapped vertices map into b and most of b's into a
-    (b = a: a part symmetric in itself, such as the trunk), else -1.  Also needs most of the part's
-    vertices mapped."""
-    ok = mirror >= 0
-    C = np.zeros((k, k))
-    np.add.at(C, (labels[ok], labels[mirror[ok]]), 1.0)
-    size = np.bincount(labels, minlength=k)
-    rows = C.sum(axis=1)
-    best = np.argmax(C, axis=1)
-    good = (rows >= match * size) & (C[np.arange(k), best] >= match * np.maximum(rows, 1))
-    partner = np.where(good, best, -1)
-    mutual = good & (partner[np.where(good, best, 0)] == np.arange(k))
-    return np.where(mutual, partner, -1)
-
-
-def mirror_compatible(labels, mirror, k, contain=MIRROR_CONTAIN, match=MIRROR_MATCH):
-    """Which parts may hold a vertex and its mirror image: ``(k,k)`` bool, symmetric.  Parts a and b are
-    compatible when they are mirror partners (:func:`mirror_partners`, a = b for a part symmetric in
-    itself) or when one of them lies mostly (``contain`` of its mapped vertices) in the other's mirror
-    image — a limb end split in two on one side only (hand and fingers) is then compatible with the one
-    part on the other side.  Parts with no compatible part, or with fewer than ``match`` of their vertices
-    mapped, are compatible with every part (no constraint)."""
-    ok = mirror >= 0
-    C = np.zeros((k, k))
-    np.add.at(C, (labels[ok], labels[mirror[ok]]), 1.0)
-    rows = C.sum(axis=1)
-    inside = C >= contain * np.maximum(rows, 1)[:, None]
-    P = inside | inside.T
-    partner = mirror_partners(labels, mirror, k, match)
-    a = np.flatnonzero(partner >= 0)
-    P[a, partner[a]] = P[partner[a], a] = True
-    free = ~P.any(axis=1) | (rows < match * np.bincount(labels, minlength=k))
-    P[free, :] = True
-    P[:, free] = True
-    return P
-
-
-def mirrored_labels(cl, mirror, compatible):
-    """Step 3 with mirror symmetry: every vertex v with a mirror vertex m(v) goes to the part c of the
-    compatible pair (c, d) (:func:`mirror_compatible`) that minimises the summed squared error
-    ``err[v, c] + err[m(v), d]`` of both sides under the parts' own rigid motions.  The pair minimises
-    the same sum seen from m(v), so m(v) goes to d: mirror-image parts are cut at mirrored places, where
-    the motion of both sides together puts the boundary.  Vertices without a mirror vertex go to their
-    best part as in :meth:`Clustering.best_labels`."""
-    new = np.argmin(cl.err, axis=1)
-    v = np.flatnonzero(mirror >= 0)
-    if len(v):
-        own, other = cl.err[v], cl.err[mirror[v]]
-        cost = np.empty_like(own)
-        for c in range(cl.k):
-            cost[:, c] = own[:, c] + other[:, compatible[c]].min(axis=1)
-        new[v] = np.argmin(cost, axis=1)
-    if np.bincount(new, minlength=cl.k).min() == 0:
-        new = _reseed_empty(new, cl.err[np.arange(len(new)), new], cl.k)
-    return new
+def connected_refinement(mesh, cl, A, mirror=None, compatible=None):
+    """Steps 2-3 (step 6's mirror-aware step 3 with a ``mirror`` map, see :meth:`Clustering.best_labels`)
+    alternating with step 5 (at most CONNECT_ROUNDS times) on ``cl`` (a :class:`Clustering` of ``mesh``,
+    updated in place); ``A``: vertex adjacency.  Returns the final labels ``(V,)``, every part connected."""
+    for _ in range(CONNECT_ROUNDS):
+        labels = make_parts_connected(mesh, cl.refine(POLISH_ROUNDS, mirror, compatible).labels, A)
+        if not cl.relabel(labels):
+            break
+    return labels
 
 
 def finish(rest, scans, faces, R, t, mirror=None):
     """Steps 2-5 at full resolution from the sample's part transforms ``R (M,k,3,3)``, ``t (M,k,3)``
-    (centred ``rest``, ``scans``).  With a vertex ``mirror (V,)`` map (:func:`mirror_map`), the parts
-    that are mirror images of each other are then re-cut alike (:func:`mirrored_labels` in place of
-    step 3, alternating with step 5 as before).  Returns ``(labels (V,), rms metres)``."""
+    (centred ``rest``, ``scans``).  With a vertex ``mirror (V,)`` map, the parts that are mirror images
+    of each other are then re-cut alike (step 6; :func:`solver.learn.symmetry.mirror_compatible` says
+    which parts may hold a vertex and its image).  Returns ``(labels (V,), rms metres)``."""
     mesh, k = Mesh(rest, scans), t.shape[1]
     err = rigid_fit_errors(rest, scans, R, t)
     labels = np.argmin(err, axis=1)
     labels = _reseed_empty(labels, err[np.arange(len(labels)), labels], k)
     cl, A = Clustering(mesh, labels, k), adjacency(faces, len(rest))
-    for _ in range(CONNECT_ROUNDS):
-        labels = make_parts_connected(mesh, cl.refine(POLISH_ROUNDS).labels, A)
-        if not cl.relabel(labels):
-            break
+    labels = connected_refinement(mesh, cl, A)
     compatible = mirror_compatible(labels, mirror, k) if mirror is not None else np.ones((k, k), dtype=bool)
     if not compatible.all():
-        for _ in range(CONNECT_ROUNDS):
-            for _ in range(POLISH_ROUNDS):
-                if not cl.relabel(mirrored_labels(cl, mirror, compatible)):
-                    break
-            labels = make_parts_connected(mesh, cl.labels, A)
-            if not cl.relabel(labels):
-                break
+        labels = connected_refinement(mesh, cl, A, mirror, compatible)
     counts = np.bincount(labels, minlength=k)
     if counts.min() < MIN_PART_VERTICES:
         raise ArticulaInputError(
@@ -563,8 +474,9 @@ def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES, mirro
     most this many rounds of steps 2-3 per split; samples: size of the cell subsample.  Returns
     ``(labels (V,) int64 in [0,k), rms)`` where rms is the RMS distance (metres) of the scans from the
     per-part rigid fits.  Raises :class:`ArticulaInputError` when a part ends up with too few vertices.
-    mirror: True finds the mesh's vertex mirror map (:func:`mirror_map`) and cuts mirror-image parts
-    alike (:func:`finish`); False does not; or a map ``(V,)`` (-1: no mirror vertex) to use."""
+    mirror: True finds the mesh's vertex mirror map (:func:`solver.learn.mirror_map.mirror_map`) and
+    cuts mirror-image parts alike (:func:`finish`); False does not; or a map ``(V,)`` (-1: no mirror
+    vertex) to use."""
     if mirror is True:
         mirror = mirror_map(rest, scans, faces) if k > 1 else None
     elif mirror is False:
@@ -607,210 +519,3 @@ def choose_num_parts(rest, scans, faces, k_max=20, seed=0, progress=None):
     errors = np.array(errors + errors[-1:] * (k_max - len(errors)))
     size = np.linalg.norm(np.ptp(rest, axis=0))
     return parts_from_curve(errors, 1e-6 * size) + 1, errors
-
-
-# ----------------------------------------------------------------------------- mirror symmetry
-
-
-def _paired_quads(f):
-    """Quads ``(Q,4)`` when every two consecutive triangles of ``f (F,3)`` share an edge (in opposite
-    directions): how a quad mesh is usually triangulated and written.  Otherwise None."""
-    if len(f) == 0 or len(f) % 2:
-        return None
-    a, b = f[0::2], f[1::2]
-    for r in range(3):                              # rotate the first triangle: (x0, x1, x2), x2 -> x0 shared
-        x = np.roll(a, -r, axis=1)
-        for s in range(3):
-            y = np.roll(b, -s, axis=1)               # (x0, x2, y) is the second triangle
-            hit = (y[:, 0] == x[:, 0]) & (y[:, 1] == x[:, 2])
-            if r == 0 and s == 0:
-                quads, found = np.zeros((len(a), 4), dtype=np.int64), np.zeros(len(a), dtype=bool)
-            new = hit & ~found
-            quads[new] = np.concatenate([x[new], y[new, 2:]], axis=1)
-            found |= new
-    return quads if found.all() else None
-
-
-def polygons_of(faces, points):
-    """Triangles merged back into the quads they were split from: consecutive triangle pairs when every
-    pair shares an edge (:func:`_paired_quads`; MakeHuman), else two triangles sharing an edge that is
-    the longest of both (the quad's diagonal; lengths averaged over ``points (M,V,3)``).  A triangulated
-    quad mesh splits mirror-image quads along either diagonal, so only its quads are mirror symmetric.
-    Returns a list of vertex tuples (3 or 4 vertices, orientation kept)."""
-    f = np.asarray(faces, dtype=np.int64)
-    quads = _paired_quads(f)
-    if quads is not None:
-        return [tuple(q) for q in quads.tolist()]
-    pts = np.asarray(points, dtype=np.float64)
-    pts = pts if pts.ndim == 3 else pts[None]
-    nxt = f[:, [1, 2, 0]]
-    length = np.mean(np.linalg.norm(pts[:, nxt] - pts[:, f], axis=3), axis=0)      # edge (f_i, f_i+1)
-    r = np.argmax(length, axis=1)                                                  # longest: f_r -> f_r+1
-    tri = np.take_along_axis(f, (r[:, None] + np.array([2, 0, 1])) % 3, axis=1)   # (x0, x1, x2), x2 -> x0 longest
-    V = int(f.max()) + 1 if len(f) else 0
-    owner = {}
-    for i, (x0, x1, x2) in enumerate(tri.tolist()):
-        owner.setdefault(x2 * V + x0, []).append(i)
-    done = np.zeros(len(f), dtype=bool)
-    polys = []
-    for i, (x0, x1, x2) in enumerate(tri.tolist()):
-        if done[i]:
-            continue
-        other = owner.get(x0 * V + x2, [])
-        j = other[0] if len(other) == 1 and len(owner[x2 * V + x0]) == 1 else -1
-        if j >= 0 and not done[j]:
-            polys.append((x0, x1, x2, int(tri[j, 1])))                             # j is (x2, y, x0)
-            done[j] = True
-        else:
-            polys.append((x0, x1, x2))
-        done[i] = True
-    return polys
-
-
-def _halfedges(polys, V):
-    """``{p·V + q: (the polygon's other vertices after q, in order)}`` for every directed edge (p, q) of
-    the polygons; directed edges used by more than one polygon (non-manifold or inconsistently oriented
-    meshes) are left out."""
-    H, bad = {}, set()
-    for poly in polys:
-        n = len(poly)
-        for i in range(n):
-            key = poly[i] * V + poly[(i + 1) % n]
-            if key in H:
-                bad.add(key)
-            H[key] = tuple(poly[(i + 2 + j) % n] for j in range(n - 2))
-    for key in bad:
-        del H[key]
-    return H
-
-
-def propagate_mirror(H, V, seed):
-    """Extend a mirror correspondence of one polygon over the mesh.  A reflection reverses orientation,
-    so polygon (p, q, x1..xj) maps to (m(p), m(xj), .., m(x1), m(q)): the vertices after directed edge
-    (m(q), m(p)) are m(xj), .., m(x1).  From ``seed`` = ((vertices), (their images)) every polygon
-    reachable over manifold edges is mapped, depth first (``H``: :func:`_halfedges`).  Returns the map
-    ``(V,)`` int64, or None when two polygons disagree on a vertex's image (or a polygon's image has
-    another vertex count), some vertex is not reached, or the map is not an involution (m(m(v)) = v):
-    the mesh topology is not mirror symmetric, or the seed was wrong."""
-    m = [-1] * V
-    for v, w in zip(*seed):
-        if m[v] not in (-1, w):
-            return None
-        m[v] = w
-    src = list(seed[0])
-    stack = [(p, q) for p in src for q in src if p != q]
-    seen = set()
-    while stack:
-        p, q = stack.pop()
-        key = p * V + q
-        if key in seen:
-            continue
-        seen.add(key)
-        xs = H.get(key)
-        ys = H.get(m[q] * V + m[p])
-        if xs is None or ys is None:
-            continue
-        if len(xs) != len(ys):
-            return None
-        for x, y in zip(xs, reversed(ys)):
-            if m[x] < 0:
-                m[x] = y
-            elif m[x] != y:
-                return None
-        ring = (p, q) + xs
-        n = len(ring)
-        stack += [(ring[(i + 1) % n], ring[i]) for i in range(n)] + [(ring[i], ring[(i + 1) % n]) for i in range(n)]
-    m = np.array(m, dtype=np.int64)
-    if m.min() < 0 or not np.array_equal(m[m], np.arange(V)):
-        return None
-    return m
-
-
-def _length_seeds(polys, shapes, count=MIRROR_SEED_POLYGONS, tol=MIRROR_SIGNATURE_TOL):
-    """Pose-independent seed correspondences for :func:`propagate_mirror`: a mirror map keeps lengths, so a
-    quad's image is a quad with the same side and diagonal lengths in reversed order.  Lengths are
-    medians over ``shapes (S,V,3)`` (far from joints they do not change with the pose).  For ``count``
-    quads with the least length variation over the shapes (spread over the mesh), every quad and
-    orientation-reversing rotation whose 6 lengths agree within ``tol`` (relative, largest difference) is
-    a hypothesis.  Yields ``(quad, images of its vertices)``, best agreement first within each quad."""
-    quads = np.array([q for q in polys if len(q) == 4], dtype=np.int64)
-    if len(quads) < 2:
-        return
-    pairs = [(0, 1), (1, 2), (2, 3), (3, 0), (0, 2), (1, 3)]
-    L = np.stack([np.linalg.norm(shapes[:, quads[:, i]] - shapes[:, quads[:, j]], axis=2) for i, j in pairs], 2)
-    med = np.median(L, axis=0)                                             # (Q, 6)
-    spread = np.max((L.max(axis=0) - L.min(axis=0)) / np.maximum(med, 1e-300), axis=1)
-    order = np.argsort(spread, kind="stable")
-    picks = order[np.linspace(0, max(len(order) // 4 - 1, 0), count).astype(np.int64)]
-    # lengths of every quad re-listed as the image of quad p under rotation r: side i of p = side
-    # (r - i - 1) mod 4 of q, diagonal (0, 2) of p = diagonal r mod 2 of q, (1, 3) -> (r - 1) mod 2
-    images = []
-    for r in range(4):
-        idx = [(r - i - 1) % 4 for i in range(4)] + [4 + r % 2, 4 + (r - 1) % 2]
-        images.append(med[:, idx])
-    images = np.stack(images, 1)                                           # (Q, 4, 6)
-    for p in picks:
-        diff = np.max(np.abs(images - med[p]) / np.maximum(med[p], 1e-300), axis=2)     # (Q, 4)
-        qs, rs = np.nonzero(diff <= tol)
-        for j in np.argsort(diff[qs, rs], kind="stable"):
-            q, r = quads[qs[j]], rs[j]
-            yield quads[p].tolist(), [int(q[(r - i) % 4]) for i in range(4)]
-
-
-def mirror_map(rest, scans, faces, max_scans=MIRROR_SCANS):
-    """Vertex mirror map ``(V,)`` int64 (each vertex → its mirror image; -1: none known) or None.
-
-    * topological (meshes whose polygon topology is mirror symmetric, as MakeHuman's): the triangles are
-      merged back into quads (:func:`polygons_of`); seed correspondences of one quad (:func:`_length_seeds`:
-      a quad and a quad with the same side and diagonal lengths in reversed order, lengths as medians over
-      the rest and up to ``max_scans`` − 1 evenly spaced scans) are extended over the mesh by
-      :func:`propagate_mirror`, which fails on a wrong seed; the first complete, consistent involution
-      that also keeps the edges' mean lengths (median relative difference within MIRROR_EDGE_TOL:
-      regular meshes have other automorphisms, e.g. a grid flipped along the wrong axis) is returned;
-      at most MIRROR_TRIES seeds;
-    * geometric (no topological map, e.g. a non-manifold mesh): in the most symmetric of those shapes
-      (:func:`solver.learn.skeleton.symmetry_planes`), the mutual reflected nearest-vertex matches within
-      MIRROR_GEOMETRIC_TOL of the median edge length (exactly symmetric geometry only; elsewhere -1).
-    Returns None when neither finds anything (no symmetry plane, or no vertex matched)."""
-    from ..geometry.mesh_graph import edges_of
-    from .skeleton import _nn_tree, _reflect, symmetry_planes
-    rest = np.asarray(rest, dtype=np.float64)
-    scans = np.asarray(scans, dtype=np.float64)
-    faces = np.asarray(faces, dtype=np.int64)
-    V = len(rest)
-    step = max(1, int(np.ceil(len(scans) / max(1, max_scans - 1))))
-    shape_arr = np.concatenate([rest[None], scans[::step][:max_scans - 1]])       # (S, V, 3)
-    polys = polygons_of(faces, shape_arr)
-    H = _halfedges(polys, V)
-    e = edges_of(faces)
-    edge = float(np.median(np.linalg.norm(rest[e[:, 0]] - rest[e[:, 1]], axis=1))) if len(e) else 0.0
-    mean_length = np.mean(np.linalg.norm(shape_arr[:, e[:, 0]] - shape_arr[:, e[:, 1]], axis=2), axis=0)
-
-    def isometric(m):
-        """The map keeps the edges' lengths (mean over the shapes): not some other automorphism of a
-        regular mesh (a grid flipped along the wrong axis)."""
-        other = np.mean(np.linalg.norm(shape_arr[:, m[e[:, 0]]] - shape_arr[:, m[e[:, 1]]], axis=2), axis=0)
-        return np.median(np.abs(mean_length - other) / np.maximum(np.maximum(mean_length, other), 1e-300)) \
-            <= MIRROR_EDGE_TOL
-
-    tries = 0
-    for poly, img in _length_seeds(polys, shape_arr):
-        m = propagate_mirror(H, V, (poly, img))
-        if m is not None and isometric(m):
-            return m
-        tries += 1
-        if tries >= MIRROR_TRIES:
-            break
-    best = None
-    for pts in shape_arr:
-        planes = symmetry_planes(pts)
-        if not planes:
-            continue
-        n, d, score = planes[0]
-        dist, idx = _nn_tree(pts).query(_reflect(pts, n, d))
-        mutual = idx[idx] == np.arange(V)
-        if best is None or score < best[0]:
-            best = (score, np.where(mutual & (dist <= MIRROR_GEOMETRIC_TOL * edge), idx, -1))
-    if best is None or best[1].max() < 0:
-        return None
-    return best[1]

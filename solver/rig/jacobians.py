@@ -1,4 +1,4 @@
-"""Analytic Jacobians of hybrid-skinned vertices, for Gauss–Newton / Levenberg–Marquardt solvers.
+"""Analytic Jacobians of hybrid-skinned vertices, for the Levenberg–Marquardt solvers (:mod:`solver.fit`).
 
 Pose parameters of one frame, in this order (``P = 4 + 3 B``; see :func:`pose_layout`):
 * ``t`` (3): root translation, world metres, additive (t ← t + dt);
@@ -9,10 +9,10 @@ Pose parameters of one frame, in this order (``P = 4 + 3 B``; see :func:`pose_la
 ``J Δ = −r; poses = apply_pose_increment(poses, Δ)``.
 
 Joint-centre parameters: the rest heads ``(B, 3)`` (world metres), moved additively with rest frames,
-tails and rest vertices held fixed (Chapter 4 adapts only joint locations; spec §2).
-Frame parameters (:func:`frame_jacobian`): a world axis-angle ω_b per rest frame, ``F_b ← exp(ω_b) F_b``,
-with every bone's world rotation held fixed (:func:`apply_frame_increment`), as Chapter 3 optimises the
-joint orientations.
+tails and rest vertices held fixed (the dissertation's Chapter 4 adapts only joint locations;
+dissertation (model-adaptive mocap) §2).  Frame parameters (:func:`frame_jacobian`): a world axis-angle ω_b
+per rest frame, ``F_b ← exp(ω_b) F_b``, with every bone's world rotation held fixed
+(:func:`apply_frame_increment`), as the dissertation's Chapter 3 optimises the joint orientations.
 
 Shapes: Jacobians are dense per-vertex blocks ``(N, V, 3, P)`` (resp. ``(N, V, 3, 3B)``); memory is
 N·V·3·P·8 bytes (13,380 vertices × 19 bones ≈ 20 MB per frame).  Each vertex has non-zero columns only
@@ -134,9 +134,8 @@ def _dq_apply_jacobian(b, x):
     ∂g/∂a_w = a × x + d, ∂g/∂a = a xᵀ + (a·x) I − 2 x aᵀ − a_w [x]× − d_w I − [d]×, ∂g/∂d_w = −a,
     ∂g/∂d = a_w I + [a]×.
     Written entry by entry on the component arrays (…) into a component-major array, returned as a
-    (…, 3, 8) view: numpy's inner loops over the short trailing 3 × 8 dimensions of the former broadcasting
-    form were the cost (measured, 4 scans × 13,380 vertices, followed by the (3,3) @ (3,8) product of
-    ``group_jacobian``: 83 ms → 34 ms per call; values equal to 3e-16 relative)."""
+    (…, 3, 8) view: numpy's inner loops over short trailing 3 × 8 dimensions (a broadcasting form) would
+    be the cost."""
     b = np.asarray(b, dtype=np.float64)
     x = np.broadcast_to(np.asarray(x, dtype=np.float64), b.shape[:-1] + (3,))
     aw, a0, a1, a2, dw, d0, d1, d2 = (b[..., i] for i in range(8))
@@ -327,9 +326,7 @@ def _kid_block(bt, a, c, wt_k, ws_k, L3Jdq, vt, keys):
     translation: ``w_s Rm_a (I − R_sw)``.  All three as one product per frame: the per-vertex rows
     ``[w_t L3 ∂f/∂b | −w_s [RR (v_t − h_c)]× | w_s I]`` ``(N, V_a, 3, 8 + 3 + 3)`` times the per-frame
     ``[T; RR G / s; Rm_a (I − R_sw)]`` (zero where a piece has no such part): one pass over the vertices'
-    columns instead of one per term.  Measured (MakeHuman game_engine, the learned root with 4 children
-    and 5,759 vertices, 4 scans, one thread): group_jacobian 95-118 → 67 ms, R equal to 1e-15 relative;
-    one Gauss–Newton build of all 30 scans 1.69 → 1.47 s."""
+    columns instead of one per term."""
     names = {"rot": ("T", "G"), "frame": ("T_f", "G_f"), "head": ("T_head", None)}
     T = np.concatenate([bt[names[k[0]][0]][:, c] for k in keys], axis=-1)            # (N, 8, m)
     Gs = [bt[names[k[0]][1]][:, c] for k in keys if k[0] != "head"]

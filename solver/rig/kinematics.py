@@ -1,4 +1,4 @@
-"""Forward kinematics of the part chain (ARCHITECTURE.md, deformation step 4; spec §1.2).
+"""Forward kinematics of the part chain (dissertation (model-adaptive mocap) §1.2; docs/skinning.md).
 
 Every joint rotates about its *rest* centre ``heads[b]``; rotations are converted from bone-local
 axes to world axes with the rest frame: ``R_b = F_b R(q_b) F_bᵀ``.  The chain of part b is

@@ -1,6 +1,7 @@
-"""``export_lbs``: convert an Articula rig into a plain linear-blend rig (one Armature modifier, no
-Preserve Volume) for FBX/glTF and game engines, using twist segment bones, and measure how far it
-deviates from the exact hybrid rig.
+"""The maths of the plain linear-blend version of an Articula rig (one Armature modifier, no Preserve
+Volume; for FBX/glTF and game engines): its bones with twist segments, their skin weights and
+deformation, and how far it deviates from the exact hybrid rig (:func:`deviation`, metres).  Pure numpy;
+``addon/rig/linear_blend.py`` builds this rig in Blender (operator ``articula.export_lbs``, docs/RIG.md).
 
 For every joint c (parent part a) and segments n the LBS rig has, besides the control bones and the
 swing helpers ``SW-<c>`` (as in the hybrid rig):

@@ -5,7 +5,7 @@ Bones are body parts.  Bone 0 is the root part (parent -1); every other bone b i
 as columns in world coordinates; Y = (tail - head)/|tail - head| is the twist axis.  Lengths in metres.
 Each vertex has an anchor part ``anchor[v]``; its twist and swing weights may be non-zero only on the
 children of that part (its blend set), each row in [0, 1] with sum <= 1 (remainder = neutral).
-See ../shared/ARCHITECTURE.md ("The model bundle").
+The bundle file: :mod:`solver.formats.bundle`; conventions: docs/skinning.md.
 
 ``validate()`` raises :class:`ArticulaInputError` naming the key and the offending index.
 """

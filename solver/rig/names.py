@@ -1,4 +1,5 @@
-"""Names used by Articula rigs: helper-bone prefixes, bone collections, modifiers, widgets.
+"""Names used by Articula rigs: helper-bone prefixes, bone collections, modifiers, widgets.  Plain
+strings and string rules (no bpy), shared by the solver's linear-blend layout and the Blender rig.
 
 A rig built from a bundle keeps the bundle's bone names for its control bones (``.L``/``.R`` mirror
 suffixes included) and derives every other name from them, so the names alone say what a bone is:

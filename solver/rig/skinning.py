@@ -1,5 +1,5 @@
 """Skinning: plain linear blend skinning, Blender-style dual-quaternion skinning, and the exact hybrid
-swing/twist skin of ARCHITECTURE.md ("Hybrid skinning"; spec §1.2-1.6).
+swing/twist skin (dissertation (model-adaptive mocap) §1.2-1.6; docs/skinning.md).
 
 Shapes: rest vertices ``(V, 3)`` metres; bone maps ``Rm (N, B, 3, 3)``, ``tm (N, B, 3)`` (part b maps
 x -> Rm x + tm, e.g. from :func:`kinematics.forward_kinematics`); posed vertices ``(N, V, 3)``.
@@ -11,12 +11,12 @@ Hybrid skin of rest vertex v with anchor a and blend set C(a) = children of a, f
 Implementation: every vertex touches only the ≤ K children of its anchor, so vertices are grouped by
 anchor; per (frame, bone) we precompute the world twist dual quaternion and the composite affine map
 ``M_parent(c) ∘ Swing_c``; per group two small matrix products blend them (weights compact ``(V_a, K_a)``).
-Hemisphere rule of the twist DLB (the spec leaves the pivot open, §1.4): the neutral comes first, then
-the children of the anchor in ascending bone order, and each child's twist dual quaternion is flipped
-when its real part points away from the weighted sum accumulated so far.  This is exactly what
-Blender's "Preserve Volume" does with the rig's vertex groups (NEUTRAL written first, then ``TW-*`` in
-bone order), so the native rig reproduces the solver everywhere, including large opposing twists at
-forks.  Twist quaternions have w >= 0 after canonicalisation, so flips only happen when two twisting
+Hemisphere rule of the twist DLB (the dissertation leaves the pivot open, dissertation (model-adaptive mocap)
+§1.4): the neutral comes first, then the children of the anchor in ascending bone order, and each child's
+twist dual quaternion is flipped when its real part points away from the weighted sum accumulated so far. This
+is exactly what Blender's "Preserve Volume" does with the rig's vertex groups (NEUTRAL written first, then
+``TW-*`` in bone order), so the native rig reproduces the solver everywhere, including large opposing twists
+at forks. Twist quaternions have w >= 0 after canonicalisation, so flips only happen when two twisting
 children of one vertex turn by more than 180° together; the rule is antipodally invariant.
 """
 import numpy as np
@@ -326,7 +326,7 @@ def _apply_affine_components(sw, x):
 
 
 def hybrid_skin(model, poses, groups=None):
-    """Posed vertices ``(N, V, 3)`` of the hybrid swing/twist skin (ARCHITECTURE.md steps 1-4).
+    """Posed vertices ``(N, V, 3)`` of the hybrid swing/twist skin (the steps of the module docstring).
     ``groups``: an optional :class:`AnchorGroups` of this model (built here when omitted)."""
     check_pose_shapes(model, poses)
     groups = _groups_for(model, groups)
@@ -380,8 +380,8 @@ def _dq_components_to_rigid(tw):
 
 
 def affine_form(model, poses, groups=None):
-    """Per-vertex affine form of the hybrid skin (spec §1.6): ``A (N, V, 3, 3)``, ``b (N, V, 3)`` with
-    posed vertex = A @ rest vertex + b.  A = L · R_D and b = L t_D + l, where (R_D, t_D) is the vertex's
+    """Per-vertex affine form of the hybrid skin (dissertation (model-adaptive mocap) §1.6):
+    ``A (N, V, 3, 3)``, ``b (N, V, 3)`` with posed vertex = A @ rest vertex + b.  A = L · R_D and b = L t_D + l, where (R_D, t_D) is the vertex's
     normalised DLB twist and (L, l) its blended swing∘chain map; A is not orthogonal when swing
     weights are fractional."""
     check_pose_shapes(model, poses)

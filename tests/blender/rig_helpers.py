@@ -5,12 +5,11 @@ import bpy
 
 
 def subject(pkg, **kw):
-    return pkg("sample_scenes.tube_body").model(**kw)
+    return pkg("sample_scenes.synthetic").tube_body(**kw)
 
 
 def poses(pkg, num_bones, n, **kw):
-    Poses = pkg("solver.rig.model").Poses
-    return Poses(*pkg("sample_scenes.tube_body").random_poses(num_bones, n, **kw))
+    return pkg("solver.rig.pose_sampling").random_poses(n, num_bones, **kw)
 
 
 def write_raw_bundle(path, arrays):

@@ -7,7 +7,7 @@ import pytest
 
 from articula.sample_scenes import cli as samples_cli
 from articula.solver.depth import camera
-from articula.solver.formats import meshes as meshfiles
+from articula.solver.formats.obj import read_obj
 from articula.solver.formats import png16
 from articula.solver.errors import ArticulaInputError
 
@@ -43,7 +43,7 @@ def test_samples_unregistered_command(tmp_path, capsys):
     assert run(["samples", "unregistered", "--poses", "2", "--cameras", "3", "--resolution", "96x72",
                      "--format", "obj", "--out", str(out)]) == 0
     g = np.load(out / "ground_truth.npz")
-    counts = [len(meshfiles.read_obj(str(out / f"scan_{k:04d}.obj")).vertices) for k in range(2)]
+    counts = [len(read_obj(str(out / f"scan_{k:04d}.obj")).vertices) for k in range(2)]
     assert counts == list(g["vertex_counts"]) and counts[0] != counts[1]
     assert g["cam_to_world"].shape == (2, 3, 4, 4)
 

@@ -9,7 +9,7 @@ import trimesh
 from articula.sample_scenes import depth_noise as dn
 from articula.sample_scenes import unregistered as unreg
 from articula.solver.depth import camera
-from articula.solver.formats import meshes as meshfiles
+from articula.solver.formats.ply import read_ply
 from articula.solver.errors import ArticulaInputError
 
 RIG = unreg.ScanRig(resolution=(96, 72), n_cameras=3)
@@ -47,7 +47,7 @@ def test_noiseless_scans_lie_on_their_source_faces(tmp_path):
     np.testing.assert_allclose(g["centres"], centres)
     assert g["cam_to_world"].shape == (3, 3, 4, 4)
     for k in range(3):
-        mesh = meshfiles.read_ply(str(tmp_path / f"scan_{k:04d}.ply"))
+        mesh = read_ply(str(tmp_path / f"scan_{k:04d}.ply"))
         v = mesh.vertices
         src = g["source_face"][g["source_offsets"][k]:g["source_offsets"][k + 1]]
         assert len(v) == len(src) == g["vertex_counts"][k]

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from articula.solver import parallel
-from articula.solver.learn.joints_poses import gauss_newton_blocks
+from articula.solver.learn.joints_poses import normal_equation_blocks
 from articula.solver.geometry.mesh_graph import uniform_laplacian
 from articula.solver.learn.pipeline import learn_rig
 from articula.solver.rig.model import Poses
@@ -16,7 +16,7 @@ from articula.solver.fit.pose_fit import fit_poses
 from articula.solver.learn.objective import RigObjective
 from articula.solver.rig.skinning import hybrid_skin
 from articula.solver.geometry.surface_distance import distance_to_surface, per_vertex_scan_distances
-from articula.solver.learn.weights import optimise_weights
+from articula.solver.learn.weights.optimise import optimise_weights
 
 from .learn_data import hybrid_truth
 
@@ -80,7 +80,7 @@ def test_skin_blocks_fits_and_distances_equal_serial(sequence):
     a, b = _twice(lambda: hybrid_skin(model, poses))
     assert np.abs(a - b).max() < 1e-14
     objective = RigObjective(scans, uniform_laplacian(model.faces, model.num_vertices), 100.0)
-    a, b = _twice(lambda: gauss_newton_blocks(model, poses, objective))
+    a, b = _twice(lambda: normal_equation_blocks(model, poses, objective))
     for x, y in zip(a, b):
         assert np.allclose(x, y, rtol=1e-11, atol=1e-12 * np.abs(x).max())
     a, b = _twice(lambda: fit_poses(model, scans, max_iterations=3))
@@ -93,7 +93,7 @@ def test_skin_blocks_fits_and_distances_equal_serial(sequence):
 
 
 def test_weights_and_whole_learning_equal_serial(sequence, monkeypatch):
-    from articula.solver.learn import weights as weights_bcd
+    from articula.solver.learn.weights import evaluation as weights_bcd
     monkeypatch.setattr(weights_bcd, "PARALLEL_MIN_WORK", 2000)       # split every colour class as well
     model, poses, scans = sequence
     objective = RigObjective(scans, uniform_laplacian(model.faces, model.num_vertices), 100.0)
@@ -183,3 +183,54 @@ def test_single_blas_thread_restores_the_thread_count():
         with parallel.single_blas_thread():
             raise ValueError
     assert get() == before
+
+
+def test_map_in_order_uses_its_own_thread_count_and_reports_in_order():
+    threads, reports, main = set(), [], threading.current_thread().name
+
+    def slow_square(x):
+        threads.add(threading.current_thread().name)
+        time.sleep(0.02 * (x % 3 == 0))            # results finish out of order
+        return x * x
+
+    def report(i, result):
+        assert threading.current_thread().name == main
+        reports.append((i, result))
+
+    assert parallel.workers() == 1                 # `using` is not consulted
+    assert parallel.map_in_order(slow_square, range(9), 3, report) == [x * x for x in range(9)]
+    assert reports == [(i, i * i) for i in range(9)]
+    assert 1 < len(threads) <= 3 and all(name.startswith("articula-solver") for name in threads)
+    threads.clear()
+    assert parallel.map_in_order(slow_square, range(4), 1) == [0, 1, 4, 9] and threads == {main}
+    threads.clear()
+    assert parallel.map_in_order(slow_square, [5], 4) == [25] and threads == {main}   # one piece: no pool
+
+
+def test_map_in_order_stops_on_errors_without_leaving_threads_behind():
+    started, finished = [], []
+
+    def work(x):
+        started.append(x)
+        time.sleep(0.01)
+        if x == 2:
+            raise ValueError("piece 2")
+        finished.append(x)
+        return x
+
+    with pytest.raises(ValueError, match="piece 2"):
+        parallel.map_in_order(work, range(40), 2)
+    done = len(finished)
+    time.sleep(0.05)
+    assert len(finished) == done and len(started) < 40     # pieces not started were cancelled, none runs on
+
+    def stop(i, result):
+        if i == 3:
+            raise KeyboardInterrupt
+    started.clear()
+    with pytest.raises(KeyboardInterrupt):
+        parallel.map_in_order(work, range(3, 40), 2, stop)
+    assert len(started) < 37
+    inner = parallel.map_in_order(lambda x: parallel.map_in_order(lambda y: threading.current_thread().name,
+                                                                    range(3), 3), range(2), 2)
+    assert all(len(set(names)) == 1 for names in inner)    # serial inside a worker: no nested pools

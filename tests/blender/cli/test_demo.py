@@ -50,17 +50,17 @@ def _centre_x(ob):
 
 def test_demo_learns_a_rig_beside_the_scans(pkg, demo_run):
     stdout, out = demo_run
-    learn = pkg("addon.learn.learning")
+    heat_map, learn_report = pkg("addon.learn.heat_map"), pkg("addon.learn.report")
     demo = pkg("addon.cli.demo")
     line = next((ln for ln in stdout.splitlines() if ln.startswith("demo: learned rig")), "")
     assert "6 parts" in line and "mean" in line and "max" in line, stdout[-2000:]
 
     bpy.ops.wm.open_mainfile(filepath=str(out / "demo.blend"))
-    arms = [ob for ob in bpy.data.objects if ob.type == 'ARMATURE' and learn.REPORT_PROPERTY in ob]
+    arms = [ob for ob in bpy.data.objects if ob.type == 'ARMATURE' and learn_report.REPORT_PROPERTY in ob]
     assert [ob.name for ob in arms] == [demo.LEARNED_NAME]
     arm = arms[0]
-    report = json.loads(arm[learn.REPORT_PROPERTY])
-    err = learn.error_summary(report)
+    report = json.loads(arm[learn_report.REPORT_PROPERTY])
+    err = learn_report.error_summary(report)
     assert report["parts"] == 6 and report["input"]["scans"] == SCANS
     assert f"mean {err['mean']:.2f}" in line
 
@@ -79,9 +79,9 @@ def test_demo_learns_a_rig_beside_the_scans(pkg, demo_run):
     meshes = [ob for ob in bpy.data.objects if ob.type == 'MESH' and ob.parent == arm]
     assert len(meshes) == 1
     me = meshes[0].data
-    assert me.color_attributes.active_color_name == learn.COLOR_ATTRIBUTE
+    assert me.color_attributes.active_color_name == heat_map.COLOR_ATTRIBUTE
     heat = np.empty(len(me.vertices), np.float32)
-    me.attributes[learn.ERROR_ATTRIBUTE].data.foreach_get("value", heat)
+    me.attributes[heat_map.ERROR_ATTRIBUTE].data.foreach_get("value", heat)
     assert abs(float(heat.mean()) - err["mean"]) < 0.05 * err["mean"] + 1e-3   # same distances, averaged
 
     # Its own exhibit: one spacing to the right of the scans, at the frame the picture shows.
@@ -90,7 +90,7 @@ def test_demo_learns_a_rig_beside_the_scans(pkg, demo_run):
     assert abs(dx - demo.SPACING) < 0.1, dx
     labels = {ob.data.body for ob in bpy.data.objects if ob.type == 'FONT'}
     assert demo.TITLES["scans"] in labels
-    assert demo.learned_title(me[learn.SCALE_PROPERTY]) in labels          # the heat map's scale in its title
+    assert demo.learned_title(me[heat_map.SCALE_PROPERTY]) in labels          # the heat map's scale in its title
 
 
 def test_demo_picture_shows_the_heat_map(pkg, demo_run):
@@ -114,8 +114,8 @@ def test_demo_no_learn_keeps_the_three_exhibits(pkg, tmp_path):
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-3000:]
     assert not [ln for ln in res.stdout.splitlines() if ln.startswith("demo: learn")]
     bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "out" / "demo.blend"))
-    learn, demo = pkg("addon.learn.learning"), pkg("addon.cli.demo")
-    assert not [ob for ob in bpy.data.objects if learn.REPORT_PROPERTY in ob]
+    learn_report, demo = pkg("addon.learn.report"), pkg("addon.cli.demo")
+    assert not [ob for ob in bpy.data.objects if learn_report.REPORT_PROPERTY in ob]
     assert {ob.data.body for ob in bpy.data.objects if ob.type == 'FONT'} == set(demo.TITLES.values())
     assert bpy.context.scene.display.shading.color_type == 'OBJECT'     # palette colours only
 

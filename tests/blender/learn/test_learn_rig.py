@@ -5,6 +5,7 @@ bundle and report of the batch command, bad input and cancellation leaving the s
 Data: the small branching tube body of ``tests/solver/learn_data.py`` (509 vertices, 8 parts) posed by
 the solver's hybrid skin, written as OBJ files and imported with ``articula.import_scans``.
 """
+import argparse
 import json
 import os
 import sys
@@ -80,21 +81,22 @@ def blender_distances(pkg, rig_mesh, scans, faces):
 # --------------------------------------------------------------------------- building (no solver run)
 
 def test_build_from_the_true_model_replays_every_scan(pkg, tmp_path, truth):
-    """learn.build with the generating model and poses: one key per scan on the scan frames, the
+    """result.build with the generating model and poses: one key per scan on the scan frames, the
     evaluated rig mesh equals scan k at frame k, a zero heat map, the report stored on the armature."""
-    learn = pkg("addon.learn.learning")
+    inputs, heat_map, solve = pkg("addon.learn.inputs"), pkg("addon.learn.heat_map"), pkg("addon.learn.solve")
+    result, learn_report = pkg("addon.learn.result"), pkg("addon.learn.report")
     model, poses, scans = truth
     ob = import_sequence(pkg, tmp_path, scans, model.faces)
-    inp = learn.input_from_object(ob)
+    inp = inputs.input_from_object(ob)
     assert inp.frame_start == FRAME_START and inp.scans.shape == scans.shape
     np.testing.assert_allclose(inp.scans, scans, atol=1e-6)          # OBJ keeps 6 decimals
-    heat = learn.vertex_error_mm(model, poses, inp.scans, inp.faces)
+    heat = heat_map.vertex_error_mm(model, poses, inp.scans)
     assert heat.max() < 1e-3                                          # sub-micrometre: OBJ rounding only
     report = {"error_mm": {"mean": 0.0, "median": 0.0, "max": 0.0}}
-    outcome = learn.LearnOutcome(inp, SimpleNamespace(model=model, poses=poses, report=report), heat)
+    outcome = solve.LearnOutcome(inp, SimpleNamespace(model=model, poses=poses, report=report), heat)
     with pkg("addon.jobs").scene_guard():
-        rig, action = learn.build(bpy.context, outcome, "Truth")
-    assert rig.armature.name == "Truth" and rig.mesh.data[learn.SCALE_PROPERTY] > 0
+        rig, action = result.build(bpy.context, outcome, "Truth")
+    assert rig.armature.name == "Truth" and rig.mesh.data[heat_map.SCALE_PROPERTY] > 0
     assert key_frames(pkg, rig.armature) == {tuple(range(FRAME_START, FRAME_START + M_SCANS))}
     assert (bpy.context.scene.frame_start, bpy.context.scene.frame_end) == (FRAME_START, FRAME_START + M_SCANS - 1)
     for k in range(M_SCANS):
@@ -102,27 +104,27 @@ def test_build_from_the_true_model_replays_every_scan(pkg, tmp_path, truth):
         np.testing.assert_allclose(evaluated(pkg, rig.mesh), scans[k], atol=2e-5)
         np.testing.assert_allclose(evaluated(pkg, ob), scans[k], atol=1e-6)   # the scans play on the same frames
     me = rig.mesh.data
-    attr = me.attributes[learn.ERROR_ATTRIBUTE]
+    attr = me.attributes[heat_map.ERROR_ATTRIBUTE]
     assert (attr.domain, attr.data_type) == ('POINT', 'FLOAT')
     vals = np.empty(len(me.vertices), np.float32)
     attr.data.foreach_get("value", vals)
     np.testing.assert_allclose(vals, heat, atol=1e-6)
-    assert me.color_attributes.active_color_name == learn.COLOR_ATTRIBUTE
-    assert json.loads(rig.armature[learn.REPORT_PROPERTY])["error_mm"]["max"] == 0.0
+    assert me.color_attributes.active_color_name == heat_map.COLOR_ATTRIBUTE
+    assert json.loads(rig.armature[learn_report.REPORT_PROPERTY])["error_mm"]["max"] == 0.0
 
 
 def test_heat_map_colours_follow_the_ramp(pkg):
-    learn = pkg("addon.learn.learning")
+    heat_map = pkg("addon.learn.heat_map")
     me = bpy.data.meshes.new("m")
     me.vertices.add(3)
-    scale = learn.add_heat_map(me, [0.0, 2.0, 4.0])
+    scale = heat_map.add_heat_map(me, [0.0, 2.0, 4.0])
     assert scale == 4.0
     col = np.empty(12, np.float32)
-    me.color_attributes[learn.COLOR_ATTRIBUTE].data.foreach_get("color", col)
+    me.color_attributes[heat_map.COLOR_ATTRIBUTE].data.foreach_get("color", col)
     col = col.reshape(3, 4)
-    np.testing.assert_allclose(col[0], [*learn.RAMP_COLORS[0], 1], atol=1e-6)   # 0 mm: blue
-    np.testing.assert_allclose(col[1], [*learn.RAMP_COLORS[2], 1], atol=1e-6)   # half the scale: green
-    np.testing.assert_allclose(col[2], [*learn.RAMP_COLORS[-1], 1], atol=1e-6)  # the top: red
+    np.testing.assert_allclose(col[0], [*heat_map.RAMP_COLORS[0], 1], atol=1e-6)   # 0 mm: blue
+    np.testing.assert_allclose(col[1], [*heat_map.RAMP_COLORS[2], 1], atol=1e-6)   # half the scale: green
+    np.testing.assert_allclose(col[2], [*heat_map.RAMP_COLORS[-1], 1], atol=1e-6)  # the top: red
     assert me.color_attributes.render_color_index == me.color_attributes.active_color_index
 
 
@@ -148,10 +150,10 @@ def make_armature(sk, location=(0.0, 0.0, 0.0)):
 def test_initial_skeleton_from_an_armature(pkg, truth):
     """A plain armature (moved object, bones made in arbitrary order) becomes a skeleton in world
     coordinates, breadth-first, with frames equal to Blender's bone matrices."""
-    learn = pkg("addon.learn.learning")
+    inputs = pkg("addon.learn.inputs")
     sk = truth[0].skeleton
     arm = make_armature(sk, (0.1, -0.2, 0.3))
-    got = learn.skeleton_from_armature(arm)
+    got = inputs.skeleton_from_armature(arm)
     assert got.names[0] == sk.names[0] and sorted(got.names) == sorted(sk.names)
     assert all(got.parents[b] < b for b in range(1, got.num_bones))
     order = [got.names.index(n) for n in sk.names]
@@ -162,6 +164,26 @@ def test_initial_skeleton_from_an_armature(pkg, truth):
         assert (parent.name if parent else None) == (sk.names[sk.parents[b]] if b else None)
         np.testing.assert_allclose(got.frames[order[b]], np.array(arm.data.bones[n].matrix_local)[:3, :3], atol=1e-6)
     got.validate()
+
+
+# --------------------------------------------------------------------------- settings
+
+def test_operator_and_batch_command_defaults_are_the_options(pkg):
+    """The operator's properties and the batch command's arguments default to LearnOptions' fields, and
+    the operator's bounds are the fields' bounds."""
+    opts = pkg("solver.learn.options").LearnOptions()
+    props = bpy.ops.articula.learn_rig.get_rna_type().properties
+    for name in ("parts", "alpha", "symmetry", "max_iterations", "key_scans", "joint_prior", "seed"):
+        assert props[name].default == pytest.approx(getattr(opts, name), rel=1e-6), name
+    assert (props["parts"].hard_min, props["parts"].hard_max) == (0, 64)
+    assert (props["alpha"].hard_min, props["alpha"].soft_max) == (0.0, 1000.0)
+    assert (props["key_scans"].hard_min, props["key_scans"].hard_max) == (0, 100000)
+    parser = argparse.ArgumentParser()
+    pkg("addon.cli.learn").add_commands(parser.add_subparsers())
+    args = parser.parse_args(["learn-rig", "--scans", "scans", "--out", "model.npz"])
+    assert (args.parts, args.alpha, not args.no_symmetry, args.iterations, args.seed, args.key_scans,
+            args.threads, args.joint_prior) == (opts.parts, opts.alpha, opts.symmetry, opts.max_iterations,
+                                                opts.seed, opts.key_scans, opts.workers, opts.joint_prior)
 
 
 # --------------------------------------------------------------------------- bad input
@@ -223,7 +245,7 @@ def test_learn_from_a_scan_sequence(pkg, tmp_path, truth):
     """The operator on an imported sequence: a rig whose action has one key per scan on the scan frames;
     Blender's evaluated mesh reproduces the solver's posed model, and its distances to the scans give the
     solver's reported statistics and the heat map; the bundle holds the same model and poses."""
-    learn = pkg("addon.learn.learning")
+    inputs, heat_map, learn_report = pkg("addon.learn.inputs"), pkg("addon.learn.heat_map"), pkg("addon.learn.report")
     sd = pkg("solver.geometry.surface_distance")
     model, poses, scans = truth
     ob = import_sequence(pkg, tmp_path, scans, model.faces)
@@ -239,40 +261,40 @@ def test_learn_from_a_scan_sequence(pkg, tmp_path, truth):
     bundle = pkg("solver.formats.bundle").load_bundle(out)
     assert len(bundle.poses) == M_SCANS and bundle.model.num_vertices == scans.shape[1]
     posed = pkg("solver.rig.skinning").hybrid_skin(bundle.model, bundle.poses)
-    inp_scans = learn.input_from_object(ob).scans
+    inp_scans = inputs.input_from_object(ob).scans
     dist = blender_distances(pkg, rig_mesh, inp_scans, model.faces)
     for k in range(M_SCANS):
         bpy.context.scene.frame_set(FRAME_START + k)
         np.testing.assert_allclose(evaluated(pkg, rig_mesh), posed[k], atol=5e-5)   # Blender = solver's skin
 
-    report = json.loads(arm[learn.REPORT_PROPERTY])
-    stats = learn.error_summary(report)
+    report = json.loads(arm[learn_report.REPORT_PROPERTY])
+    stats = learn_report.error_summary(report)
     ours = sd.error_statistics(1000 * dist)
     for key in ("mean", "std", "median", "mad", "iqr", "max"):
         assert stats[key] == pytest.approx(ours[key], rel=1e-3, abs=0.01), key   # Blender's float32 mesh
     assert stats["count"] == M_SCANS * scans.shape[1]
     assert stats["mean"] < 10.0                                  # a few mm at most on clean synthetic scans
     heat = np.empty(len(rig_mesh.data.vertices), np.float32)
-    rig_mesh.data.attributes[learn.ERROR_ATTRIBUTE].data.foreach_get("value", heat)
+    rig_mesh.data.attributes[heat_map.ERROR_ATTRIBUTE].data.foreach_get("value", heat)
     np.testing.assert_allclose(heat, 1000 * dist.mean(axis=0), rtol=1e-3, atol=0.01)
     assert heat.mean() == pytest.approx(stats["mean"], rel=1e-5)   # the heat map averages the same distances
-    assert rig_mesh.data[learn.SCALE_PROPERTY] == pytest.approx(heat.max(), rel=1e-6)
-    assert rig_mesh.data.color_attributes.active_color_name == learn.COLOR_ATTRIBUTE
+    assert rig_mesh.data[heat_map.SCALE_PROPERTY] == pytest.approx(heat.max(), rel=1e-6)
+    assert rig_mesh.data.color_attributes.active_color_name == heat_map.COLOR_ATTRIBUTE
 
 
 def test_learn_matches_a_direct_solver_run(pkg, tmp_path, truth):
     """Same scans, same options: the operator's rig and report are those of solver.learn.pipeline.learn_rig."""
-    learn = pkg("addon.learn.learning")
+    inputs, learn_report = pkg("addon.learn.inputs"), pkg("addon.learn.report")
     model, poses, scans = truth
     folder = write_scans(pkg, str(tmp_path / "files"), scans, model.faces)
-    inp = learn.input_from_files(learn.scan_paths(folder))
+    inp = inputs.input_from_files(inputs.scan_paths(folder))
     direct = pkg("solver.learn.pipeline").learn_rig(inp.scans, inp.faces, parts=8, max_iterations=0, seed=1, symmetry=False)
     assert bpy.ops.articula.learn_rig(directory=folder, parts=8, max_iterations=0, seed=1, symmetry=False,
                                       name="Files") == {'FINISHED'}
     arm = bpy.data.objects["Files"]
-    report = json.loads(arm[learn.REPORT_PROPERTY])
-    for key, value in learn.error_summary(direct.report).items():
-        assert learn.error_summary(report)[key] == pytest.approx(value, rel=1e-9), key
+    report = json.loads(arm[learn_report.REPORT_PROPERTY])
+    for key, value in learn_report.error_summary(direct.report).items():
+        assert learn_report.error_summary(report)[key] == pytest.approx(value, rel=1e-9), key
     got = pkg("addon.rig.reader").read_model(arm)
     assert got.skeleton.names == direct.model.skeleton.names
     np.testing.assert_allclose(got.skeleton.heads, direct.model.skeleton.heads, atol=1e-6)
@@ -282,17 +304,17 @@ def test_learn_matches_a_direct_solver_run(pkg, tmp_path, truth):
 
 def test_initial_armature_becomes_the_skeleton(pkg, tmp_path, truth):
     """initial_armature: the learned rig starts from (and with no optimisation round keeps) its bones."""
-    learn = pkg("addon.learn.learning")
+    inputs, learn_report = pkg("addon.learn.inputs"), pkg("addon.learn.report")
     model, poses, scans = truth
     ob = import_sequence(pkg, tmp_path, scans, model.faces)
     arm = make_armature(model.skeleton)
     assert bpy.ops.articula.learn_rig(source_object=ob.name, initial_armature=arm.name, max_iterations=0,
                                       name="FromArmature") == {'FINISHED'}
     got = pkg("addon.rig.reader").read_skeleton(bpy.data.objects["FromArmature"])
-    given = learn.skeleton_from_armature(arm)
+    given = inputs.skeleton_from_armature(arm)
     assert got.names == given.names
     np.testing.assert_allclose(got.heads, given.heads, atol=1e-6)
-    assert json.loads(bpy.data.objects["FromArmature"][learn.REPORT_PROPERTY])["options"]["initial_skeleton"]
+    assert json.loads(bpy.data.objects["FromArmature"][learn_report.REPORT_PROPERTY])["options"]["initial_skeleton"]
 
 
 def test_failure_after_building_rolls_the_rig_back(pkg, tmp_path, truth):
@@ -309,15 +331,16 @@ def test_failure_after_building_rolls_the_rig_back(pkg, tmp_path, truth):
 
 def test_learn_from_object_for_scripts(pkg, tmp_path, truth):
     """The synchronous entry point the demo uses: same rig layout, poses on the scan frames."""
-    learn = pkg("addon.learn.learning")
+    heat_map, result, learn_report = pkg("addon.learn.heat_map"), pkg("addon.learn.result"), pkg("addon.learn.report")
+    options = pkg("solver.learn.options")
     model, poses, scans = truth
     ob = import_sequence(pkg, tmp_path, scans, model.faces)
-    rig, action, outcome = learn.learn_from_object(bpy.context, ob, learn.LearnOptions(parts=8, max_iterations=0),
+    rig, action, outcome = result.learn_from_object(bpy.context, ob, options.LearnOptions(parts=8, max_iterations=0),
                                                      name="Script")
-    assert rig.armature.name == "Script" and rig.mesh.data.attributes.get(learn.ERROR_ATTRIBUTE) is not None
+    assert rig.armature.name == "Script" and rig.mesh.data.attributes.get(heat_map.ERROR_ATTRIBUTE) is not None
     assert tuple(action.frame_range) == (FRAME_START, FRAME_START + M_SCANS - 1)
     assert len(outcome.poses) == M_SCANS and outcome.vertex_error_mm.shape == (scans.shape[1],)
-    assert "mean" in learn.error_summary(outcome.report)
+    assert "mean" in learn_report.error_summary(outcome.report)
 
 
 def test_cancel_leaves_scene_unchanged(pkg, tmp_path, truth, monkeypatch):
@@ -349,7 +372,7 @@ def test_forked_weight_helper_inside_blender_gives_the_in_process_result(pkg, tm
     """The operator with every weight sweep cut into halves (SPLIT_MIN_WORK 0): half of each sweep runs in
     a process forked from Blender, and the learned bundle equals the one computed with both halves in
     Blender's process."""
-    wb, parallel = pkg("solver.learn.weights"), pkg("solver.parallel")
+    wb, parallel = pkg("solver.learn.weights.sweeps"), pkg("solver.parallel")
     load_bundle = pkg("solver.formats.bundle").load_bundle
     model, poses, scans = truth
     ob = import_sequence(pkg, tmp_path, scans, model.faces)
@@ -429,19 +452,19 @@ def test_key_scans_learn_from_some_and_pose_every_scan(pkg, tmp_path, truth):
     """key_scans below the scan count: the rig is learned from that many scans, every scan gets a baked pose
     (the others fitted with the learned rig), Blender replays the solver's posed model on every frame, and
     the report covers all scans and names the keys and the thread count."""
-    learn = pkg("addon.learn.learning")
+    learn_report = pkg("addon.learn.report")
     model, poses, scans = truth
     ob = import_sequence(pkg, tmp_path, scans, model.faces)
     out = str(tmp_path / "keys.npz")
     assert bpy.ops.articula.learn_rig(source_object=ob.name, parts=8, max_iterations=0, key_scans=4,
                                       joint_prior=0.0, output_bundle=out, name="Keys") == {'FINISHED'}
     arm = bpy.data.objects["Keys"]
-    report = json.loads(arm[learn.REPORT_PROPERTY])
+    report = json.loads(arm[learn_report.REPORT_PROPERTY])
     keys = report["key_scans"]
     assert len(keys) == 4 and report["rest_scan"] in keys and report["options"]["key_scans"] == 4
     assert report["options"]["joint_prior"] == 0.0
     assert report["other_scans"]["scans"] == M_SCANS - 4 and report["workers"] >= 1
-    assert learn.error_summary(report)["count"] == M_SCANS * scans.shape[1]
+    assert learn_report.error_summary(report)["count"] == M_SCANS * scans.shape[1]
     assert key_frames(pkg, arm) == {tuple(range(FRAME_START, FRAME_START + M_SCANS))}
     bundle = pkg("solver.formats.bundle").load_bundle(out)
     posed = pkg("solver.rig.skinning").hybrid_skin(bundle.model, bundle.poses)

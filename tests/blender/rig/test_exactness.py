@@ -57,7 +57,7 @@ def test_fork_twists_within_human_range_are_exact(pkg):
 
 
 def test_candy_wrapper_does_not_collapse(pkg):
-    tube = pkg("sample_scenes.tube_body")
+    tube = pkg("sample_scenes.synthetic")
     model = tube.cylinder(41, 24, 0.3)
     rig = pkg("addon.rig.builder").build_rig(bpy.context, model, "Tube")
     pb = rig.armature.pose.bones["upper"]

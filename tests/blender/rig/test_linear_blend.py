@@ -1,6 +1,6 @@
-"""``articula.export_lbs``: the linear-blend rig Blender builds deforms exactly as lbs_export predicts,
-and its reported deviation from the exact rig is that prediction (shrinking with more segments where
-one joint twists per vertex)."""
+"""``articula.export_lbs``: the linear-blend rig Blender builds deforms exactly as solver.rig.linear_blend
+predicts, and its reported deviation from the exact rig is that prediction (shrinking with more
+segments where one joint twists per vertex)."""
 import numpy as np
 
 import bpy
@@ -37,7 +37,7 @@ def test_lbs_rig_matches_its_prediction(pkg):
 
 
 def test_more_segments_deviate_less_on_a_twisted_limb(pkg):
-    tube = pkg("sample_scenes.tube_body")
+    tube = pkg("sample_scenes.synthetic")
     model = tube.cylinder()
     Poses = pkg("solver.rig.model").Poses
     q = np.array([[[1, 0, 0, 0], [np.cos(np.pi / 4), 0, np.sin(np.pi / 4), 0]]])     # 90° twist

@@ -56,7 +56,7 @@ def evaluated_points(ob):
 
 
 def sensor_points(ob, frame):
-    seq = pkg_pcs().load_sequence(pkg_pcs().cache_abspath(ob))
+    seq = pkg_pcs().load_sequence(_PCS["playback"].cache_abspath(ob))
     return seq.points[seq.frame(frame)]
 
 
@@ -70,6 +70,7 @@ def pkg_pcs():
 @pytest.fixture(autouse=True)
 def _pcs(pkg):
     _PCS["mod"] = pkg("addon.sequences.points")
+    _PCS["playback"] = pkg("addon.sequences.playback")
 
 
 def test_import_builds_camera_and_points_that_follow_the_frame(tmp_path):
@@ -234,7 +235,7 @@ def test_colour_frames_become_point_colours(tmp_path):
         bpy.data.images.remove(img)
     assert bpy.ops.articula.import_depth(directory=folder, color_directory=str(cdir)) == {'FINISHED'}
     ob = bpy.data.objects["rec Points"]
-    seq = pkg_pcs().load_sequence(pkg_pcs().cache_abspath(ob))
+    seq = pkg_pcs().load_sequence(_PCS["playback"].cache_abspath(ob))
     pts = seq.points[seq.frame(1)]
     uv, _ = camera.project(pts, INTR)
     rgb = seq.colors[seq.frame(1)] * 255

@@ -198,7 +198,7 @@ def test_parsers_agree_with_blenders_importers(tmp_path, pkg, fmt):
         bpy.ops.wm.stl_import(filepath=path, forward_axis='Y', up_axis='Z')
     theirs = bpy.context.selected_objects[0].data
     their_v = np.array([v.co[:] for v in theirs.vertices])
-    ours = pkg("solver.formats.meshes").read_mesh(path)
+    ours = pkg("solver.formats.mesh_files").read_mesh(path)
     our_faces = [ours.corner_verts[s:s + n].tolist() for s, n in zip(ours.face_starts, ours.face_sizes)]
     if fmt != "stl":   # STL: Blender numbers welded vertices its own way; compare by position below
         assert np.allclose(ours.vertices, their_v, atol=1e-6)

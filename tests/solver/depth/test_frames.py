@@ -8,6 +8,7 @@ from articula.solver.depth import camera
 from articula.solver.depth import frames as dp
 from articula.solver.depth import recording as ps
 from articula.solver.errors import ArticulaInputError
+from articula.solver.formats.point_files import PointSequence
 from articula.solver.formats.png16 import write_png16
 
 from ..depth_scene import floor_box_scene, sphere_depth
@@ -238,7 +239,7 @@ def test_sequence_from_pngs_with_floor_and_cache_roundtrip(tmp_path):
         assert len(pts) > 100
         assert (np.abs(w[:, 0] - x) < 0.2 + 5e-3).all() and (w[:, 2] > 0.01).all()
     seq.save(str(tmp_path / "c.npz"))
-    back = ps.PointSequence.load(str(tmp_path / "c.npz"))
+    back = PointSequence.load(str(tmp_path / "c.npz"))
     np.testing.assert_array_equal(back.points, seq.points)
     np.testing.assert_array_equal(back.offsets, seq.offsets)
     np.testing.assert_array_equal(back.normals, seq.normals)
@@ -264,31 +265,10 @@ def test_bad_depth_inputs_name_the_file(tmp_path):
                         camera.Intrinsics(100, 100, 90.0, 90.0, 50.0, 50.0), opts())
 
 
-def test_point_cloud_files(tmp_path):
+def test_point_cloud_sequence_from_files(tmp_path):
     rng = np.random.default_rng(0)
     a = rng.uniform([-1, -1, 1], [1, 1, 3], size=(500, 3))
     np.save(tmp_path / "f_0.npy", a)
-    np.savetxt(tmp_path / "f_1.xyz", np.c_[a[:100], np.full((100, 3), 255.0)])
-    pts, col = ps.read_point_file(str(tmp_path / "f_0.npy"))
-    np.testing.assert_allclose(pts, a, rtol=1e-6)
-    assert col is None
-    pts, col = ps.read_point_file(str(tmp_path / "f_1.xyz"))
-    assert pts.shape == (100, 3) and np.allclose(col, 1.0)
-    bad = a.copy(); bad[7, 1] = np.nan
-    np.save(tmp_path / "f_2.npy", bad)
-    with pytest.raises(ArticulaInputError, match=r"f_2.npy: 1 point\(s\) with NaN/inf coordinates \(first at row 7\)"):
-        ps.read_point_file(str(tmp_path / "f_2.npy"))
-    np.save(tmp_path / "f_3.npy", a[:, :2])
-    with pytest.raises(ArticulaInputError, match=r"f_3.npy: expected a \(K, 3\) or \(K, 6\)"):
-        ps.read_point_file(str(tmp_path / "f_3.npy"))
-    # binary PLY point cloud (vertex element only, with colour properties that are skipped)
-    rec = np.zeros(50, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1")])
-    rec["x"], rec["y"], rec["z"] = a[:50].T
-    header = ("ply\nformat binary_little_endian 1.0\nelement vertex 50\nproperty float x\nproperty float y\n"
-              "property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n")
-    (tmp_path / "f_4.ply").write_bytes(header.encode() + rec.tobytes())
-    pts, col = ps.read_point_file(str(tmp_path / "f_4.ply"))
-    np.testing.assert_allclose(pts, a[:50], rtol=1e-6)
     seq = ps.import_clouds([str(tmp_path / "f_0.npy")] * 2, opts(voxel_size=0.2, estimate_normals=True))
     assert seq.frame_count == 2 and seq.normals.shape == seq.points.shape
     assert len(seq.points[seq.frame(0)]) < 500

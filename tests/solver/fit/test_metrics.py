@@ -56,7 +56,8 @@ def test_zero_for_the_model_itself_and_surface_not_vertices():
 
 
 def test_statistics_in_millimetres():
-    s = metrics.statistics_mm(np.array([1.0, 2, 3, 4, 100]) / 1000)        # spec T23, metres in
+    # dissertation (model-adaptive mocap) T23, metres in
+    s = metrics.statistics_mm(np.array([1.0, 2, 3, 4, 100]) / 1000)
     assert s["median"] == pytest.approx(3.0) and s["mad"] == pytest.approx(1.0)
     assert s["mean"] == pytest.approx(22.0) and s["max"] == pytest.approx(100.0)
     assert s["iqr"] == pytest.approx(52.0 - 1.5) and s["count"] == 5

@@ -71,7 +71,7 @@ def test_gradient_matches_finite_differences_and_the_step_decreases_the_objectiv
     truth = synthetic.random_poses(1, 19, seed=14)
     targets = skinning.hybrid_skin(model, truth)
     start = perturb(truth, 20.0, seed=2)
-    H, g, E = pose_fit.gauss_newton_system(model, start, targets, fit_scale=True)
+    H, g, E = pose_fit.normal_equations(model, start, targets, fit_scale=True)
     from articula.solver.rig.jacobians import apply_pose_increment
 
     def energy(delta):
@@ -89,13 +89,13 @@ def test_gradient_matches_finite_differences_and_the_step_decreases_the_objectiv
 
 
 def test_normal_equations_equal_the_dense_einsum_reference(model):
-    """gauss_newton_system (summed over anchor groups from factored Jacobians, residual as an extra
+    """normal_equations (summed over anchor groups from factored Jacobians, residual as an extra
     column) = JᵀWJ, JᵀWr and rᵀWr by einsum on the dense Jacobian."""
     truth = synthetic.random_poses(3, 19, seed=15)
     targets = skinning.hybrid_skin(model, truth)
     start = perturb(truth, 20.0, seed=4)
     w = np.random.default_rng(5).uniform(0.0, 2.0, model.num_vertices)
-    H, g, E = pose_fit.gauss_newton_system(model, start, targets, vertex_weights=w, fit_scale=True)
+    H, g, E = pose_fit.normal_equations(model, start, targets, vertex_weights=w, fit_scale=True)
     posed, J = jacobians.pose_jacobian(model, start)
     r = posed - targets
     H_ref = np.einsum("nvip,v,nviq->npq", J, w, J)
@@ -104,7 +104,7 @@ def test_normal_equations_equal_the_dense_einsum_reference(model):
     assert np.abs(H - H_ref).max() < 1e-11 * np.abs(H_ref).max()
     assert np.abs(g - g_ref).max() < 1e-11 * np.abs(g_ref).max()
     assert np.abs(E - E_ref).max() < 1e-11 * E_ref.max()
-    H2, g2, _ = pose_fit.gauss_newton_system(model, start, targets)           # unweighted, scale fixed
+    H2, g2, _ = pose_fit.normal_equations(model, start, targets)           # unweighted, scale fixed
     keep = np.ones(J.shape[-1], dtype=bool)
     keep[3] = False
     H2_ref = np.einsum("nvip,nviq->npq", J, J)[:, keep][:, :, keep]

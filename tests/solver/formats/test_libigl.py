@@ -8,7 +8,7 @@ import pytest
 
 from articula.solver.formats import libigl as igl_formats
 from articula.solver.errors import ArticulaInputError
-from articula.solver.formats.meshes import read_obj
+from articula.solver.formats.obj import read_obj
 
 from ...conftest import SHARED_DATA
 

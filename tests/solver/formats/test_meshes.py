@@ -1,9 +1,15 @@
 """Mesh-file readers against fixture files written with known content by independent writers."""
+import struct
+
 import numpy as np
 import pytest
 
 from articula.solver.errors import ArticulaInputError
-from articula.solver.formats.meshes import PolyMesh, read_mesh, read_obj, read_ply, read_stl
+from articula.solver.formats.mesh_files import read_mesh
+from articula.solver.formats.obj import read_obj
+from articula.solver.formats.ply import read_ply
+from articula.solver.formats.polymesh import PolyMesh
+from articula.solver.formats.stl import read_stl
 
 from ..mesh_writers import CUBE_FACES, CUBE_VERTS, triangles, write_obj, write_off, write_ply, write_stl
 
@@ -167,3 +173,49 @@ def test_obj_indented_lines_crlf_and_colours(tmp_path):
     mesh = read_obj(str(path))
     assert mesh.vertices.tolist() == [[0, 0, 0], [1, 0, 0], [0, 1, 0]]
     assert faces_of(mesh) == [[0, 1, 2], [2, 1, 0]]
+
+
+def _two_list_ply(fmt, faces, cut=0):
+    """A PLY whose faces carry a second list (``corner_ids``, 2 ints per corner) beside their indices,
+    so the reader takes the record-by-record path; ``cut`` drops that many bytes off the end."""
+    head = ["ply", f"format {fmt} 1.0", f"element vertex {len(CUBE_VERTS)}", "property float x",
+            "property float y", "property float z", f"element face {len(faces)}",
+            "property list uchar int vertex_indices", "property uchar tag", "property list uchar int corner_ids",
+            "end_header"]
+    if fmt == "ascii":
+        rows = [" ".join(repr(float(c)) for c in v) for v in CUBE_VERTS]
+        rows += [f"{len(f)} {' '.join(map(str, f))} 5 {2 * len(f)} " + " ".join(["8"] * 2 * len(f)) for f in faces]
+        body = ("\n".join(rows) + "\n").encode()
+    else:
+        o = "<" if fmt.endswith("little_endian") else ">"
+        body = b"".join(struct.pack(o + "3f", *v) for v in CUBE_VERTS)
+        body += b"".join(struct.pack(f"{o}B{len(f)}iBB{2 * len(f)}i", len(f), *f, 5, 2 * len(f), *[8] * 2 * len(f))
+                         for f in faces)
+    data = ("\n".join(head) + "\n").encode() + body
+    return data[:len(data) - cut]
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian", "binary_big_endian"])
+@pytest.mark.parametrize("faces", [CUBE_FACES, triangles(CUBE_FACES)[:5] + [[0, 1, 2, 3, 4]]])
+def test_ply_record_by_record_with_two_lists(tmp_path, fmt, faces):
+    path = tmp_path / "two.ply"
+    path.write_bytes(_two_list_ply(fmt, faces))
+    mesh = read_ply(str(path))
+    assert np.array_equal(mesh.vertices, CUBE_VERTS.astype(np.float32)) and faces_of(mesh) == faces
+
+
+@pytest.mark.parametrize("fmt, message", [("ascii", r"ends inside element 'face'; truncated"),
+                                          ("binary_little_endian", r"ends inside element 'face' \(record 6\)")])
+def test_ply_truncated_inside_a_record(tmp_path, fmt, message):
+    path = tmp_path / "cut.ply"
+    path.write_bytes(_two_list_ply(fmt, CUBE_FACES, cut=6))
+    with pytest.raises(ArticulaInputError, match=message):
+        read_ply(str(path))
+
+
+def test_ply_bad_list_length_names_the_record(tmp_path):
+    data = _two_list_ply("ascii", CUBE_FACES).replace(b"\n4 4 5 6 7 5", b"\nx 4 5 6 7 5")
+    path = tmp_path / "bad.ply"
+    path.write_bytes(data)
+    with pytest.raises(ArticulaInputError, match=r"bad list length in PLY element 'face' record \d"):
+        read_ply(str(path))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from articula.solver.errors import ArticulaInputError
-from articula.solver.formats.meshes import read_mesh
+from articula.solver.formats.mesh_files import read_mesh
 from articula.solver.formats.pointcache import read_point_cache
 from articula.solver.formats.scan_files import (list_scan_files, natural_sorted, read_scan_files,
                                            sequence_from_cache)

@@ -1,4 +1,5 @@
-"""G3 (tree), G4 (joint placement), mirror pairs / names, frames, and G6 (pose conversion)."""
+"""G3 (tree), G4 (joint placement), mirror pair names, frames, and G6 (pose conversion); the mirror pairs
+themselves: test_symmetry.py."""
 import numpy as np
 
 from articula.solver.rig.kinematics import forward_kinematics
@@ -6,8 +7,7 @@ from articula.solver.rig.model import Model
 from articula.solver.fit.pose_init import poses_from_part_fits
 from articula.solver.geometry.procrustes import fit_parts
 from articula.solver.learn.segmentation import segment
-from articula.solver.learn.skeleton import (build_skeleton, mirror_pairs, part_adjacency, rotation_centre,
-                                           symmetry_planes, unequal_pairs)
+from articula.solver.learn.skeleton import build_skeleton, part_adjacency, rotation_centre
 from articula.solver.rig.skinning import hybrid_skin
 
 from ..learn_data import JOINTS, PARTS, TAILS, body, hybrid_truth, rigid_scans, rotvec_matrix
@@ -75,19 +75,6 @@ def test_mirror_pairs_named_L_R():
     assert len(set(sk.names)) == 8
 
 
-def test_symmetry_plane_of_a_tilted_mirror_body():
-    d = _learned(M=3)
-    rest = d["rest"]
-    Rt = rotvec_matrix(np.array([0.1, 0.2, 0.3]))
-    moved = rest @ Rt.T + [0.3, -0.2, 0.1]
-    n_true = Rt @ [1.0, 0, 0]
-    planes = symmetry_planes(moved)
-    assert any(abs(n @ n_true) > 1 - 1e-9 for n, _, _ in planes)
-    n, off, _ = next(p for p in planes if abs(p[0] @ n_true) > 0.5)
-    assert abs(off - n @ [0.3, -0.2, 0.1]) < 1e-9
-    assert len(mirror_pairs(moved, d["lab"], 8, (n, off, 0.0))) == 3
-
-
 def test_rotation_centre_exact_for_ball_joint_and_prior_on_hinge_axis():
     rng = np.random.default_rng(0)
     c = np.array([0.2, -0.1, 0.5])
@@ -127,19 +114,6 @@ def test_pose_conversion_reproduces_rigid_fit():
     assert np.abs(hybrid_skin(model, poses) - d["scans"]).max() < 1e-9
 
 
-def test_consistent_pairs_keeps_only_structural_mirror_pairs():
-    from articula.solver.learn.skeleton import consistent_pairs
-    #        0 root; 1, 2 thighs (siblings); 3 under 1, 4 under 2 (shins); 5 neck under 0 (small); 6 arm
-    parent = np.array([-1, 0, 0, 1, 2, 0, 0])
-    sizes = np.array([900, 300, 310, 200, 190, 60, 280])
-    votes = {(5, 6): 3,            # neck vs arm: siblings but sizes 60 vs 280 -> rejected
-             (1, 2): 1,            # thighs
-             (4, 3): 2,            # shins, voted right-before-left: left follows the parents' pair
-             (0, 5): 1,            # root never pairs
-             (3, 6): 1}            # parents 1 and 0 are not a pair -> rejected
-    assert consistent_pairs(votes, parent, sizes) == [(1, 2), (3, 4)]
-
-
 def test_joint_local_fits_place_smoothly_skinned_joints():
     """Blended skin near the joints biases whole-part rigid fits; the joint-local robust fits (scans given)
     put every joint of the smoothly skinned tube body within 2 mm (whole parts: up to 7.5 mm)."""
@@ -163,41 +137,3 @@ def test_joint_local_fits_match_whole_part_fits_on_rigid_parts():
     assert np.array_equal(order, d["order"]) and pairs == d["pairs"]
     assert np.abs(sk.heads - d["sk"].heads).max() < 1e-9
     assert np.abs(sk.heads[1:] - JOINTS[d["truth"][1:]]).max() < 1e-3
-
-
-def test_consistent_pairs_rejects_parts_cut_differently():
-    """Mirror parts whose vertex counts differ by more than MIRROR_SIZE_RATIO were cut at different places
-    (MakeHuman at 19 parts: a left shin part with the heel, 371 vertices, vs the right shin alone, 240)."""
-    from articula.solver.learn.skeleton import consistent_pairs
-    parent = np.array([-1, 0, 0, 1, 2])
-    assert consistent_pairs({(1, 2): 2, (3, 4): 2}, parent, np.array([900, 342, 342, 371, 240])) == [(1, 2)]
-    assert consistent_pairs({(1, 2): 2, (3, 4): 2}, parent, np.array([900, 342, 342, 371, 340])) == [(1, 2), (3, 4)]
-
-
-def test_unequal_pairs_flags_mirror_bones_of_different_length():
-    #   0 root; 1 / 2 mirrored upper limbs continuing into 3 / 4
-    parents = np.array([-1, 0, 0, 1, 2])
-    heads = np.array([[0, 0, 1.0], [0.1, 0, 1], [-0.1, 0, 1], [0.1, 0, 0.6], [-0.1, 0, 0.62]])
-    tails = np.array([[0, 0, 1.5], heads[3], heads[4], [0.1, 0, 0.2], [-0.1, 0, 0.2]])
-    assert unequal_pairs(heads, tails, parents, [(1, 2), (3, 4)]) == []          # 0.40 vs 0.38 m: within 10 %
-    heads[4, 2] = tails[2, 2] = 0.7                                              # 0.40 vs 0.30 m
-    assert unequal_pairs(heads, tails, parents, [(1, 2), (3, 4)]) == [(1, 2)]    # end bones are not compared
-
-
-def test_mirror_pairs_from_the_vertex_mirror_map():
-    """With the mesh's vertex mirror map the pairs come from it: the same pairs and names as from the
-    symmetry planes on the symmetric rest mesh, and the same parts paired from every posed scan, where no
-    plane reflects the whole body."""
-    from articula.solver.learn.segmentation import mirror_map
-    from articula.solver.learn.skeleton import MAP_COVERAGE, map_pair_votes
-    d = _learned()
-    mirror = mirror_map(d["rest"], d["scans"], d["faces"])
-    assert mirror is not None and np.mean(mirror >= 0) >= MAP_COVERAGE
-    sk, order, bone_of_part, pairs = build_skeleton(d["rest"], d["lab"], d["faces"], 8, d["R"], d["t"],
-                                                    mirror=mirror)
-    assert pairs == d["pairs"] and sk.names == d["sk"].names
-    expected = {frozenset((int(d["order"][l]), int(d["order"][r]))) for l, r in d["pairs"]}
-    for m in range(len(d["scans"])):           # (a scan's own rigid turn may flip which side is +X)
-        assert {frozenset(p) for p in map_pair_votes(d["scans"][m], d["lab"], 8, mirror)} == expected, m
-    broken = np.where(np.arange(len(mirror)) % 2 == 0, mirror, -1)      # half the map: planes instead
-    assert build_skeleton(d["rest"], d["lab"], d["faces"], 8, d["R"], d["t"], mirror=broken)[3] == d["pairs"]

@@ -1,4 +1,5 @@
-"""Forward kinematics (spec §8.1 S2, S3, S13, S14) against closed forms and homogeneous matrices."""
+"""Forward kinematics (dissertation (model-adaptive mocap) §8.1 S2, S3, S13, S14) against closed forms and
+homogeneous matrices."""
 import numpy as np
 
 from articula.solver.rig import kinematics

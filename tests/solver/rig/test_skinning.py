@@ -1,4 +1,5 @@
-"""Hybrid swing/twist skinning (spec §8.1 S7, S9-S16), LBS and DQS against literal references."""
+"""Hybrid swing/twist skinning (dissertation (model-adaptive mocap) §8.1 S7, S9-S16), LBS and DQS against
+literal references."""
 import numpy as np
 import pytest
 
@@ -13,8 +14,8 @@ RNG = np.random.default_rng(5)
 
 
 def literal_hybrid(model, poses):
-    """Independent reference: ARCHITECTURE.md steps 1-4 for one vertex and frame at a time, with
-    4x4 homogeneous chain matrices and the generic DLB of dualquat."""
+    """Independent reference: the steps of skinning's module docstring for one vertex and frame at a time,
+    with 4x4 homogeneous chain matrices and the generic DLB of dualquat."""
     sk = model.skeleton
     N, V = len(poses), model.num_vertices
     out = np.zeros((N, V, 3))

@@ -1,0 +1,47 @@
+"""The learning report on the Blender side: the solver's report with the run's input and options as JSON
+(stored on the armature as ``articula_learn_report`` and in a saved bundle's provenance) and its error
+summary."""
+import numpy as np
+
+REPORT_PROPERTY = "articula_learn_report"       # armature ID property: the solver's report (JSON)
+REPORTED_OPTIONS = ("parts", "alpha", "symmetry", "max_iterations", "seed", "key_scans", "workers", "joint_prior")
+
+
+def jsonable(x):
+    """``x`` with numpy arrays and scalars, tuples and non-string keys turned into JSON types."""
+    if isinstance(x, dict):
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return jsonable(x.tolist())
+    if isinstance(x, np.generic):
+        return x.item()
+    return x
+
+
+def report_json(outcome) -> dict:
+    """The solver's report of a :class:`addon.learn.solve.LearnOutcome` with the run's input and options
+    (JSON-serialisable)."""
+    opts, inp = outcome.options, outcome.input
+    options = {name: getattr(opts, name) for name in REPORTED_OPTIONS}
+    options["initial_skeleton"] = opts.initial_skeleton is not None
+    return jsonable({**outcome.report,
+                     "input": {"source": inp.source, "scans": int(len(inp.scans)), "vertices": int(inp.scans.shape[1]),
+                               "faces": int(len(inp.faces))},
+                     "options": options})
+
+
+def error_summary(report: dict) -> dict:
+    """The error statistics in mm from the solver's report (keys mean, median, max, ...)."""
+    for key in ("surface_error_mm", "error_mm"):
+        if isinstance(report.get(key), dict):
+            return report[key]
+    return {k: report[k] for k in ("mean", "std", "median", "mad", "iqr", "max") if k in report}
+
+
+def summary_text(outcome) -> str:
+    """One line of the outcome's error statistics (mm): mean, median, max."""
+    s = error_summary(outcome.report)
+    parts = [f"{k} {s[k]:.2f}" for k in ("mean", "median", "max") if k in s]
+    return "error (mm) " + ", ".join(parts) if parts else "no error statistics"
