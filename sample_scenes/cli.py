@@ -3,63 +3,19 @@
     ./run samples registered --rig cmu_mb --poses 30 --skin hybrid --shape female,heavy --seed 0 --out DIR
     ./run samples subject --rig default --shape male,tall --out model.npz
 
-Extension point: every module ``sample_scenes/samples_<kind>.py`` that defines
-``add_sample_commands(subparsers)`` is found automatically and may add its own ``samples <kind>``
-subcommands (each parser sets ``func(args) -> int``), e.g. ``samples depth`` and ``samples unregistered``;
-no edit of this file is needed.  :func:`add_subject_arguments` and :func:`add_motion_arguments` give
-those commands the same ``--rig/--shape/--subject-seed`` and ``--poses/--motion/--skin/--seed/...``
-options, and :func:`sequence_from_args` turns them into ``registered.posed_sequence(...)``.
+``samples depth`` and ``samples unregistered`` come from :mod:`samples_cameras`; a new kind of sample data adds
+its module's ``add_sample_commands(subparsers)`` to ``KIND_MODULES`` (each parser sets ``func(args) -> int``)
+and takes the shared subject and motion options from :mod:`arguments`.
 """
 from __future__ import annotations
 
-import importlib
-import pkgutil
 import time
 from pathlib import Path
 
-from .mpfb_rig import RIGS
-from .registered import MOTIONS, SKINS
+from . import samples_cameras
+from .arguments import add_motion_arguments, add_subject_arguments, motion_options
 
-EXTENSION_PREFIX = "samples_"
-
-
-def add_subject_arguments(p) -> None:
-    """``--rig``, ``--shape``, ``--subject-seed``."""
-    p.add_argument("--rig", default="cmu_mb", choices=RIGS, help="MPFB2 rig (default cmu_mb)")
-    p.add_argument("--shape", default="", help="presets and macros, e.g. female,heavy,age=0.7 "
-                   "(presets: female male heavy thin tall short young old muscular weak average)")
-    p.add_argument("--subject-seed", type=int, default=None,
-                   help="draw the macros not given in --shape at random (default: MakeHuman defaults)")
-
-
-def add_motion_arguments(p) -> None:
-    """``--poses``, ``--motion``, ``--skin``, ``--seed`` and the motion options."""
-    p.add_argument("--poses", type=int, default=30, help="number of poses/frames (default 30)")
-    p.add_argument("--motion", default="rom", choices=MOTIONS, help="rom: random range of motion; walk")
-    p.add_argument("--skin", default="lbs", choices=SKINS, help="skinning used to pose the mesh")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the motion (default 0)")
-    p.add_argument("--amplitude", type=float, default=1.0, help="rom: scale of the joint limits (0, 1]")
-    p.add_argument("--key-every", type=int, default=1, help="rom: key poses every K frames, interpolated")
-    p.add_argument("--step", type=float, default=1.0, help="walk: cycle frames per pose (40-frame cycle)")
-    p.add_argument("--root-yaw", type=float, default=0.0, help="random root yaw up to this many degrees")
-    p.add_argument("--root-shift", type=float, default=0.0, help="random root shift up to this many metres")
-
-
-def motion_options(args) -> dict:
-    """Pose-generator options from parsed arguments."""
-    opts = dict(root_yaw=args.root_yaw, root_shift=args.root_shift)
-    if args.motion == "rom":
-        opts.update(amplitude=args.amplitude, key_every=args.key_every)
-    else:
-        opts.update(step=args.step)
-    return opts
-
-
-def sequence_from_args(args):
-    """``registered.posed_sequence`` for the subject and motion arguments: (vertices, faces, gt)."""
-    from .registered import posed_sequence
-    return posed_sequence(args.rig, args.shape, args.poses, args.motion, args.skin, args.seed,
-                          args.subject_seed, **motion_options(args))
+KIND_MODULES = (samples_cameras,)
 
 
 def _run_registered(args) -> int:
@@ -99,19 +55,11 @@ def _add_builtin(sub) -> None:
     p.set_defaults(func=_run_subject)
 
 
-def extension_modules() -> list:
-    """Names of the ``samples_<kind>`` modules of this package (sorted)."""
-    here = Path(__file__).parent
-    return sorted(m.name for m in pkgutil.iter_modules([str(here)]) if m.name.startswith(EXTENSION_PREFIX))
-
-
 def add_commands(subparsers) -> None:
     """Register ``samples`` and its subcommands (built-in ones, then the extension modules)."""
     p = subparsers.add_parser("samples", help="generate sample data with ground truth (samples -h)")
     sub = p.add_subparsers(dest="samples_kind", metavar="<kind>")
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
     _add_builtin(sub)
-    for name in extension_modules():
-        module = importlib.import_module(f".{name}", __package__)
-        if hasattr(module, "add_sample_commands"):
-            module.add_sample_commands(sub)
+    for module in KIND_MODULES:
+        module.add_sample_commands(sub)

@@ -13,7 +13,7 @@ import dataclasses
 import time
 
 from ..solver.errors import ArticulaInputError
-from .cli import add_motion_arguments, add_subject_arguments, sequence_from_args
+from .arguments import add_motion_arguments, add_subject_arguments, sequence_from_args
 from .depth_noise import NOISELESS, NoiseParams
 
 _HEAVY_GT = ("posed_vertices",)  # stored only on request (--save-vertices)

@@ -5,8 +5,8 @@ A dual quaternion is a float64 array ``(..., 8)``: ``[:4]`` the real part q0 (a 
 ``q0 = quat(R)``, ``qe = ½ (0, t) · q0``.  A rotation by q about a centre c (x -> R (x - c) + c) has
 ``qe = ½ ((0, c)·q - q·(0, c)) = (0, c × u)`` for q = (w, u).
 
-Points are mapped with the normalising formula of the spec (§1.4), which is rigid even when the
-blended dual quaternion is not exactly unit (⟨q0, qe⟩ ≠ 0):
+Points are mapped with the normalising formula of the model-adaptive mocap dissertation (§1.4), which is
+rigid even when the blended dual quaternion is not exactly unit (⟨q0, qe⟩ ≠ 0):
 ``x' = x + 2 a × (a × x + a_w x) + 2 (a_w d − d_w a + a × d)`` with (a_w, a) = q0/|q0|, (d_w, d) = qe/|q0|.
 """
 import numpy as np

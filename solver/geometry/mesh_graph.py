@@ -1,4 +1,4 @@
-"""Mesh connectivity and the uniform (umbrella) Laplacian of spec §3.3 (Eq. 3.20).
+"""Mesh connectivity and the uniform (umbrella) Laplacian of the model-adaptive mocap dissertation §3.3 (Eq. 3.20).
 
 ``L(v) = v − (1/|N(v)|) Σ_{n∈N(v)} v_n`` with N(v) the one-ring of the triangle mesh.  As a sparse
 matrix ``L = I − D⁻¹ A`` (A = vertex adjacency, D = degrees) acting on ``(V,3)`` positions.  L has

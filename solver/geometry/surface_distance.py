@@ -1,4 +1,5 @@
-"""Exact point-to-surface distances of triangle meshes and the error statistics of spec §6.1.
+"""Exact point-to-surface distances of triangle meshes and the error statistics of the model-adaptive mocap
+dissertation §6.1.
 
 * :func:`closest_points_on_triangles` — the closest point of triangle (a, b, c) to p, per row, by the
   Voronoi-region test (vertex, edge or face region; Ericson, *Real-Time Collision Detection* §5.1.5,
@@ -16,14 +17,13 @@
      over the plane, in-plane distance to the three edges; the region test for thin triangles).
 
   One k-d tree over all centroids would need the largest triangle radius as search margin for every
-  point (MakeHuman radii range 1.8-50 mm: ~1,000-2,500 centroids per point), hence the groups.
-  Measured: 13,380 MakeHuman scan vertices against a posed 13,380-vertex model, ~3x less CPU than the
-  previous per-group kNN search (0.15 vs 0.45 s per scan on a loaded 2-core machine).
+  point (MakeHuman radii range 1.8-50 mm: ~1,000-2,500 centroids per point), hence the groups
+  (docs/evaluation.md, "Metrics", has the timings).
 * :func:`per_vertex_scan_distances` — per frame m, the distance of points m to surface m, ``(M, N)``; the
   heat map of a learned rig is its mean over m of scan vertex v to the posed model's surface.
 * :func:`error_statistics` — mean, std, median, MAD = median |x − median|, IQR = Q3 − Q1 and max.
   Q1/Q3 are the medians of the lower/upper halves (the middle element excluded for odd n), as the
-  spec defines them.
+  dissertation defines them.
 
 Units: those of the input (metres in Articula); :func:`error_statistics` only summarises numbers.
 """
@@ -143,7 +143,7 @@ def _pair_distances(points, tri, frames, pi, ti):
 
 
 def _tree(x):
-    """k-d tree with sliding-midpoint splits and unshrunk node boxes (measured faster here)."""
+    """k-d tree with sliding-midpoint splits and unshrunk node boxes (faster for these queries; docs/evaluation.md)."""
     return cKDTree(x, compact_nodes=False, balanced_tree=False)
 
 
@@ -275,8 +275,7 @@ def per_vertex_scan_distances(points, surfaces, faces):
 
     Small frames are measured several at a time (:func:`_side_by_side`, at least ``BATCH_POINTS`` points
     per call), so that the searches' fixed costs are paid per batch instead of per frame; the batches
-    go to the solver's threads.  Measured on Dem Bones' Bone_Anim (400 frames × 754 vertices, one
-    thread): 4.3 s one frame at a time, 3.2 s in batches of 26 frames; the distances agree to 1e-13."""
+    go to the solver's threads (the distances equal the frame-by-frame ones to rounding)."""
     points = np.asarray(points, dtype=np.float64)
     surfaces = np.asarray(surfaces, dtype=np.float64)
     M, N = points.shape[:2]
