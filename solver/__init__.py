@@ -1,4 +1,4 @@
-"""Articula's mathematics: pure numpy/scipy (trimesh where useful).  Never imports bpy or mathutils.
+"""Articula's mathematics: pure numpy/scipy.  Never imports bpy or mathutils.
 
 Conventions everywhere: lengths in metres, quaternions (w, x, y, z), rotation vectors with
 angle = norm (full angle), bone-local +Y is the twist axis, frames are (3,3) matrices whose columns

@@ -1,4 +1,4 @@
-"""Build the Articula extension zips, one per platform, with scipy and trimesh bundled as wheels.
+"""Build the Articula extension zips, one per platform, with scipy bundled as wheels.
 
     ./run package [--platforms linux-x64,windows-x64,macos-arm64,macos-x64] [--out dist]
 
@@ -50,13 +50,12 @@ MANIFEST = "blender_manifest.toml"
 class Requirement:
     name: str
     version: str
-    pure: bool  # pure-Python wheel: one file for every platform and Python 3 version
 
 
 # numpy is deliberately absent: Blender ships it and a second copy would shadow or clash with Blender's.
+# Only what product code imports is bundled (docs/libraries.md: trimesh is used by tests and benchmarks only).
 REQUIREMENTS = (
-    Requirement("scipy", "1.17.1", pure=False),
-    Requirement("trimesh", "5.2.0", pure=True),
+    Requirement("scipy", "1.17.1"),
 )
 # Python of Blender 4.2 LTS .. 5.0 and of 5.1 .. 5.2 LTS.
 PYTHON_VERSIONS = ("3.11", "3.13")
@@ -165,7 +164,7 @@ def _normal(name: str) -> str:
 def fetch_wheel(req: Requirement, python: str, platform: str, cache: Path) -> Path:
     """The cached wheel of ``req`` for CPython ``python`` on Blender ``platform``; downloads it if missing."""
     cp = "cp" + python.replace(".", "")
-    pip_platform = "any" if req.pure else PLATFORMS[platform]
+    pip_platform = PLATFORMS[platform]
     folder = cache / f"{req.name}-{req.version}" / f"{cp}-{pip_platform}"
     cached = sorted(folder.glob("*.whl"))
     if len(cached) == 1:
@@ -189,7 +188,7 @@ def fetch_wheel(req: Requirement, python: str, platform: str, cache: Path) -> Pa
                 f"(pip --platform {pip_platform} --abi {cp}).\n    {detail}\n"
                 f"Leave the platform out (--platforms) or change the pin in tools/package.py.")
         tags = parse_wheel(got[0].name)
-        ok = (tags["plat"] == "any") if req.pure else (tags["py"] == cp and tags["abi"] == cp)
+        ok = tags["py"] == cp and tags["abi"] == cp
         if _normal(tags["name"]) != _normal(req.name) or tags["version"] != req.version or not ok:
             raise PackageError(f"pip returned an unexpected wheel for {req.name}=={req.version}, {cp}, "
                                f"{pip_platform}: {got[0].name}")
@@ -205,17 +204,9 @@ def fetch_wheel(req: Requirement, python: str, platform: str, cache: Path) -> Pa
 
 
 def fetch_wheels(platforms: list[str], cache: Path) -> dict[str, list[Path]]:
-    """Blender platform -> its wheels (one per requirement and Python version; pure wheels once)."""
-    result = {}
-    for platform in platforms:
-        wheels = []
-        for req in REQUIREMENTS:
-            for python in PYTHON_VERSIONS:
-                path = fetch_wheel(req, python, platform, cache)
-                if path.name not in {w.name for w in wheels}:  # a pure wheel serves both Pythons
-                    wheels.append(path)
-        result[platform] = wheels
-    return result
+    """Blender platform -> its wheels (one per requirement and Python version)."""
+    return {platform: [fetch_wheel(req, python, platform, cache) for req in REQUIREMENTS for python in PYTHON_VERSIONS]
+            for platform in platforms}
 
 
 # --------------------------------------------------------------------------------------------------

@@ -93,12 +93,12 @@ def test_zip_holds_the_extension_and_this_platforms_wheels_only(built):
                 assert contents.get(rel) == path.read_bytes(), f"{rel} missing or different in the zip"
 
     wheels = sorted(n.split("/", 1)[1] for n in names if n.startswith("wheels/"))
-    assert len(wheels) == 3, wheels
+    assert len(wheels) == 2, wheels
     assert [w for w in wheels if w.startswith("scipy-1.17.1-cp311-cp311-") and w.endswith("_x86_64.whl")
             and "manylinux" in w]
     assert [w for w in wheels if w.startswith("scipy-1.17.1-cp313-cp313-") and w.endswith("_x86_64.whl")
             and "manylinux" in w]
-    assert "trimesh-5.2.0-py3-none-any.whl" in wheels
+    assert not [w for w in wheels if w.lower().startswith("trimesh")]   # tests and benches only (docs/libraries.md)
     assert not [w for w in wheels if w.lower().startswith("numpy")]
     assert manifest["platforms"] == [PLATFORM]
     assert manifest["build"]["generated"] == {"platforms": [PLATFORM], "wheels": [f"./wheels/{w}" for w in wheels]}
@@ -137,24 +137,21 @@ def test_every_class_the_source_registers_is_registered(installed):
 
 def test_bundled_wheels_are_extracted_and_import(installed):
     site = installed["user"] / "extensions" / ".local" / "lib" / f"python{PY}" / "site-packages"
-    assert (site / "scipy" / "__init__.py").is_file() and (site / "trimesh" / "__init__.py").is_file()
-    assert (site / "scipy-1.17.1.dist-info").is_dir() and (site / "trimesh-5.2.0.dist-info").is_dir()
-    assert not (site / "numpy").exists()
-    # This venv has scipy and trimesh itself; import the extracted copies first, with this venv's numpy
-    # standing in for Blender's, the way a real Blender would.
+    assert (site / "scipy" / "__init__.py").is_file() and (site / "scipy-1.17.1.dist-info").is_dir()
+    assert not (site / "numpy").exists() and not (site / "trimesh").exists()
+    # This venv has scipy itself; import the extracted copy first, with this venv's numpy standing in for
+    # Blender's, the way a real Blender would.
     code = (
-        "import sys; sys.path.insert(0, sys.argv[1]); import json, numpy, scipy, trimesh\n"
+        "import sys; sys.path.insert(0, sys.argv[1]); import json, numpy, scipy\n"
         "from scipy.spatial import cKDTree\n"
         "tree = cKDTree(numpy.eye(3)); d, i = tree.query([[0.9, 0.1, 0.0]])\n"
-        "print(json.dumps({'scipy': [scipy.__version__, scipy.__file__], 'trimesh': [trimesh.__version__,"
-        " trimesh.__file__], 'nearest': int(i[0]), 'volume': float(trimesh.creation.box().volume)}))\n")
+        "print(json.dumps({'scipy': [scipy.__version__, scipy.__file__], 'nearest': int(i[0])}))\n")
     proc = subprocess.run([sys.executable, "-I", "-c", code, str(site)], capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr
     got = json.loads(proc.stdout.strip().splitlines()[-1])
     assert got["scipy"][0] == "1.17.1" and Path(got["scipy"][1]).is_relative_to(site)
-    assert got["trimesh"][0] == "5.2.0" and Path(got["trimesh"][1]).is_relative_to(site)
-    assert got["nearest"] == 0 and got["volume"] == pytest.approx(1.0)
+    assert got["nearest"] == 0
 
 
 def test_operators_run_from_the_installed_copy(installed):
@@ -173,7 +170,7 @@ def test_operators_run_from_the_installed_copy(installed):
 def test_a_platform_without_a_wheel_is_a_clear_error(tmp_path, monkeypatch):
     monkeypatch.setenv("PIP_NO_INDEX", "1")  # nothing can be found: the same path as a missing wheel
     monkeypatch.delenv("PIP_FIND_LINKS", raising=False)
-    req = tool.Requirement("scipy", "1.17.1", pure=False)
+    req = tool.Requirement("scipy", "1.17.1")
     with pytest.raises(tool.PackageError) as err:
         tool.fetch_wheel(req, "3.13", "macos-x64", tmp_path)
     message = str(err.value)
