@@ -78,7 +78,10 @@ def main() -> int:
 
 
 if __name__ == "__main__":
+    as_module = "bpy" not in sys.modules
     code = main()
     sys.stdout.flush()
     sys.stderr.flush()
+    if as_module:       # the bpy 4.2 module segfaults in its exit handlers after a glTF export: skip them
+        os._exit(code)
     sys.exit(code)

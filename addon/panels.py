@@ -1,6 +1,10 @@
 """The "Articula" tab in the 3D viewport's sidebar.  One panel per feature; each draws the buttons
 of the operators that feature registered (operators missing from this build are skipped)."""
+import re
+
 import bpy
+
+from .sequences import playback
 
 
 def _button(layout, idname: str, text: str, icon: str = 'NONE'):
@@ -32,6 +36,32 @@ class ARTICULA_PT_main(_ArticulaPanel, bpy.types.Panel):
             col.label(text=f"{data.frame_count} frames from frame {data.frame_start}")
         if data.kind == 'SCAN_SEQUENCE':
             col.label(text="Registered" if data.registered else "Unregistered (for tracking)")
+        if data.kind in ('SCAN_SEQUENCE', 'POINT_CLOUD_SEQUENCE'):
+            _draw_cache_problem(self.layout, ob)
+
+
+def _draw_cache_problem(layout, ob) -> None:
+    """A red box saying why a sequence object cannot play (its frame cache is missing or unusable)."""
+    problem = playback.cache_problem(ob)
+    if not problem:
+        return
+    box = layout.box()
+    box.alert = True
+    box.label(text="Cannot play this sequence", icon='ERROR')
+    for line in _wrap(problem, 48):
+        box.label(text=line)
+    box.label(text="Import the source again to rebuild the cache")
+
+
+def _wrap(text: str, width: int) -> list:
+    """``text`` in lines of about ``width`` characters, broken after spaces and path separators."""
+    lines, line = [], ""
+    for part in re.split(r"(?<=[/ ])", text):
+        if line and len(line) + len(part) > width:
+            lines.append(line)
+            line = ""
+        line += part
+    return [piece.strip() for piece in lines + [line] if piece.strip()]
 
 
 class ARTICULA_PT_import(_ArticulaPanel, bpy.types.Panel):

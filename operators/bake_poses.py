@@ -21,11 +21,12 @@ class ARTICULA_OT_bake_poses(BundleFileInput, JobOperator, bpy.types.Operator):
     job_label = "Bake poses"
 
     def prepare(self, context):
-        path = bpy.path.abspath(self.filepath)
+        path = self.bundle_path()
         return lambda progress: path
 
     def finish(self, context, path):
-        action = rig_io.bake_bundle(context, path, self.armature, self.nla, self.frame_start, self.action_name)
+        action = rig_io.bake_bundle(context, path, self.armature, self.nla, self.frame_start, self.action_name,
+                                    warn=lambda text: self.report({'WARNING'}, text))
         where = "an NLA track" if self.nla else "the active action"
         self.report({'INFO'}, f"Baked {action.name!r} as {where}")
 

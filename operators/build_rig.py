@@ -22,7 +22,7 @@ class ARTICULA_OT_build_rig(BundleFileInput, JobOperator, bpy.types.Operator):
     job_label = "Build rig"
 
     def prepare(self, context):
-        path = bpy.path.abspath(self.filepath)
+        path = self.bundle_path()
         bake = self.bake
         self._rig_name = self.name or rig_io.rig_name_for(path)
         return lambda progress: rig_io.load_for_build(path, bake)

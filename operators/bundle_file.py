@@ -1,6 +1,8 @@
 """Shared input of the operators that read a model bundle (``.npz``): the file path property with its
-file-browser filter, and ``invoke`` opening the browser when no path was given."""
+file-browser filter, ``invoke`` opening the browser when no path was given, and the checked path."""
 import bpy
+
+from ..solver.errors import ArticulaInputError
 
 
 class BundleFileInput:
@@ -14,3 +16,9 @@ class BundleFileInput:
             context.window_manager.fileselect_add(self)
             return {'RUNNING_MODAL'}
         return self.execute(context)
+
+    def bundle_path(self) -> str:
+        """The absolute path of ``filepath`` (``//`` = the .blend's folder); an empty one is refused."""
+        if not self.filepath.strip():
+            raise ArticulaInputError("no bundle file given (set filepath to a model bundle .npz)")
+        return bpy.path.abspath(self.filepath)

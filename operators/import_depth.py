@@ -80,8 +80,8 @@ class ARTICULA_OT_import_depth(JobOperator, bpy.types.Operator):
                                           unit='LENGTH')
     cache_file: bpy.props.StringProperty(
         name="Cache File", subtype='FILE_PATH',
-        description="Where to write the point cache (.npz); default beside the .blend, or the extension's "
-                    "user folder when the file is unsaved")
+        description="Where to write the point cache (.npz); default beside the .blend in <name>_articula/, or "
+                    "the cache folder when the file is unsaved (moved beside the .blend when it is saved)")
     collection_name: bpy.props.StringProperty(name="Name", description="Collection name (default: the folder name)")
     run_modal: bpy.props.BoolProperty(default=False, options={'HIDDEN', 'SKIP_SAVE'})
 

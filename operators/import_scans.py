@@ -7,12 +7,32 @@ Sources (first match wins):
   or ``source_object`` (else the active mesh object);
 * ``source_object`` alone: a mesh object's shape keys (one frame per key, basis first) or its
   animation over ``source_frame_start..source_frame_end`` (0, 0: the scene's range).
+
+``axis_forward`` / ``axis_up``: the files' axes (Blender's importer enum names; ``AUTO`` = the format's
+convention, e.g. OBJ forward -Z, up Y).  The frames stay in file coordinates; the object matrix carries
+the conversion (docs/scans.md, "Axes").
 """
 import bpy
 from bpy_extras.io_utils import ImportHelper
 
 from ..addon.sequences import scan_sources
 from ..addon.jobs import JobOperator
+from ..solver.formats.axes import AUTO
+
+AXIS_ITEMS = ((AUTO, "Format Default", "The file format's own convention, as Blender's importer for it: OBJ "
+                                       "forward -Z, up Y; PLY, STL, OFF, MDD, PC2 as written (forward Y, up Z); "
+                                       "Alembic converted by Blender's importer"),
+              ('X', "X", ""), ('Y', "Y", ""), ('Z', "Z", ""),
+              ('NEGATIVE_X', "-X", ""), ('NEGATIVE_Y', "-Y", ""), ('NEGATIVE_Z', "-Z", ""))
+
+
+def axis_property(which: str):
+    """The Forward/Up axis property of a file input (``which``: "Forward" or "Up")."""
+    return bpy.props.EnumProperty(
+        name=f"{which} Axis", items=AXIS_ITEMS, default=AUTO,
+        description=f"The files' axis that becomes Blender's {'+Y (forward)' if which == 'Forward' else '+Z (up)'} "
+                    f"(Format Default: the format's convention); the object matrix carries the conversion, the "
+                    f"frames stay as written")
 
 
 class ARTICULA_OT_import_scans(JobOperator, bpy.types.Operator, ImportHelper):
@@ -54,6 +74,8 @@ class ARTICULA_OT_import_scans(JobOperator, bpy.types.Operator, ImportHelper):
                                               description="First frame of an animated source (0: scene start)")
     source_frame_end: bpy.props.IntProperty(name="Source End", default=0,
                                             description="Last frame of an animated source (0: scene end)")
+    axis_forward: axis_property("Forward")
+    axis_up: axis_property("Up")
 
     def _has_file_input(self):
         return bool(self.filepath or self.directory or any(f.name for f in self.files))
@@ -82,7 +104,8 @@ class ARTICULA_OT_import_scans(JobOperator, bpy.types.Operator, ImportHelper):
             context, filepath=self.filepath, directory=self.directory, names=[f.name for f in self.files],
             source_object=self.source_object, base_mesh=self.base_mesh, name=self.name,
             require_registered=self.require_registered, object_frames=self.object_frames,
-            source_range=(self.source_frame_start, self.source_frame_end))
+            source_range=(self.source_frame_start, self.source_frame_end),
+            axes=(self.axis_forward, self.axis_up))
         return lambda progress: (plan, *plan.run(progress))
 
     def finish(self, context, result):

@@ -2,19 +2,22 @@
 registered scans, bake one pose per scan and show the per-vertex error as a heat map.
 
 Input (first match wins): ``files`` in ``directory`` or the folder ``directory`` (mesh files read with
-the solver's readers, coordinates as written); the scan-sequence object named ``source_object``; the
-active object.  The work is in :mod:`addon.learn`; the settings' defaults and bounds come from
+the solver's readers, coordinates as written; ``axis_forward``/``axis_up`` place the rig as
+``articula.import_scans`` places those files); the scan-sequence object named ``source_object``; the
+active object.  The rig gets the scans' object matrix; the bundle stays in the scans' coordinates.  The work is in :mod:`addon.learn`; the settings' defaults and bounds come from
 :class:`solver.learn.options.LearnOptions`.
 """
 import os
 from dataclasses import replace
 
 import bpy
+import numpy as np
 
 from ..addon import preferences
 from ..addon.jobs import JobOperator
 from ..addon.learn import inputs, result, solve
 from ..addon.learn.report import summary_text
+from .import_scans import axis_property
 from ..solver.errors import ArticulaInputError
 from ..solver.learn.options import LearnOptions, property_range
 
@@ -34,6 +37,8 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
         name="Folder", subtype='DIR_PATH', options={'SKIP_SAVE'},
         description="Folder of registered scans (OBJ/PLY/STL/OFF), used instead of a scan-sequence object")
     files: bpy.props.CollectionProperty(type=bpy.types.OperatorFileListElement, options={'HIDDEN', 'SKIP_SAVE'})
+    axis_forward: axis_property("Forward")
+    axis_up: axis_property("Up")
     name: bpy.props.StringProperty(name="Name", options={'SKIP_SAVE'},
                                    description="Name of the new rig (empty: after the scans)")
     parts: bpy.props.IntProperty(
@@ -107,19 +112,19 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
                                max_iterations=self.max_iterations, seed=self.seed, key_scans=self.key_scans,
                                workers=preferences.threads(context), joint_prior=self.joint_prior)
         options.validate()
-        if self.initial_armature:
-            arm = bpy.data.objects.get(self.initial_armature)
-            if arm is None:
-                raise ArticulaInputError(f"initial armature: no object named {self.initial_armature!r}")
-            options = replace(options, initial_skeleton=inputs.skeleton_from_armature(arm))
+        arm = bpy.data.objects.get(self.initial_armature) if self.initial_armature else None
+        if self.initial_armature and arm is None:
+            raise ArticulaInputError(f"initial armature: no object named {self.initial_armature!r}")
         out = bpy.path.abspath(self.output_bundle) if self.output_bundle else ""
         result.check_output_path(out)
         names = [f.name for f in self.files if f.name]
         if self.directory or names:
             paths = inputs.scan_paths(bpy.path.abspath(self.directory), names)
+            matrix = inputs.files_matrix(paths, (self.axis_forward, self.axis_up))
+            inputs.check_before_reading(paths, options)     # the first file's size, before reading all
 
             def read(progress):
-                return inputs.input_from_files(paths)
+                return inputs.input_from_files(paths, matrix=matrix)
         else:
             if self.source_object:
                 ob = bpy.data.objects.get(self.source_object)
@@ -128,9 +133,14 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
             else:
                 ob = context.active_object
             inp = inputs.input_from_object(ob)
+            inputs.check_input_sizes(inp, options)
+            matrix = inp.matrix
 
             def read(progress):
                 return inp
+        if arm is not None:      # placed over the scans as shown: into the scans' coordinates
+            skeleton = inputs.skeleton_from_armature(arm, world_to_scans=np.linalg.inv(matrix))
+            options = replace(options, initial_skeleton=skeleton)
         self._output = out
 
         def work(progress):

@@ -14,6 +14,9 @@ On disk: :func:`generate_registered` writes ``pose_0000.obj`` ... (or ``.ply``; 
 names sort in frame order) with the same vertex order and faces in all files (quads by default,
 ``faces="triangles"`` for triangles), ``ground_truth.npz``, and for ``skin="hybrid"`` the model bundle
 ``ground_truth_model.npz`` ("articula-model/1", via ``solver.formats.bundle.save_bundle``, with the poses).
+The files are in their format's axis convention, as Blender's exporter writes them (OBJ: Y up, a world
+point (x, y, z) written as (x, z, -y); PLY: world Z up as is), so Blender's importers and
+``articula.import_scans`` stand them up; the ground truth and the bundle are in world coordinates (Z up).
 
 ``ground_truth.npz`` keys (B bones, N poses):
 
@@ -30,6 +33,7 @@ anchor (V,) int32,        hybrid skin (only for ``skin="hybrid"``): anchor part 
 twist_weights, swing_weights (V,B) f32   weights on the anchor's children (solver.rig.model.Model)
 posed_vertices (N,V,3)    the posed meshes (float64; files hold them rounded)
 skin, motion, rig         strings; seed, subject_seed (-1 = none) int; macros: JSON of the shape
+file_faces, file_axes     "quads"/"triangles"; (forward, up) of the files, e.g. ("NEGATIVE_Z", "Y")
 =======================  =====================================================================
 Skins: ``lbs`` = linear blend skinning, ``dqs`` = dual quaternions as Blender's Preserve Volume,
 ``hybrid`` = Articula's swing/twist skin (``solver.rig.skinning``).
@@ -44,6 +48,7 @@ import numpy as np
 from ..solver.rig import skinning
 from ..solver.formats.bundle import save_bundle
 from ..solver.errors import ArticulaInputError
+from ..solver.formats.axes import format_axes
 from ..solver.rig.kinematics import forward_kinematics
 from ..solver.rig.model import Model, Poses, Skeleton
 from .mesh_files import FORMATS, SequenceWriter
@@ -135,10 +140,11 @@ def generate_registered(out_dir, rig: str = "cmu_mb", shape=None, n_poses: int =
         raise ArticulaInputError(f"faces: must be 'quads' or 'triangles', got {faces!r}")
     posed, _, gt = posed_sequence(rig, shape, n_poses, motion, skin, seed, subject_seed, **motion_options)
     os.makedirs(out_dir, exist_ok=True)
-    writer = SequenceWriter(gt["quads"] if faces == "quads" else gt["faces"], fmt)
+    writer = SequenceWriter(gt["quads"] if faces == "quads" else gt["faces"], fmt, from_world=True)
     for name, verts in zip(frame_names(len(posed), fmt), posed):
         writer.write(os.path.join(out_dir, name), verts)
     gt["file_faces"] = np.array(faces)
+    gt["file_axes"] = np.array(format_axes("." + fmt))
     _save_npz(os.path.join(out_dir, "ground_truth.npz"), gt)
     if skin == "hybrid":
         _save_model_bundle(os.path.join(out_dir, "ground_truth_model.npz"), gt)

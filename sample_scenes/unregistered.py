@@ -11,8 +11,9 @@ topology differ between frames.  The cameras' meshes are merged (concatenated, n
 coordinates, unused vertices removed, and a few outliers (tiny floating triangles around the body)
 added.  Everything is deterministic from ``seed`` (frame k uses ``default_rng([seed, k])``).
 
-Output folder: ``scan_0000.ply`` (or ``.obj``) per frame, metres, world Z up, triangles facing the
-camera that saw them; ``ground_truth.npz`` ("articula-unregistered-gt/1"):
+Output folder: ``scan_0000.ply`` (or ``.obj``) per frame, metres, triangles facing the camera that saw
+them, written in the format's axis convention (``mesh_files``: PLY world Z up as is, OBJ Y up as
+Blender's exporter writes it); ``ground_truth.npz`` ("articula-unregistered-gt/1", world Z up):
 
 =========================  =====================================================================
 vertex_counts (N,)         vertices per scan;  face_counts (N,)
@@ -22,6 +23,8 @@ source_camera              (sum V,) int8 the camera (index into cam_to_world[k])
 cam_to_world (N,C,4,4)     every virtual camera (OpenCV axes); intrinsics (N,C,6): w, h, fx, fy, cx, cy
 faces (F,3)                the subject's triangles (``source_face`` indexes them)
 noise_params, seed         JSON str, int
+file_axes (2,)             (forward, up) of the scan files (``solver.formats.axes``): ("Y", "Z") PLY,
+                           ("NEGATIVE_Z", "Y") OBJ; file = ``world_to_file(world, ext)``
 (caller's gt)              e.g. ``posed_heads``, ``pose_rotations`` of ``registered.posed_sequence``
 =========================  =====================================================================
 """
@@ -35,6 +38,7 @@ import numpy as np
 
 from ..solver.depth import camera as cam
 from ..solver.errors import ArticulaInputError
+from ..solver.formats.axes import format_axes
 from .depth_noise import NoiseParams, apply_noise
 from .depth_recording import check_frames
 from .depth_render import incidence_cosine, render_depth
@@ -163,7 +167,7 @@ def generate_unregistered(out_dir, frames, faces, gt: dict | None = None, rig: S
     counts, fcounts, sources, seen_by, c2ws, intrs = [], [], [], [], [], []
     for k, verts in enumerate(frames):
         sv, sf, src, src_cam, cams = scan_frame(verts, faces, np.random.default_rng([seed, k]), rig, noise)
-        SequenceWriter(sf, fmt).write(os.path.join(out_dir, f"scan_{k:04d}.{fmt}"), sv)
+        SequenceWriter(sf, fmt, from_world=True).write(os.path.join(out_dir, f"scan_{k:04d}.{fmt}"), sv)
         counts.append(len(sv))
         fcounts.append(len(sf))
         sources.append(src)
@@ -177,7 +181,8 @@ def generate_unregistered(out_dir, frames, faces, gt: dict | None = None, rig: S
            "source_offsets": np.r_[0, np.cumsum(counts)].astype(np.int64),
            "cam_to_world": np.stack(c2ws), "intrinsics": np.stack(intrs), "faces": faces.astype(np.int32),
            "seed": np.array(seed), "noise_params": np.array(json.dumps(dataclasses.asdict(noise))),
-           "scan_rig": np.array(json.dumps(dataclasses.asdict(rig)))}
+           "scan_rig": np.array(json.dumps(dataclasses.asdict(rig))),
+           "file_axes": np.array(format_axes("." + fmt))}
     for key, value in (gt or {}).items():
         arr = np.asarray(value)
         if key not in out and arr.dtype != object:

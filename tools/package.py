@@ -7,8 +7,12 @@ Steps:
    ``pip download --no-deps --only-binary=:all:`` with an explicit target (``--python-version``, ``--platform``,
    ``--implementation cp``, ``--abi``).  Downloads are cached in ``$ARTICULA_HOME/wheels`` (one folder per
    request, so a second run needs no network).  numpy is never bundled: Blender ships its own.
-2. Staging: a copy of the source tree whose ``blender_manifest.toml`` gets ``platforms`` and ``wheels`` filled in
-   (the committed manifest keeps ``wheels = []`` for development and is never modified).
+2. Staging: a copy of the files git tracks in the checkout (``git ls-files``: sample data, models and reports a
+   user wrote into the checkout never reach a zip; outside a git checkout this is an error) whose
+   ``blender_manifest.toml`` gets ``platforms`` and ``wheels`` filled in (the committed manifest keeps
+   ``wheels = []`` for development and is never modified).  An untracked ``.py`` file in the extension's
+   packages is an error (a new module left out would break the installed add-on); other untracked files there
+   are named in the log.
 3. Build with Blender's own builder (``bl_pkg/cli/blender_ext.py`` shipped in the bpy wheel, run as a plain
    script, with Blender's list of valid tags), ``--split-platforms`` -> ``articula-<version>-<platform>.zip``.
 4. Check every zip (only the extension's own files plus its platform's wheels; the generated manifest block
@@ -244,22 +248,50 @@ def _toml_str(s: str) -> str:
     return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
 
 
+def _git_files(source: Path, *args: str) -> list[str]:
+    """``git ls-files -z ARGS`` run in ``source``: paths relative to it (POSIX); PackageError outside git."""
+    try:
+        proc = subprocess.run(["git", "-C", str(source), "ls-files", "-z", *args], capture_output=True)
+    except FileNotFoundError:
+        raise PackageError("git is not installed: ./run package builds from the files git tracks") from None
+    if proc.returncode != 0:
+        detail = proc.stderr.decode(errors="replace").strip().splitlines()
+        raise PackageError(f"{source} is not a git checkout ({detail[-1] if detail else 'git ls-files failed'}): "
+                           f"./run package builds from the files git tracks, so run it in a clone of the "
+                           f"repository")
+    return [p for p in proc.stdout.decode("utf-8", errors="surrogateescape").split("\0") if p]
+
+
+def tracked_files(source: Path) -> list[str]:
+    """The files git tracks in ``source`` that exist (relative POSIX paths, sorted): the only files a zip
+    may take from the checkout.  Untracked and ignored files are never packaged."""
+    return sorted(p for p in _git_files(source, "--cached") if os.path.lexists(source / p))
+
+
+def untracked_extension_files(source: Path) -> list[str]:
+    """Files in the extension's packages that git neither tracks nor ignores (left out of the zip)."""
+    return sorted(_git_files(source, "--others", "--exclude-standard", "--", *sorted(EXTENSION_PACKAGES)))
+
+
 def stage(source: Path, dest: Path, wheels: list[Path], platforms: list[str], skip_dirs=()) -> Path:
-    """Copy ``source`` to ``dest/<id>`` with the wheels in ``wheels/`` and the manifest filled in.
+    """Copy the files git tracks in ``source`` (:func:`tracked_files`) to ``dest/<id>`` with the wheels in
+    ``wheels/`` and the manifest filled in.
 
     ``skip_dirs``: more folders not to copy (the output folder when it lies inside the source tree)."""
     manifest = tomllib.loads((source / MANIFEST).read_text(encoding="utf-8"))
     pkg = dest / manifest["id"]
     skip_dirs = {Path(d).resolve() for d in skip_dirs}
-
-    def ignore(folder, names):
-        skip = {n for n in names if n == "__pycache__" or (Path(folder) / n).resolve() in skip_dirs}
-        if Path(folder).resolve() == source.resolve():
-            skip |= STAGING_SKIP_TOP & set(names)
-        return skip
-
-    shutil.copytree(source, pkg, symlinks=True, ignore=ignore)
-    (pkg / WHEEL_DIR).mkdir()
+    pkg.mkdir(parents=True)
+    for rel in tracked_files(source):
+        parts = rel.split("/")
+        path = source / rel
+        if parts[0] in STAGING_SKIP_TOP or "__pycache__" in parts or any(
+                path.resolve().is_relative_to(d) for d in skip_dirs):
+            continue
+        target = pkg / rel
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(path, target, follow_symlinks=False)
+    (pkg / WHEEL_DIR).mkdir(exist_ok=True)
     for wheel in wheels:
         target = pkg / WHEEL_DIR / wheel.name
         try:
@@ -346,6 +378,12 @@ def zip_name(manifest: dict, platform: str) -> str:
 def build(platforms: list[str], out: Path, cache: Path, source: Path = ROOT, log=print) -> list[Path]:
     """Download, stage, build, check and validate; return the zip paths (one per platform)."""
     manifest = tomllib.loads((source / MANIFEST).read_text(encoding="utf-8"))
+    left_out = untracked_extension_files(source)          # before any download: outside git is an error
+    modules = [f for f in left_out if f.endswith(".py")]
+    if modules:
+        raise PackageError(f"Python files in the extension's packages that git does not track would be missing "
+                           f"from the zip (the installed add-on could not import them): {', '.join(modules[:10])}"
+                           f"{' ...' if len(modules) > 10 else ''}. git add them, or move them out of the way.")
     blenders = find_blenders()
     if not blenders:
         raise PackageError("no bpy install found (neither this interpreter's nor $ARTICULA_HOME/venv-*); "
@@ -366,6 +404,9 @@ def build(platforms: list[str], out: Path, cache: Path, source: Path = ROOT, log
 
     out.mkdir(parents=True, exist_ok=True)
     all_wheels = list({w.name: w for p in platforms for w in wheels[p]}.values())
+    if left_out:
+        log(f"left out {len(left_out)} file(s) git does not track (git add them to ship them): "
+            f"{', '.join(left_out[:10])}{' ...' if len(left_out) > 10 else ''}")
     with tempfile.TemporaryDirectory(prefix="articula-stage-") as tmp:
         pkg = stage(source, Path(tmp), all_wheels, platforms, skip_dirs=[out])
         run_builder(builder, "build", "--source-dir", str(pkg), "--output-dir", str(out), "--split-platforms")
@@ -377,10 +418,14 @@ def build(platforms: list[str], out: Path, cache: Path, source: Path = ROOT, log
         path = out / zip_name(manifest, platform)
         if not path.is_file():
             raise PackageError(f"the builder did not write {path}")
-        names = check_zip(path, platform, wheels[platform])
-        for tools in blenders:
-            run_builder(tools, "validate", str(path))
-            check_compiles(path, tools)
+        try:
+            names = check_zip(path, platform, wheels[platform])
+            for tools in blenders:
+                run_builder(tools, "validate", str(path))
+                check_compiles(path, tools)
+        except PackageError:
+            path.unlink()                 # never leave a zip that failed its checks in the output folder
+            raise
         log(f"{path}  {path.stat().st_size / 1e6:.1f} MB  wheels: {', '.join(names)}")
         zips.append(path)
     t3 = time.perf_counter()

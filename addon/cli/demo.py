@@ -31,7 +31,7 @@ from ..learn import heat_map
 from ..learn import report as learn_report
 from ..scene import render
 from ..sequences import scans as scan_sequence
-from .common import save_blend_again, save_blend_first
+from .common import save_blend
 
 SPACING = 1.1  # metres between the demo's exhibits along X
 LEARNED_NAME = "Learned rig"
@@ -84,11 +84,10 @@ def _shift(objects, dx: float) -> None:
         ob.matrix_world.translation.x += dx
 
 
-def build_scene(paths: dict, blend: str) -> dict:
-    """Import and build everything into a new empty scene saved as ``blend`` first (so the importers'
-    frame caches go next to it); return the created objects by role."""
+def build_scene(paths: dict) -> dict:
+    """Import and build everything into a new empty scene (its caches move beside the .blend when that
+    is saved); return the created objects by role."""
     bpy.ops.wm.read_homefile(use_empty=True)
-    save_blend_first(blend)
     scans = _call(bpy.ops.articula.import_scans, directory=paths["scans"])
     depth = _call(bpy.ops.articula.import_depth, directory=paths["depth"],
                   intrinsics=os.path.join(paths["depth"], "intrinsics.json"), remove_floor=True)
@@ -111,8 +110,8 @@ def learn_scene(scans: list, parts: int = 0, iterations: int = 2, seed: int = 0)
     arms = [ob for ob in objects if ob.type == 'ARMATURE' and learn_report.REPORT_PROPERTY in ob]
     if len(arms) != 1:
         raise ArticulaInputError(f"demo: articula.learn_rig made {len(arms)} armatures with a report, expected 1")
-    # The learner works in the scans' own coordinates; the scans object sits at +SPACING.
-    _shift(objects, float(seqs[0].matrix_world.translation.x) + SPACING)
+    # The learned rig gets the scans object's matrix (it stands where the scans stand): one spacing on.
+    _shift(objects, SPACING)
     return objects, json.loads(arms[0][learn_report.REPORT_PROPERTY])
 
 
@@ -152,7 +151,7 @@ def run(args) -> int:
     paths = make_data(os.path.join(out, "demo_data"), args.scans, args.depth_frames, args.seed)
     t = _stage("sample data written", t0)
     blend = os.path.join(out, "demo.blend")
-    built = build_scene(paths, blend)
+    built = build_scene(paths)
     t = _stage(f"imported and built ({', '.join(f'{k}: {len(v)} objects' for k, v in built.items())})", t)
     titles = dict(TITLES)
     if not args.no_learn:
@@ -168,7 +167,7 @@ def run(args) -> int:
     render.render_overview(scene, png, {titles[k]: v for k, v in built.items()},
                            [titles["learned"]] if "learned" in built else [], width, height)
     t = _stage(f"rendered {png}", t)
-    save_blend_again()
+    save_blend(blend)
     _stage(f"saved {blend}", t)
     print(f"demo: done in {time.perf_counter() - t0:.1f} s -> {blend}, {png}")
     return 0

@@ -5,21 +5,25 @@ and a matching camera, optionally saved to a .blend.
     ./run import-depth --depth kinect/ --preset KINECT_V1 --voxel 0.01 --blend out.blend
     blender -b -P batch.py -- import-depth --depth rec/ --intrinsics cam.json --subtract-background
 
-With ``--blend`` the (empty or opened) file is saved there first, so the point cache is written next
-to it and referenced relative to it (``//<name>.points.npz``).
+With ``--blend`` an existing file is opened and the recording added to it (saved with a ``.blend1`` of
+the previous version), else it goes into an empty scene saved there; the point cache is put beside the
+file (``//<blend name>_articula/<name>-<id>.points.npz``).  A failed import saves nothing.
 """
 import os
 
 import bpy
 
-from .common import call_operator, finish, save_blend_first
+from .common import call_operator, editing, finish
 
 PRESETS = ("KINECT_V1", "KINECT_V2", "AZURE_KINECT", "REALSENSE_D435")
 
 
 def run(args) -> int:
-    if args.blend:
-        save_blend_first(args.blend)
+    with editing(args.blend):
+        return _import(args)
+
+
+def _import(args) -> int:
     props = dict(directory=os.path.abspath(args.depth), depth_min=args.depth_min, depth_max=args.depth_max,
                  remove_floor=not args.keep_floor, floor_tolerance=args.floor_tolerance,
                  subtract_background=args.subtract_background or bool(args.background),
@@ -43,8 +47,9 @@ def run(args) -> int:
         props["collection_name"] = args.name
     call_operator(bpy.ops.articula.import_depth, **props)
     ob = bpy.context.view_layer.objects.active
-    return finish(f"{ob.name}: {ob.articula.frame_count} frames, cache {ob.articula.cache_file}", args.blend,
-                  saved_first=True)
+    code = finish(f"{ob.name}: {ob.articula.frame_count} frames", args.blend)
+    print(f"cache {ob.articula.cache_file}")       # where it is once saved
+    return code
 
 
 def add_commands(sub):

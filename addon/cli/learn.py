@@ -6,9 +6,12 @@
     blender -b -P batch.py -- learn-rig --scans scans/ --out model.npz
 
 The scans are read with the solver's readers, coordinates as written (no axis conversion) and vertex
-order kept; the bundle holds one pose per scan in scan order (natural file order).  ``--report`` writes
-the solver's report as JSON (see :func:`report_document`).  ``--blend`` saves a scene with the scans as a
-scan-sequence object (frames 1..N) and the learned rig with its poses on the same frames.
+order kept; the bundle holds one pose per scan in scan order (natural file order), in the files'
+coordinates.  ``--forward``/``--up`` (as for ``import-scans``) only place the scans and the rig in the
+.blend (their object matrix).  ``--report`` writes the solver's report as JSON (see
+:func:`report_document`).  ``--blend`` saves a scene with the scans as a scan-sequence object (frames
+1..N) and the learned rig with its poses on the same frames, added to the file when it exists (a
+``.blend1`` keeps its previous version), else in an empty scene.
 """
 import json
 import os
@@ -21,7 +24,8 @@ from ...solver.learn.options import LearnOptions
 from .. import jobs
 from ..learn import inputs, result, solve
 from ..learn.report import error_summary, jsonable, report_json, summary_text
-from .common import call_operator, save_blend_again, save_blend_first
+from .common import call_operator, check_blend_output, editing, save_blend
+from .scans import add_axis_arguments, axis_props
 
 
 def report_document(outcome) -> dict:
@@ -56,38 +60,32 @@ def _write_json(path: str, doc: dict) -> None:
     os.replace(tmp, path)
 
 
-def _save_blend(blend: str, paths, outcome) -> None:
+def _save_blend(blend: str, paths, outcome, axes: dict) -> None:
     """Save a .blend with the scans (scan-sequence object, frames 1..N, cache beside the file) and the
-    learned rig; a .blend this command created is removed again if a step fails."""
-    existed = os.path.exists(blend)
-    save_blend_first(blend)                                # the scans' frame cache goes beside it
-    try:
+    learned rig: added to ``blend`` when it exists (a ``.blend1`` keeps its previous version), else in an
+    empty scene; nothing is saved if a step fails."""
+    with editing(blend):
         call_operator(bpy.ops.articula.import_scans, directory=os.path.dirname(paths[0]),
                       files=[{"name": os.path.basename(p)} for p in paths],
-                      require_registered=True, frame_start=1)
+                      require_registered=True, frame_start=1, **axes)
         outcome.input.frame_start = 1
         with jobs.scene_guard():
             result.build(bpy.context, outcome, f"{outcome.input.name} Rig")
-        save_blend_again()
-    except BaseException:
-        if not existed:
-            try:
-                os.remove(blend)
-            except OSError:
-                pass
-        raise
+        save_blend(blend)
 
 
 def run(args) -> int:
     for path in (args.out, args.report, args.blend):
         result.check_output_path(path or "")
+    check_blend_output(args.blend)
     options = LearnOptions(parts=args.parts, alpha=args.alpha, symmetry=not args.no_symmetry,
                            max_iterations=args.iterations, seed=args.seed, key_scans=args.key_scans,
                            workers=args.threads, joint_prior=args.joint_prior)
     options.validate()
     paths = _scan_paths(args.scans)
+    matrix = inputs.files_matrix(paths, (args.forward, args.up))
     progress = jobs.Progress("learn-rig", echo=True)
-    inp = inputs.input_from_files(paths, progress)
+    inp = inputs.input_from_files(paths, progress, matrix, options)
     outcome = solve.learn(inp, options, progress)
     result.save(args.out, outcome)
     print(f"wrote {args.out}: {outcome.model.num_vertices} vertices, {outcome.model.skeleton.num_bones} bones, "
@@ -96,7 +94,7 @@ def run(args) -> int:
         _write_json(args.report, report_document(outcome))
         print(f"wrote {args.report}")
     if args.blend:
-        _save_blend(os.path.abspath(args.blend), paths, outcome)
+        _save_blend(os.path.abspath(args.blend), paths, outcome, axis_props(args))
         print(f"saved {args.blend}: the scans and the learned rig on frames 1..{len(paths)}")
     return 0
 
@@ -126,5 +124,6 @@ def add_commands(sub):
                    help=f"solver threads (default {default.workers}: one per CPU core)")
     p.add_argument("--out", required=True, help="model bundle to write (.npz)")
     p.add_argument("--report", help="write the error statistics, stage times and objective log as JSON")
+    add_axis_arguments(p)
     p.add_argument("--blend", help="also save a .blend with the scans and the learned rig")
     p.set_defaults(func=run)

@@ -3,26 +3,24 @@
 * ``build-rig --bundle X.npz [--blend out.blend] [--name N] [--no-bake] [--frame-start 1]``
 * ``bake --bundle X.npz --blend file.blend [--armature NAME] [--nla] [--frame-start 1] [--out other.blend]``
 * ``export-bundle --blend file.blend --out X.npz [--armature NAME] [--action NAME] [--no-poses]``
-"""
-import os
 
+``build-rig --blend`` adds the rig to the file when it exists, else saves it in an empty scene; ``bake``
+saves over ``--blend`` (or as ``--out``).  Saving over a file keeps its previous version as ``.blend1``;
+a command that fails saves nothing (``common.editing``).
+"""
 import bpy
 
-from ...solver.errors import ArticulaInputError
 from ..rig import bundle_io as rig_io
 from ..rig import reader as rig_reader
-from .common import finish, save_blend_as
-
-
-def _open(path: str) -> None:
-    if not os.path.isfile(path):
-        raise ArticulaInputError(f"{path}: no such .blend file")
-    bpy.ops.wm.open_mainfile(filepath=os.path.abspath(path))
+from .common import check_blend_output, editing, finish, open_blend
 
 
 def build_rig(args) -> int:
-    if args.blend and not os.path.isdir(os.path.dirname(os.path.abspath(args.blend))):
-        raise ArticulaInputError(f"{args.blend}: its folder does not exist")
+    with editing(args.blend):
+        return _build_rig(args)
+
+
+def _build_rig(args) -> int:
     rig, action = rig_io.build_from_bundle(bpy.context, args.bundle, args.name, not args.no_bake, args.frame_start)
     for text in rig.warnings:
         print(f"warning: {text}")
@@ -32,16 +30,16 @@ def build_rig(args) -> int:
 
 
 def bake(args) -> int:
-    _open(args.blend)
-    action = rig_io.bake_bundle(bpy.context, args.bundle, args.armature, args.nla, args.frame_start,
-                                args.action_name)
     out = args.out or args.blend
-    save_blend_as(out)
-    return finish(f"baked action {action.name!r}; saved {out}")
+    check_blend_output(out)
+    open_blend(args.blend)
+    action = rig_io.bake_bundle(bpy.context, args.bundle, args.armature, args.nla, args.frame_start,
+                                args.action_name, warn=lambda text: print(f"warning: {text}"))
+    return finish(f"baked action {action.name!r}", out)
 
 
 def export_bundle(args) -> int:
-    _open(args.blend)
+    open_blend(args.blend)
     model, poses = rig_io.export_bundle(args.out, args.armature, args.action,
                                         'NONE' if args.no_poses else 'ACTIVE', bpy.context)
     frames = f", {len(poses)} poses" if poses is not None else ""

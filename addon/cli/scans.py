@@ -3,24 +3,32 @@
     ./run import-scans --scans scans/ --blend out.blend
     ./run import-scans --scans a.obj b.obj c.obj
     ./run import-scans --scans anim.pc2 --base base.obj --blend out.blend
+    ./run import-scans --scans zup_scans/ --forward Y --up Z      # OBJ files written Z up
     blender -b -P batch.py -- import-scans --scans capture.abc --blend out.blend
 
-With ``--blend`` the (empty or opened) file is first saved there, so the frame cache is written next
-to it (``<name>_articula/``) and referenced relative to it.
+With ``--blend`` an existing file is opened and the scans added to it (saved with a ``.blend1`` of the
+previous version), else the scans go into an empty scene saved there; the frame cache is put beside the
+file (``<blend name>_articula/``) and referenced relative to it.  A failed import saves nothing.
 """
+import argparse
 import os
+import re
 
 import bpy
 
 from ...solver.errors import ArticulaInputError
-from .common import call_operator, finish, save_blend_first
+from ...solver.formats.axes import AUTO, parse_axis
+from .common import call_operator, editing, finish
 
 
 def run(args) -> int:
+    with editing(args.blend):
+        return _import(args)
+
+
+def _import(args) -> int:
     scans = [os.path.abspath(p) for p in args.scans]
-    if args.blend:
-        save_blend_first(args.blend)
-    props = dict(frame_start=args.frame_start, require_registered=args.require_registered)
+    props = dict(frame_start=args.frame_start, require_registered=args.require_registered, **axis_props(args))
     if args.name:
         props["name"] = args.name
     if args.base:
@@ -36,9 +44,32 @@ def run(args) -> int:
     call_operator(bpy.ops.articula.import_scans, **props)
     ob = bpy.context.view_layer.objects.active
     data = ob.articula
-    return finish(f"{ob.name}: {data.frame_count} frames of {len(ob.data.vertices)} vertices, "
-                  f"{'registered' if data.registered else 'unregistered'}, cache {data.cache_file}",
-                  args.blend, saved_first=True)
+    code = finish(f"{ob.name}: {data.frame_count} frames of {len(ob.data.vertices)} vertices, "
+                  f"{'registered' if data.registered else 'unregistered'}", args.blend)
+    print(f"cache {data.cache_file}")       # where it is once saved
+    return code
+
+
+def _axis(text: str) -> str:
+    try:
+        return parse_axis(text)
+    except ArticulaInputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_axis_arguments(p) -> None:
+    """``--forward`` / ``--up`` (X, Y, Z, -X, -Y, -Z or auto) of a command reading scan files."""
+    # "-Z" would otherwise be taken for an option: let values like -X pass as argparse lets -1 pass.
+    p._negative_number_matcher = re.compile(r"^-\d+$|^-\d*\.\d+$|^-[XYZxyz]$")
+    for flag, which in (("--forward", "+Y (forward)"), ("--up", "+Z (up)")):
+        p.add_argument(flag, default=AUTO, type=_axis, metavar="AXIS",
+                       help=f"the files' axis that becomes Blender's {which}: X, Y, Z, -X, -Y, -Z (default auto: "
+                            f"the format's convention, OBJ forward -Z up Y, PLY/STL/OFF/MDD/PC2 as written)")
+
+
+def axis_props(args) -> dict:
+    """The operators' ``axis_forward`` / ``axis_up`` from ``--forward`` / ``--up``."""
+    return {"axis_forward": args.forward, "axis_up": args.up}
 
 
 def add_commands(sub):
@@ -51,5 +82,6 @@ def add_commands(sub):
     p.add_argument("--frame-start", type=int, default=1, help="scene frame of the first scan (default 1)")
     p.add_argument("--require-registered", action="store_true",
                    help="fail unless all frames share vertices and faces")
+    add_axis_arguments(p)
     p.add_argument("--blend", help="save the result to this .blend file")
     p.set_defaults(func=run)

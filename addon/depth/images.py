@@ -7,13 +7,23 @@ import bpy
 import numpy as np
 
 from ...solver.errors import ArticulaInputError
+from ...solver.formats.bounded import check_size, read_head
+from ...solver.formats.png16 import MAX_FRAME_BYTES
+
+# first bytes of the image files Blender is asked to read (checked before it reads the whole file)
+MAGIC = {"OpenEXR": (b"v/1\x01",), "PNG": (b"\x89PNG\r\n\x1a\n",), "JPEG": (b"\xff\xd8\xff",)}
 
 
-def load_image_pixels(path: str, what: str) -> np.ndarray:
+def load_image_pixels(path: str, what: str, formats=("PNG", "JPEG")) -> np.ndarray:
     """(H, W, 4) float32 pixels of an image file read by Blender (rows top to bottom, as stored in
-    the file), values as stored (no colour management).  Main thread only."""
+    the file), values as stored (no colour management).  The file must start like one of ``formats``
+    (:data:`MAGIC`) and be within ``png16.MAX_FRAME_BYTES`` before Blender reads it.  Main thread only."""
     if not os.path.isfile(path):
         raise ArticulaInputError(f"{path}: {what} file missing")
+    head, size = read_head(path, 8)
+    if not any(head.startswith(m) for f in formats for m in MAGIC[f]):
+        raise ArticulaInputError(f"{path}: not a {' or '.join(formats)} file ({what})")
+    check_size(path, size, MAX_FRAME_BYTES, f"a single {what}", "use smaller frames")
     try:
         img = bpy.data.images.load(path, check_existing=False)
     except RuntimeError as exc:
@@ -35,7 +45,7 @@ def load_image_pixels(path: str, what: str) -> np.ndarray:
 
 def load_exr_depth(path: str) -> np.ndarray:
     """Depth from an OpenEXR (or other float) image: the first channel, in metres, (H, W) float32."""
-    return np.ascontiguousarray(load_image_pixels(path, "EXR depth")[:, :, 0])
+    return np.ascontiguousarray(load_image_pixels(path, "EXR depth frame", ("OpenEXR",))[:, :, 0])
 
 
 def load_color(path: str) -> np.ndarray:

@@ -41,7 +41,22 @@ def error_summary(report: dict) -> dict:
 
 
 def summary_text(outcome) -> str:
-    """One line of the outcome's error statistics (mm): mean, median, max."""
+    """One line of the outcome's error statistics (mm): mean, median, max; and the islands carried
+    rigidly (:func:`islands_text`) if any."""
     s = error_summary(outcome.report)
     parts = [f"{k} {s[k]:.2f}" for k in ("mean", "median", "max") if k in s]
-    return "error (mm) " + ", ".join(parts) if parts else "no error statistics"
+    text = "error (mm) " + ", ".join(parts) if parts else "no error statistics"
+    islands = islands_text(outcome.report)
+    return f"{text}; {islands}" if islands else text
+
+
+def islands_text(report: dict) -> str:
+    """What the report says about separate mesh islands carried rigidly ("" if none), e.g.
+    "2 separate islands (130 vertices) carried rigidly by bones head, torso"."""
+    info = report.get("islands") or {}
+    if not info.get("count"):
+        return ""
+    bones = sorted({row["bone"] for row in info.get("islands", [])})
+    n = info["count"]
+    return (f"{n} separate island{'s' if n != 1 else ''} ({info['vertices']} vertices) carried rigidly by "
+            f"bone{'s' if len(bones) != 1 else ''} {', '.join(bones)}")

@@ -1,9 +1,12 @@
 """The learned rig in the scene and on disk: :func:`build` (main thread, inside ``scene_guard``) builds the
 exact swing/twist rig from an in-memory bundle, bakes the poses on the scan-sequence object's frames (scan
 k on frame ``frame_start + k``, so scrubbing replays the scans with the learned rig), adds the heat map and
-stores the report on the armature; :func:`save` writes the bundle."""
+stores the report on the armature; :func:`save` writes the bundle.  The rig gets the scans' object matrix
+(``LearnInput.matrix``): the bundle is in the scans' coordinates, the rig stands where the scans stand."""
 import json
 import os
+
+from mathutils import Matrix
 
 from ...solver.errors import ArticulaInputError
 from ...solver.formats.bundle import Bundle, save_bundle
@@ -24,6 +27,7 @@ def build(context, outcome, name: str = ""):
     bundle = Bundle(outcome.model, outcome.poses, {"source": "learn_rig", "scans": inp.source})
     rig_builder.check_model(bundle.model, bundle.poses)
     rig, action = rig_io.build_bundle(context, bundle, name or f"{inp.name} Rig", True, inp.frame_start)
+    rig.armature.matrix_world = Matrix(inp.matrix.tolist())     # the mesh and twist armature are its children
     add_heat_map(rig.mesh.data, outcome.vertex_error_mm)
     rig.armature[REPORT_PROPERTY] = json.dumps(report_json(outcome))
     return rig, action

@@ -35,6 +35,7 @@ def build_bundle(context, bundle, name: str, bake: bool = True, frame_start: int
     """Build the rig of a checked ``bundle``; bake its poses (if any, and ``bake``) as a new action on
     frames ``frame_start..``.  Returns ``(rig, action or None)``."""
     rig = rig_builder.build_rig(context, bundle.model, name)
+    rig.warnings = tuple(bundle.notes) + tuple(rig.warnings)       # e.g. normalised quaternions
     action = None
     if bake and bundle.poses is not None and len(bundle.poses):
         action = actions.write_action(rig.armature, bundle.model.skeleton.names, bundle.poses,
@@ -61,15 +62,17 @@ def poses_for_rig(poses: Poses, bundle_names, rig_names_, path: str = "") -> Pos
 
 
 def bake_bundle(context, path: str, armature: str = "", nla: bool = False, frame_start: int = 1,
-                action_name: str = ""):
+                action_name: str = "", warn=None):
     """Bake the poses of the bundle at ``path`` onto the rig ``armature`` (or the active rig) as a new
-    action; returns the action."""
+    action; returns the action.  ``warn(text)`` receives what loading changed (``Bundle.notes``)."""
     bundle = load_bundle(path)
     if bundle.poses is None or len(bundle.poses) == 0:
         raise ArticulaInputError(f"{path}: the bundle holds no poses")
     arm = rig_reader.find_armature(armature, context)
     names = rig_reader.control_names(arm)
     poses = poses_for_rig(bundle.poses, bundle.model.skeleton.names, names, path)
+    for text in bundle.notes if warn is not None else ():
+        warn(text)
     return actions.write_action(arm, names, poses, name=action_name or f"{rig_name_for(path)} poses",
                                 frame_start=frame_start, nla=nla, scene=context.scene)
 

@@ -1,6 +1,7 @@
 """Build the plain linear-blend version of an Articula rig in the scene (the Blender half of
 ``solver.rig.linear_blend``): an armature with the control bones, swing helpers and twist segment
 bones, and a copy of the rig mesh with one plain Armature modifier, sharing the rig's active action.
+At most ``max_influences`` bones per vertex (glTF keeps 4): the solver fits the limited weights.
 
 Twist segment bones are driven like the twist bones of the hybrid rig (SWING_TWIST_Y, local space) with
 the simple expression ``twist * k / n``, which Blender evaluates without Python.
@@ -12,23 +13,28 @@ from mathutils import Matrix
 
 from ...solver.rig import linear_blend as lbs
 from ...solver.rig import names as rig_names
-from ...solver.rig import pose_sampling
 from .. import compat
 from ..scene.mesh_io import write_vertex_groups
 from . import builder as rig_builder
 from . import reader as rig_reader
 
 MAX_DEVIATION_PROP = "articula_lbs_max_mm"
+UNLIMITED_DEVIATION_PROP = "articula_lbs_unlimited_max_mm"
+MAX_INFLUENCES_PROP = "articula_lbs_max_influences"
 
 
 @dataclass
 class LbsRig:
     armature: bpy.types.Object
     mesh: bpy.types.Object
-    max_mm: float          # max |LBS - hybrid| over the measured poses, millimetres
+    max_mm: float          # max |LBS - hybrid| over the measured poses, millimetres (the rig built)
     mean_mm: float
     poses_measured: int
     poses_source: str      # 'ACTION' or 'RANDOM'
+    max_influences: int    # bones per vertex at most (0 = unlimited)
+    unlimited_max_mm: float   # the same measures for the unlimited weights
+    unlimited_mean_mm: float
+    vertices_limited: int  # vertices whose weights were refitted
 
 
 def _edit_segments(arm_data, layout):
@@ -63,20 +69,31 @@ def _drive_segments(arm, layout, segments):
         t.transform_type, t.rotation_mode, t.transform_space = 'ROT_Y', 'SWING_TWIST_Y', 'LOCAL_SPACE'
 
 
-def _measure_poses(arm, model, count=100):
-    """The rig's action poses, or ``count`` random poses (seeded; swings up to 110°, twists up to ±90°,
-    see ``pose_sampling``) when it has none."""
+def _measure_poses(arm, model):
+    """The rig's action poses, or seeded random poses (``lbs.sample_poses``: swings up to 110°, twists
+    up to ±90°) when it has none."""
     if arm.animation_data is not None and arm.animation_data.action is not None:
         return rig_reader.read_poses(arm), 'ACTION'
-    return pose_sampling.random_poses(count, model.skeleton.num_bones, seed=0, max_twist_deg=90.0), 'RANDOM'
+    return lbs.sample_poses(model.skeleton.num_bones, lbs.MEASURE_SEED), 'RANDOM'
 
 
-def build_lbs_rig(context, arm, segments: int = 4) -> LbsRig:
-    """Create the LBS version of the rig whose main armature is ``arm``; returns :class:`LbsRig`."""
+def lbs_rig_weights(model, segments: int, max_influences: int):
+    """The weights the LBS rig gets: ``(layout, W (V, J))``, at most ``max_influences`` per vertex
+    (0 = unlimited) fitted to the seeded poses ``lbs.sample_poses(.., lbs.FIT_SEED)``."""
+    fit = lbs.sample_poses(model.skeleton.num_bones, lbs.FIT_SEED)
+    return lbs.limited_weights(model, segments, max_influences, fit)
+
+
+def build_lbs_rig(context, arm, segments: int = 4, max_influences: int = 4) -> LbsRig:
+    """Create the LBS version of the rig whose main armature is ``arm`` with at most ``max_influences``
+    bones per vertex (0 = unlimited); returns :class:`LbsRig` with both deviations."""
     model = rig_reader.read_model(arm)
-    layout, weights = lbs.lbs_weights(model, segments)      # validates names and segments
+    layout, full = lbs.lbs_weights(model, segments)          # validates names and segments
+    layout, weights = lbs_rig_weights(model, segments, max_influences)
     poses, source = _measure_poses(arm, model)
-    worst, mean = lbs.deviation(model, poses, segments)
+    full_worst, full_mean = lbs.deviation(model, poses, segments, weights=full)
+    limited = int(((full > 0).sum(axis=1) > max_influences).sum()) if max_influences > 0 else 0
+    worst, mean = lbs.deviation(model, poses, segments, weights=weights) if limited else (full_worst, full_mean)
     src_mesh = rig_reader.find_mesh(arm)
     sk = model.skeleton
     with rig_builder.object_mode(context):
@@ -104,8 +121,22 @@ def build_lbs_rig(context, arm, segments: int = 4) -> LbsRig:
         if ad is not None and ad.action is not None:
             compat.assign_action(lbs_arm, ad.action, getattr(ad, "action_slot", None))
         lbs_arm[MAX_DEVIATION_PROP] = float(worst.max() * 1000.0)
+        lbs_arm[UNLIMITED_DEVIATION_PROP] = float(full_worst.max() * 1000.0)
+        lbs_arm[MAX_INFLUENCES_PROP] = int(max_influences)
         context.view_layer.objects.active = lbs_arm
         lbs_arm.select_set(True)
-    return LbsRig(lbs_arm, mesh, float(worst.max() * 1000.0), float(mean * 1000.0), len(poses), source)
+    return LbsRig(lbs_arm, mesh, float(worst.max() * 1000.0), float(mean * 1000.0), len(poses), source,
+                  int(max_influences), float(full_worst.max() * 1000.0), float(full_mean * 1000.0), limited)
 
 
+
+
+def summary(rig: LbsRig) -> str:
+    """One line for the operator's report and the batch command: bones, influences, both deviations."""
+    what = "poses of the action" if rig.poses_source == 'ACTION' else "random poses (twists up to ±90°)"
+    limit = (f"at most {rig.max_influences} influences per vertex ({rig.vertices_limited} vertices refitted)"
+             if rig.max_influences > 0 else "unlimited influences per vertex")
+    return (f"Linear-blend rig {rig.armature.name!r}: {len(rig.armature.data.bones)} bones, {limit}; "
+            f"deviation from the exact rig max {rig.max_mm:.2f} mm, mean {rig.mean_mm:.3f} mm "
+            f"(unlimited influences: max {rig.unlimited_max_mm:.2f} mm, mean {rig.unlimited_mean_mm:.3f} mm) "
+            f"over {rig.poses_measured} {what}")

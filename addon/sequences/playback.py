@@ -13,20 +13,37 @@ module decides which objects to update, which frame they show, and keeps their c
   (objects in edit mode and linked meshes are left alone); ``load_post`` drops what the players hold in
   memory and shows the current frame again (the cache may have changed since the file was saved);
   ``undo_post``/``redo_post`` show the current frame (undo restores a mesh as it was when the step was
-  pushed); ``save_pre`` re-derives cache paths for the new file location.
+  pushed); ``save_pre``/``save_post``/``save_post_fail`` carry the caches with the .blend (below).
 * Why ``frame_change_pre``: it runs after ``scene.frame_current`` is set and before the depsgraph
   evaluates the frame, so the new geometry is part of that one evaluation, in the viewport and in every
   frame of an animation render (Blender's own example of a handler that edits a mesh uses it).  Data
   written in ``frame_change_post`` arrives after the frame was evaluated: it needs a second evaluation
   (the points' Geometry Nodes modifier runs twice), and whatever read the first one saw the old frame.
-* Cache paths (``ob.articula.cache_file``): ``//``-relative when the cache lies in the .blend's folder
-  tree (the project folder can move), else absolute (:func:`stored_path`).
+* Where caches live (:func:`new_cache_path`): beside a saved .blend in ``<blend name>_articula/``,
+  stored ``//``-relative; for an unsaved file in the cache folder (preferences, else $ARTICULA_HOME,
+  else ~/.cache/articula) under ``scan_cache/`` or ``point_clouds/``, stored absolute.  Their names
+  ``<name>-<8 hex digits><suffix>`` (:data:`CACHE_NAME`) are unique, which is how Articula's own files
+  are told from anything else.
+* Saving (like Blender's external data): ``save_pre`` moves the caches of an unsaved file into the new
+  ``<blend name>_articula/`` folder and copies those of another .blend's folder there (Save As: the
+  original file keeps its own); caches elsewhere (a path the user chose) stay and are stored relative
+  when inside the .blend's folder tree, else absolute.  ``save_post`` removes the caches in the saved
+  file's folder that neither the file nor its previous version (the ``.blend1``) references, and those
+  this session made for the file before its first save that nothing uses, so re-imports leave
+  nothing behind; after Save Copy the open file gets its paths back.  A cache that
+  cannot be found is also looked for by name in the open file's cache folder (an undo step from before
+  a save still names the old place).
+* An object whose cache is missing or unusable gets the ID property ``articula_warning`` (the panel
+  shows it) and one console line; the property goes when the object plays again.
 
 docs/scans.md and docs/import_depth.md describe both kinds of object.
 """
 from __future__ import annotations
 
 import os
+import re
+import shutil
+import uuid
 from dataclasses import dataclass
 from typing import Callable
 
@@ -34,8 +51,13 @@ import bpy
 from bpy.app.handlers import persistent
 
 from ...solver.errors import ArticulaInputError
+from .. import preferences
 
 SHOWN = "articula_frame"   # ID property on the mesh: sequence index it currently shows
+WARNING = "articula_warning"   # ID property on the object: why it cannot play (absent when it plays)
+FOLDER_SUFFIX = "_articula"    # <blend name>_articula/: the caches of a saved .blend
+UNSAVED_FOLDERS = ("scan_cache", "point_clouds")   # in the cache folder: caches of unsaved files
+CACHE_NAME = re.compile(r".+-[0-9a-f]{8}\.(npy|scans|points\.npz)(\.part\d*(\.npz)?)?$")  # Articula's caches
 
 
 @dataclass(frozen=True)
@@ -48,6 +70,7 @@ class Player:
 
 _players: dict = {}      # ob.articula.kind -> Player
 _reported: set = set()   # names of objects whose playback failed (reported once until a file is loaded)
+_session_unsaved: set = set()   # caches this session made for an unsaved file (removed at save if unused)
 
 
 # -- cache files -------------------------------------------------------------------------------------
@@ -72,9 +95,37 @@ def stored_path(abs_path: str, blend_path: str | None = None) -> str:
     return abs_path
 
 
+def blend_cache_folder(blend_path: str) -> str:
+    """The folder of a saved .blend's caches: ``<folder>/<blend name>_articula``."""
+    blend_path = os.path.abspath(blend_path)
+    stem = os.path.splitext(os.path.basename(blend_path))[0]
+    return os.path.join(os.path.dirname(blend_path), stem + FOLDER_SUFFIX)
+
+
+def new_cache_path(name: str, suffix: str, unsaved_folder: str) -> str:
+    """Absolute path for a new cache ``<name>-<8 hex><suffix>``: in the open .blend's cache folder, or
+    for an unsaved file in ``<cache folder>/<unsaved_folder>`` (one of :data:`UNSAVED_FOLDERS`)."""
+    if bpy.data.filepath:
+        folder = blend_cache_folder(bpy.data.filepath)
+    else:
+        folder = os.path.join(preferences.cache_dir(), unsaved_folder)
+    path = os.path.join(folder, f"{safe_name(name, 'cache')}-{uuid.uuid4().hex[:8]}{suffix}")
+    if not bpy.data.filepath:
+        _session_unsaved.add(path)
+    return path
+
+
 def cache_abspath(ob) -> str:
-    """Absolute, normalised path of the object's cache ("" when it has none)."""
-    return os.path.normpath(bpy.path.abspath(ob.articula.cache_file)) if ob.articula.cache_file else ""
+    """Absolute, normalised path of the object's cache ("" when it has none).  When the stored path does
+    not exist, a cache of that name in the open file's cache folder is used if there is one."""
+    if not ob.articula.cache_file:
+        return ""
+    path = os.path.normpath(bpy.path.abspath(ob.articula.cache_file, library=ob.library))
+    if not os.path.exists(path) and bpy.data.filepath and ob.library is None:
+        moved = os.path.join(blend_cache_folder(bpy.data.filepath), os.path.basename(path))
+        if os.path.exists(moved):
+            return moved
+    return path
 
 
 class FileCache:
@@ -138,10 +189,113 @@ def show_scene(scene, force: bool = False) -> None:
         try:
             show(ob, frame, force)
         except Exception as exc:   # never let one object break playback of the others
+            why = str(exc) if isinstance(exc, ArticulaInputError) else f"{type(exc).__name__}: {exc}"
+            if ob.library is None and ob.get(WARNING) != why:
+                ob[WARNING] = why
             if ob.name not in _reported:
                 _reported.add(ob.name)
-                why = str(exc) if isinstance(exc, ArticulaInputError) else f"{type(exc).__name__}: {exc}"
                 print(f"Articula: {ob.name}: cannot show {_players[ob.articula.kind].label} frame {frame} ({why})")
+        else:
+            if WARNING in ob and ob.library is None:
+                del ob[WARNING]
+
+
+def cache_problem(ob) -> str:
+    """What keeps ``ob`` from playing, for the panel: its cache file is missing (checked now), else the
+    last playback error (:data:`WARNING`); "" when it plays."""
+    path = cache_abspath(ob)
+    if path and not os.path.exists(path):
+        return f"frame cache missing: {path}"
+    return str(ob.get(WARNING, ""))
+
+
+# -- caches travel with the .blend -------------------------------------------------------------------
+
+_saving: dict = {}       # state between save_pre and save_post / save_post_fail
+_on_disk: set = set()    # caches the open file references as saved (its next .blend1 keeps them)
+
+
+def _sequence_items():
+    """(object, absolute cache path) of every local sequence object with a cache."""
+    return [(ob, cache_abspath(ob)) for ob in bpy.data.objects
+            if ob.type == 'MESH' and ob.articula.kind in _players and ob.articula.cache_file]
+
+
+def referenced_caches() -> set:
+    """Absolute paths of every cache a sequence object of the open file uses."""
+    return {path for _ob, path in _sequence_items()}
+
+
+def is_unsaved_cache(path: str) -> bool:
+    """A cache Articula wrote for an unsaved file (in the cache folder's scan_cache/ or point_clouds/)."""
+    folder = os.path.dirname(os.path.normpath(path))
+    return CACHE_NAME.match(os.path.basename(path)) is not None and folder in {
+        os.path.normpath(os.path.join(preferences.cache_dir(), sub)) for sub in UNSAVED_FOLDERS}
+
+
+def is_blend_cache(path: str) -> bool:
+    """A cache Articula wrote beside a saved .blend (``<blend name>_articula/<name>-<id>...``)."""
+    return (CACHE_NAME.match(os.path.basename(path)) is not None
+            and os.path.basename(os.path.dirname(os.path.normpath(path))).endswith(FOLDER_SUFFIX))
+
+
+def _copy(src: str, dst: str) -> None:
+    tmp = dst + ".part"
+    if os.path.isdir(src):
+        shutil.copytree(src, tmp)
+    else:
+        shutil.copy2(src, tmp)
+    os.replace(tmp, dst)
+
+
+def carry_cache(path: str, folder: str, state: dict) -> str:
+    """Where the cache ``path`` lives once the .blend is saved with the cache folder ``folder``: moved
+    there when it belongs to an unsaved file, copied there when it belongs to another .blend, else (a
+    missing cache, one already there, one the user placed) left where it is.  Records what it did in
+    ``state`` ("moved": [(old, new)], "created": [new]) so a failed save can undo it."""
+    if not os.path.exists(path) or os.path.dirname(path) == os.path.normpath(folder):
+        return path
+    move = is_unsaved_cache(path)
+    if not move and not is_blend_cache(path):
+        return path
+    dst = os.path.join(folder, os.path.basename(path))
+    if not os.path.exists(dst):          # (a name is unique: one already there is this cache)
+        os.makedirs(folder, exist_ok=True)
+        if move:
+            shutil.move(path, dst)
+            state["moved"].append((path, dst))
+        else:
+            _copy(path, dst)
+            state["created"].append(dst)
+    elif move:
+        remove_path(path)
+    return dst
+
+
+def remove_path(path: str) -> None:
+    """Delete a cache file or folder (no error when it is gone already)."""
+    if os.path.isdir(path):
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        try:
+            os.remove(path)
+        except OSError:
+            pass
+
+
+def remove_orphans(folder: str, keep: set) -> list:
+    """Delete the caches Articula made in ``folder`` (names matching :data:`CACHE_NAME`) that are not in
+    ``keep`` (absolute paths); other files are never touched.  Returns the removed paths."""
+    if not os.path.isdir(folder):
+        return []
+    keep = {os.path.normpath(p) for p in keep}
+    gone = [os.path.join(folder, n) for n in sorted(os.listdir(folder)) if CACHE_NAME.match(n)
+            and os.path.normpath(os.path.join(folder, n)) not in keep]
+    for path in gone:
+        remove_path(path)
+    if not os.listdir(folder):
+        os.rmdir(folder)
+    return gone
 
 
 # -- handlers ------------------------------------------------------------------------------------------
@@ -154,6 +308,8 @@ def _on_frame_change(scene, depsgraph=None):
 @persistent
 def _on_load(*_args):
     _reported.clear()
+    _on_disk.clear()
+    _on_disk.update(referenced_caches())
     for player in _players.values():
         player.forget()
     for scene in bpy.data.scenes:
@@ -168,17 +324,77 @@ def _on_undo_redo(*_args):
 
 @persistent
 def _on_save_pre(filepath="", *_args):
-    """Keep cache paths valid when the .blend is saved somewhere else: re-derive them relative to the
-    new file (or absolute when the cache is outside its folder)."""
+    """Carry every cache to the new file's cache folder (:func:`carry_cache`) and store its path
+    relative to the new file; remember the old paths for a Save Copy or a failed save."""
     if not filepath:
         return
-    for ob in bpy.data.objects:
-        if ob.type == 'MESH' and ob.articula.kind in _players and ob.articula.cache_file and not ob.library:
-            ob.articula.cache_file = stored_path(bpy.path.abspath(ob.articula.cache_file), filepath)
+    folder = blend_cache_folder(filepath)
+    state = {"file": os.path.normpath(os.path.abspath(filepath)), "opened": bpy.data.filepath,
+             "paths": {}, "moved": [], "created": []}
+    _saving.clear()
+    _saving.update(state)
+    carried = {}
+    for ob, path in _sequence_items():
+        if ob.library is not None:
+            continue
+        if path not in carried:
+            try:
+                carried[path] = carry_cache(path, folder, state)
+            except OSError as exc:
+                print(f"Articula: {ob.name}: could not put its cache {path} beside {filepath} ({exc})")
+                carried[path] = path
+        state["paths"][ob.name] = ob.articula.cache_file
+        ob.articula.cache_file = stored_path(carried[path], filepath)
+
+
+def _restore_paths(state) -> None:
+    for name, value in state.get("paths", {}).items():
+        ob = bpy.data.objects.get(name)
+        if ob is not None and ob.library is None:
+            ob.articula.cache_file = value
+
+
+@persistent
+def _on_save_post(filepath="", *_args):
+    """Saved: remove the caches nobody uses any more from the saved file's cache folder (only when the
+    open file was saved over itself: a file saved elsewhere may have a .blend1 of its own).  After Save
+    Copy the open file keeps its paths, and what was moved for the copy is copied back."""
+    state = dict(_saving)
+    _saving.clear()
+    if not filepath or not state:
+        return
+    if os.path.normpath(os.path.abspath(bpy.data.filepath or "")) != state["file"]:   # Save Copy
+        for old, new in state["moved"]:
+            if not os.path.exists(old):
+                _copy(new, old)
+        _restore_paths(state)
+        return
+    now = referenced_caches()
+    if os.path.normpath(os.path.abspath(state["opened"] or "")) == state["file"]:
+        remove_orphans(blend_cache_folder(filepath), now | _on_disk)
+    for path in _session_unsaved - now:       # made for this file before it was saved, no longer used
+        remove_path(path)
+    _session_unsaved.clear()
+    _on_disk.clear()
+    _on_disk.update(now)
+
+
+@persistent
+def _on_save_fail(filepath="", *_args):
+    """The file was not written: undo the moves and copies of ``save_pre`` and the paths."""
+    state = dict(_saving)
+    _saving.clear()
+    for old, new in state.get("moved", []):
+        if os.path.exists(new) and not os.path.exists(old):
+            shutil.move(new, old)
+    for new in state.get("created", []):
+        remove_path(new)
+    _restore_paths(state)
 
 
 _HANDLERS = (("frame_change_pre", _on_frame_change), ("load_post", _on_load), ("undo_post", _on_undo_redo),
-             ("redo_post", _on_undo_redo), ("save_pre", _on_save_pre))
+             ("redo_post", _on_undo_redo), ("save_pre", _on_save_pre), ("save_post", _on_save_post),
+             ("save_post_fail", _on_save_fail))
 
 
 def _remove_handlers():

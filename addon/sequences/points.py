@@ -24,8 +24,6 @@ opened without the add-on still shows one frame.  docs/import_depth.md describes
 """
 from __future__ import annotations
 
-import os
-
 import bpy
 import numpy as np
 
@@ -234,17 +232,7 @@ def _matrix(m):
 
 
 def default_cache_path(name: str) -> str:
-    """Absolute path for a new cache: beside the saved .blend (stored as ``//<name>.points.npz``), else
-    in the extension's user folder (survives restarts); ``<name>.2.points.npz`` ... when taken."""
-    safe = playback.safe_name(name, "points")
-    if bpy.data.filepath:
-        folder = os.path.dirname(os.path.abspath(bpy.data.filepath))
-    else:
-        from .. import package_name
-        folder = bpy.utils.extension_path_user(package_name(), path="point_clouds", create=True)
-    k = 1
-    path = os.path.join(folder, f"{safe}.points.npz")
-    while os.path.exists(path):
-        k += 1
-        path = os.path.join(folder, f"{safe}.{k}.points.npz")
-    return path
+    """Absolute path for a new cache ``<name>-<id>.points.npz``: in the saved .blend's cache folder
+    (``<blend name>_articula/``, stored ``//``-relative), else in the cache folder under
+    ``point_clouds/``; it travels with the .blend when that is saved (:mod:`.playback`)."""
+    return playback.new_cache_path(name, ".points.npz", "point_clouds")

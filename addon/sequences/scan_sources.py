@@ -11,6 +11,10 @@ rest of the user's scene, is not touched); afterwards every datablock the import
 the scene's frame range, active collection, selection and active object are restored.  Blender's
 importer converts Alembic's Y-up to Blender's Z-up: a point (x, y, z) of the file becomes (x, -z, y),
 then the object's (converted) transform applies.
+
+Axes of mesh files and point caches (``solver.formats.axes``): the frames are kept in the files'
+coordinates and the new object's matrix carries the conversion to Blender's Z up (OBJ: forward -Z, up Y
+by default; PLY/STL/OFF/MDD/PC2: as written), as Blender's own importers place them.
 """
 from __future__ import annotations
 
@@ -23,6 +27,7 @@ import bpy
 import numpy as np
 
 from ...solver.errors import ArticulaInputError
+from ...solver.formats import axes as file_axes
 from ...solver.formats.mesh_files import MESH_EXTENSIONS, read_mesh
 from ...solver.formats.pointcache import CACHE_EXTENSIONS, read_point_cache
 from ...solver.formats.scan_files import (ScanSequence, SequenceAssembler, list_scan_files, natural_sorted,
@@ -181,6 +186,7 @@ class ImportPlan:
     read: Callable          # read(progress) -> ScanSequence; no bpy (runs in the worker thread)
     name: str               # name for the new object
     source: str             # what was imported, for ``ob.articula.source``
+    matrix: object = None   # (4, 4) object matrix of the new object (the files' axis conversion) or None
     caches: dict = field(init=False)   # registered? -> path of the new cache (bpy: chosen on the main thread)
 
     def __post_init__(self):
@@ -197,7 +203,7 @@ class ImportPlan:
     def create_object(self, context, seq, path: str, frame_start: int):
         """The scan-sequence object (``scans.create_object``); the cache is deleted if that fails."""
         try:
-            return scans.create_object(context, self.name, seq, path, frame_start, self.source)
+            return scans.create_object(context, self.name, seq, path, frame_start, self.source, self.matrix)
         except BaseException:
             scans.remove_cache(path)
             raise
@@ -233,9 +239,11 @@ def resolve_files(filepath: str, directory: str, names) -> tuple:
 
 
 def plan_import(context, filepath="", directory="", names=(), source_object="", base_mesh="", name="",
-                require_registered=False, object_frames='AUTO', source_range=(0, 0)) -> ImportPlan:
+                require_registered=False, object_frames='AUTO', source_range=(0, 0),
+                axes=(file_axes.AUTO, file_axes.AUTO)) -> ImportPlan:
     """Validate the inputs (see ``operators/import_scans.py``) and prepare the reading.  Blender data
-    (Alembic, objects) is sampled here; files are read later by ``plan.read`` in the worker."""
+    (Alembic, objects) is sampled here; files are read later by ``plan.read`` in the worker.
+    ``axes``: (forward, up) of the files (``AUTO``: the format's convention)."""
     picked_file = any(names) or (filepath and not os.path.isdir(bpy.path.abspath(filepath)))
     if source_object and not picked_file:   # e.g. confirmed in the file browser without picking a file
         kind, paths = None, []
@@ -243,6 +251,30 @@ def plan_import(context, filepath="", directory="", names=(), source_object="", 
         kind, paths = resolve_files(filepath, directory, names)
     if kind is None and not source_object:
         raise ArticulaInputError("nothing to import: give files, a folder, or a source object")
+    matrix = _axis_matrix(kind, paths[0] if paths else "", axes)      # bad axes refused before any reading
+    plan = _plan_source(context, kind, paths, source_object, base_mesh, name, require_registered, object_frames,
+                        source_range)
+    plan.matrix = matrix
+    return plan
+
+
+def _axis_matrix(kind: str, path: str, axes) -> np.ndarray:
+    """The new object's matrix for files of ``kind`` read with ``axes`` (None: identity)."""
+    explicit = any(file_axes.parse_axis(a) != file_axes.AUTO for a in axes)
+    if kind is None:
+        if explicit:
+            raise ArticulaInputError("Forward/Up axes apply to files; a mesh object's frames are taken in world "
+                                     "space (set both axes to Format Default)")
+        return None
+    ext = os.path.splitext(path)[1].lower()
+    m = file_axes.conversion(ext, *axes)
+    if kind == 'ALEMBIC':      # Blender's importer already applied the format's own conversion
+        m = m @ file_axes.conversion(ext).T
+    return None if np.allclose(m, np.eye(4)) else m
+
+
+def _plan_source(context, kind, paths, source_object, base_mesh, name, require_registered, object_frames,
+                 source_range) -> ImportPlan:
     if kind == 'MESHES':
         if len(paths) == 1:
             default, source = os.path.splitext(os.path.basename(paths[0]))[0], paths[0]

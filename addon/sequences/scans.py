@@ -4,7 +4,7 @@ Storage
     All frames live in one cache file, written once at import; ``ob.articula.cache_file`` holds its path
     (relative to the .blend when the file sits in the .blend's folder tree, else absolute).  It is put in
     ``<blend folder>/<blend name>_articula/`` when the .blend is saved, else in the preferences' cache
-    folder under ``scan_cache/``.
+    folder under ``scan_cache/``, and travels with the .blend when it is saved (:mod:`.playback`).
 
     * registered sequences: ``<name>-<id>.npy``, one ``(N, V, 3)`` float32 array, memory-mapped, so a
       frame change reads only that frame.  The object's mesh carries the faces (first frame's topology).
@@ -24,16 +24,15 @@ from __future__ import annotations
 
 import os
 import shutil
-import uuid
 
 import bpy
 import numpy as np
+from mathutils import Matrix
 
 from ...solver.errors import ArticulaInputError
 from ...solver.formats.polymesh import PolyMesh
 from ...solver.formats.scan_files import ScanSequence
 from ..scene import mesh_io
-from .. import preferences
 from . import playback
 
 # -- Blender mesh <-> PolyMesh ----------------------------------------------------------------------
@@ -79,13 +78,7 @@ def read_polymesh(me: bpy.types.Mesh, matrix=None) -> PolyMesh:
 
 def new_cache_path(name: str, registered: bool) -> str:
     """Absolute path for a new cache file (see the module docstring for the folder)."""
-    if bpy.data.filepath:
-        stem = os.path.splitext(os.path.basename(bpy.data.filepath))[0]
-        folder = os.path.join(os.path.dirname(bpy.data.filepath), f"{stem}_articula")
-    else:
-        folder = os.path.join(preferences.cache_dir(), "scan_cache")
-    safe = playback.safe_name(name, "scans")
-    return os.path.join(folder, f"{safe}-{uuid.uuid4().hex[:8]}.{'npy' if registered else 'scans'}")
+    return playback.new_cache_path(name, ".npy" if registered else ".scans", "scan_cache")
 
 
 def write_cache(path: str, seq: ScanSequence) -> None:
@@ -163,14 +156,17 @@ def _frame_mesh(data, k: int) -> PolyMesh:
 
 
 def create_object(context, name: str, seq: ScanSequence, cache_path: str, frame_start: int,
-                  source: str) -> bpy.types.Object:
+                  source: str, matrix=None) -> bpy.types.Object:
     """Create the scan-sequence object (its cache already written at ``cache_path``), link it to the
-    active collection, make it active and set the scene's frame range to the sequence."""
+    active collection, make it active and set the scene's frame range to the sequence.  ``matrix``
+    (4, 4): its object matrix, e.g. the files' axis conversion (the frames stay in file coordinates)."""
     me = bpy.data.meshes.new(name)
     topo = seq.topology
     set_geometry(me, topo.vertices, topo.face_sizes, topo.corner_verts)
     me[playback.SHOWN] = 0
     ob = bpy.data.objects.new(name, me)
+    if matrix is not None:
+        ob.matrix_world = Matrix(np.asarray(matrix, np.float64).tolist())
     context.collection.objects.link(ob)
     data = ob.articula
     data.kind = 'SCAN_SEQUENCE'

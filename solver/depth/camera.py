@@ -34,6 +34,14 @@ import numpy as np
 from ..errors import ArticulaInputError
 
 FORMAT = "articula-intrinsics/1"
+#: Plausible field of view of a pinhole depth camera, degrees, edge to edge of the image (horizontal and
+#: vertical).  Real sensors are well inside: Kinect v1 57 x 43, Kinect v2 70.6 x 60, Azure Kinect 75 x 65
+#: (NFOV) and 120 x 120 (WFOV), RealSense D435 87 x 58.  Below 1 deg (fx = fy = 1e12 px) every point
+#: collapses onto the optical axis; a pinhole model near 180 deg (fx = fy = 1e-6 px) puts points
+#: kilometres away.  Focal lengths outside these bounds are refused.
+MIN_FOV_DEG, MAX_FOV_DEG = 1.0, 170.0
+#: Largest ratio of fx to fy (either way): real depth sensors have square pixels (ratio ~1).
+MAX_PIXEL_ASPECT = 4.0
 
 
 @dataclass(frozen=True)
@@ -73,7 +81,9 @@ class Intrinsics:
                        cx=(self.cx + 0.5) * sx - 0.5, cy=(self.cy + 0.5) * sy - 0.5)
 
     def validate(self, where: str = "intrinsics") -> "Intrinsics":
-        """Raise :class:`ArticulaInputError` (mentioning ``where``) unless the values are usable."""
+        """Raise :class:`ArticulaInputError` (mentioning ``where``) unless the values are usable: finite,
+        a field of view within :data:`MIN_FOV_DEG`..:data:`MAX_FOV_DEG`, fx/fy within
+        :data:`MAX_PIXEL_ASPECT`, the principal point inside the image."""
         for key in ("width", "height"):
             val = getattr(self, key)
             if not isinstance(val, (int, np.integer)) or isinstance(val, bool) or not 0 < val <= 100000:
@@ -86,9 +96,22 @@ class Intrinsics:
         for key in ("fx", "fy", "depth_unit_m"):
             if getattr(self, key) <= 0:
                 raise ArticulaInputError(f"{where}: {key} must be positive, got {getattr(self, key)!r}")
-        if not (-self.width <= self.cx <= 2 * self.width and -self.height <= self.cy <= 2 * self.height):
-            raise ArticulaInputError(f"{where}: principal point ({self.cx}, {self.cy}) is far outside "
-                                     f"the {self.width}x{self.height} image")
+        for key, size, axis in (("fx", self.width, "horizontal"), ("fy", self.height, "vertical")):
+            focal = float(getattr(self, key))
+            fov = 2 * math.degrees(math.atan(size / (2 * focal)))
+            if not MIN_FOV_DEG <= fov <= MAX_FOV_DEG:
+                lo, hi = (size / 2 / math.tan(math.radians(d) / 2) for d in (MAX_FOV_DEG, MIN_FOV_DEG))
+                raise ArticulaInputError(
+                    f"{where}: {key} = {focal:g} px gives a {axis} field of view of {fov:.3g} deg over {size} "
+                    f"pixels; a depth camera's is between {MIN_FOV_DEG:g} and {MAX_FOV_DEG:g} deg (Kinect v1: 57), "
+                    f"so {key} must be between {lo:.3g} and {hi:.3g} px")
+        if max(self.fx / self.fy, self.fy / self.fx) > MAX_PIXEL_ASPECT:
+            raise ArticulaInputError(f"{where}: fx = {self.fx:g} and fy = {self.fy:g} px differ by more than "
+                                     f"{MAX_PIXEL_ASPECT:g} times (depth sensors have square pixels)")
+        if not (-0.5 <= self.cx <= self.width - 0.5 and -0.5 <= self.cy <= self.height - 0.5):
+            raise ArticulaInputError(f"{where}: principal point (cx, cy) = ({self.cx:g}, {self.cy:g}) is outside "
+                                     f"the {self.width}x{self.height} image (pixel centres 0..{self.width - 1}, "
+                                     f"0..{self.height - 1})")
         return self
 
 
@@ -169,7 +192,10 @@ def _from_open3d(data, path):
     mat = data["intrinsic_matrix"]
     if not (isinstance(mat, list) and len(mat) == 9):
         raise ArticulaInputError(f"{path}: intrinsic_matrix must hold 9 numbers (column-major 3x3)")
-    k = np.asarray(mat, dtype=float).reshape(3, 3).T
+    try:
+        k = np.asarray(mat, dtype=float).reshape(3, 3).T
+    except (TypeError, ValueError):
+        raise ArticulaInputError(f"{path}: intrinsic_matrix must hold 9 numbers (column-major 3x3)") from None
     return dict(data, fx=float(k[0, 0]), fy=float(k[1, 1]), cx=float(k[0, 2]), cy=float(k[1, 2]))
 
 

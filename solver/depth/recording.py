@@ -17,8 +17,8 @@ import numpy as np
 from . import frames as dp
 from .. import parallel
 from ..errors import ArticulaInputError
-from ..formats.png16 import read_png16, read_png16_many
-from ..formats.point_files import PointSequence, read_point_file
+from ..formats.png16 import read_png16, read_png16_many, read_png_header
+from ..formats.point_files import PointSequence, check_point_file, read_point_file
 from ..formats.scan_files import natural_sorted
 
 DEPTH_EXTENSIONS = (".png", ".exr")
@@ -71,6 +71,23 @@ class DepthFrame:
 
 def png_frames(paths) -> list[DepthFrame]:
     return [DepthFrame(p, (lambda p=p: read_depth_png(p)), png=p) for p in paths]
+
+
+def check_png_frames(frames) -> None:
+    """Every PNG frame's header (first 33 bytes: a PNG, 16-bit, the size of the first PNG frame, a
+    file size that fits its image) checked before any frame is decoded."""
+    first = None
+    for f in frames:
+        if f is None or f.png is None:
+            continue
+        width, height, depth, _ = read_png_header(f.png)
+        if depth != 16:
+            _require_16bit(np.zeros(0, np.uint8), f.png)
+        if first is None:
+            first = (f.png, width, height)
+        elif (width, height) != first[1:]:
+            raise ArticulaInputError(f"{f.name}: {width}x{height} pixels, but {os.path.basename(first[0])} is "
+                                     f"{first[1]}x{first[2]}; all frames must have the same size")
 
 
 class _Prefetch:
@@ -219,16 +236,18 @@ def _process_frames(src: _SetupFrames, colors, rays, bg, floor, progress):
     def run_chunk(ks):
         """Decode and process consecutive frames ks (in a worker thread; no shared state written)."""
         pref = _Prefetch(frames, start=ks[0])
-        done, t_dec, t_pro = [], 0.0, 0.0
+        done, t_dec, t_pro, measured = [], 0.0, 0.0, []
         for k in ks:
             t = time.perf_counter()
-            z = src.decoded[k] if k in src.decoded else _frame_metres(frames[k], opts, src.shape, frames[0].name,
-                                                                       pref.raw(k))
+            raw = None if k in src.decoded else pref.raw(k)
+            z = src.decoded[k] if raw is None else _frame_metres(frames[k], opts, src.shape, frames[0].name, raw)
+            if not np.isfinite(z).any():      # nothing in range: keep the frame's measured depths
+                measured.append(_measured_depths(frames[k], opts, raw))
             col = colors[k]() if colors is not None else None
             t1 = time.perf_counter()
             done.append(dp.process_depth(z, rays, opts, bg, floor, col))
             t_dec, t_pro = t_dec + t1 - t, t_pro + time.perf_counter() - t1
-        return done, t_dec, t_pro
+        return done, t_dec, t_pro, measured
 
     chunks = [list(range(i, min(i + _CHUNK, n))) for i in range(0, n, _CHUNK)]
     workers = opts.workers or min(4, os.cpu_count() or 1)
@@ -238,8 +257,35 @@ def _process_frames(src: _SetupFrames, colors, rays, bg, floor, progress):
         progress(0.05 + 0.95 * last / n, f"frame {last}/{n}")
 
     results = parallel.map_in_order(run_chunk, chunks, workers, report)
-    out = [fp for done, _, _ in results for fp in done]
+    empty = [m for r in results for m in r[3]]
+    if len(empty) == n:
+        _refuse_out_of_range(frames[0].name, n, opts, empty, opts.depth_scale)
+    out = [fp for done, *_ in results for fp in done]
     return out, sum(r[1] for r in results), sum(r[2] for r in results), min(workers, len(chunks))
+
+
+def _measured_depths(frame: DepthFrame, opts: dp.DepthOptions, raw=None):
+    """(nearest, farthest) measured depth of a frame in metres (its non-zero finite pixels), or None."""
+    raw = frame.load() if raw is None else raw
+    z = np.asarray(raw, np.float64) * (1.0 if frame.metres else opts.depth_scale)
+    z = z[np.isfinite(z) & (z > 0)]
+    return (float(z.min()), float(z.max())) if z.size else None
+
+
+def _refuse_out_of_range(first: str, n: int, opts: dp.DepthOptions, measured: list, scale=None) -> None:
+    """Every frame lies outside the depth range: say which range, and what the frames measure
+    (``measured``: (nearest, farthest) metres or None per frame; ``scale``: the PNG depth scale)."""
+    where = os.path.dirname(first) or first
+    ranges = [m for m in measured if m is not None]
+    if not ranges:
+        raise ArticulaInputError(f"{where}: all {n} frames are empty (no depth measured)")
+    lo, hi = min(m[0] for m in ranges), max(m[1] for m in ranges)
+    at = f" at a depth scale of {scale:g} m per unit" if scale is not None else ""
+    fix = " or the depth scale (--depth-scale)" if scale is not None else ""
+    raise ArticulaInputError(
+        f"{where}: no point of the {n} frames lies in the depth range {opts.depth_min:g}-{opts.depth_max:g} m; "
+        f"the frames measure {lo:.3g}-{hi:.3g} m{at}: set the depth range (Depth Min/Max, "
+        f"--depth-min/--depth-max){fix}")
 
 
 # ------------------------------------------------------------------------------------ importers
@@ -260,9 +306,11 @@ def import_depth(frames: list, intr, opts: dp.DepthOptions, progress=_no_progres
     opts.validate()
     if not frames:
         raise ArticulaInputError("no depth frames to import")
+    intr.validate()
     if colors is not None and len(colors) != len(frames):
         raise ArticulaInputError(f"{len(colors)} colour frames for {len(frames)} depth frames; "
                                  "the counts must match")
+    check_png_frames(list(frames) + [background])
     t0 = time.perf_counter()
     src = _SetupFrames(frames, opts)
     notes = []
@@ -314,18 +362,25 @@ def import_clouds(paths: list, opts: dp.DepthOptions, progress=_no_progress, int
         p = read(k)[0]
         return p[(p[:, 2] >= opts.depth_min) & (p[:, 2] <= opts.depth_max)]
 
+    for path in paths:       # every file's header and size before the first is read
+        check_point_file(path)
     floor = None
     if opts.remove_floor:
         floor, _ = _fit_floor(candidates, len(paths), opts)
         notes.append("no floor found" if floor is None else f"floor found {floor[1]:.3f} m below the sensor origin")
-    out = []
+    out, measured = [], []
     for k in range(len(paths)):
         progress(k / len(paths), f"frame {k + 1}/{len(paths)}")
         pts, col = read(k)
         cache.pop(k, None)
+        z = pts[:, 2]
+        if not ((z >= opts.depth_min) & (z <= opts.depth_max)).any():
+            measured.append((float(z.min()), float(z.max())) if len(z) else None)
         t = time.perf_counter()
         out.append(dp.process_cloud(pts, opts, floor, col))
         timings["processing"] += time.perf_counter() - t
+    if len(measured) == len(paths):
+        _refuse_out_of_range(paths[0], len(paths), opts, measured)
     if any(f.colors is None for f in out) and any(f.colors is not None for f in out):
         notes.append("some frames have no colours; colours dropped")
         for f in out:

@@ -5,7 +5,9 @@ int32, ``heads``/``tails`` (B, 3) and ``frames`` (B, 3, 3) float64, ``anchor`` (
 ``twist_weights``/``swing_weights`` (V, B) float32, as in :class:`~..rig.model.Model`); the poses'
 :data:`POSE_KEYS` (``pose_rotations`` (N, B, 4), ``pose_translations`` (N, 3), ``pose_scales`` (N,));
 ``provenance``, a JSON string.  Files are read with ``allow_pickle=False``; a broken file raises
-:class:`ArticulaInputError` naming the key and the problem, a missing file names the path.
+:class:`ArticulaInputError` naming the key and the problem, a missing file names the path.  Pose
+quaternions whose norm is within ``QUAT_RENORM_TOL`` (1e-4) of 1 are normalised on load, with a note in
+``Bundle.notes`` that the operators and batch commands show.
 """
 import json
 import os
@@ -28,6 +30,7 @@ class Bundle:
     model: Model
     poses: Poses = None
     provenance: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)      # what loading changed (e.g. normalised quaternions)
 
 
 def save_bundle(path, model: Model, poses: Poses = None, provenance: dict = None) -> None:
@@ -64,14 +67,34 @@ def save_bundle(path, model: Model, poses: Poses = None, provenance: dict = None
 
 
 def _read_arrays(path) -> dict:
+    """Every array of the ``.npz`` at ``path`` by key; refuses anything else (not a zip, pickled objects,
+    members that are not ``.npy`` arrays) with a message naming the file and the key."""
     path = os.fspath(path)
+    if not path.strip():
+        raise ArticulaInputError("no bundle file given")
     if not os.path.isfile(path):
         raise ArticulaInputError(f"{path}: no such bundle file")
+    not_npz = f"{path}: not a model bundle (not a valid .npz archive of arrays)"
+    if not zipfile.is_zipfile(path):
+        raise ArticulaInputError(not_npz)
+    arrays = {}
     try:
         with np.load(path, allow_pickle=False) as data:
-            return {k: data[k] for k in data.files}
+            for key in data.files:
+                try:
+                    arrays[key] = data[key]
+                except ValueError as exc:
+                    if "pickle" in str(exc):
+                        raise ArticulaInputError(f"{path}: key {key!r} holds Python objects (pickled), which a "
+                                                 f"model bundle never contains") from None
+                    raise
+    except ArticulaInputError:
+        raise
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise ArticulaInputError(f"{path}: not a readable .npz bundle ({exc})") from exc
+        raise ArticulaInputError(f"{not_npz}: {exc}") from exc
+    if not all(isinstance(a, np.ndarray) for a in arrays.values()):
+        raise ArticulaInputError(not_npz)
+    return arrays
 
 
 def _get(arrays, key, kind, path):
@@ -91,8 +114,10 @@ def load_bundle(path) -> Bundle:
     """Read and validate a bundle; returns ``Bundle(model, poses or None, provenance dict)``."""
     arrays = _read_arrays(path)
     fmt = _get(arrays, "format", "str", path)
-    if fmt.shape != () or str(fmt) != FORMAT:
-        raise ArticulaInputError(f"{path}: key 'format' is {fmt!r}, expected {FORMAT!r}")
+    if fmt.shape != ():
+        raise ArticulaInputError(f"{path}: key 'format' must be one string, got shape {fmt.shape}")
+    if str(fmt) != FORMAT:
+        raise ArticulaInputError(f"{path}: key 'format' is {str(fmt)!r}, expected {FORMAT!r}")
     g = {k: _get(arrays, k, "int" if k in ("faces", "parents", "anchor") else
                  "str" if k == "bone_names" else "float", path) for k in MODEL_KEYS}
     if g["bone_names"].ndim != 1:
@@ -103,7 +128,7 @@ def load_bundle(path) -> Bundle:
         model.validate()
     except ArticulaInputError as exc:
         raise ArticulaInputError(f"{path}: {exc}") from exc
-    poses = _load_poses(arrays, path, skeleton.num_bones)
+    poses, notes = _load_poses(arrays, path, skeleton.num_bones)
     provenance = {}
     if "provenance" in arrays:
         try:
@@ -112,13 +137,13 @@ def load_bundle(path) -> Bundle:
             raise ArticulaInputError(f"{path}: key 'provenance' is not valid JSON ({exc})") from exc
         if not isinstance(provenance, dict):
             raise ArticulaInputError(f"{path}: key 'provenance' must hold a JSON object")
-    return Bundle(model, poses, provenance)
+    return Bundle(model, poses, provenance, notes)
 
 
 def _load_poses(arrays, path, num_bones):
     present = [k for k in POSE_KEYS if k in arrays]
     if not present:
-        return None
+        return None, []
     if "pose_rotations" not in arrays:
         raise ArticulaInputError(f"{path}: key {present[0]!r} present but 'pose_rotations' missing")
     rot = _get(arrays, "pose_rotations", "float", path)
@@ -126,8 +151,9 @@ def _load_poses(arrays, path, num_bones):
     trans = _get(arrays, "pose_translations", "float", path) if "pose_translations" in arrays else np.zeros((n, 3))
     scales = _get(arrays, "pose_scales", "float", path) if "pose_scales" in arrays else np.ones(n)
     poses = Poses(rot, trans, scales)
+    note = poses.normalise_near_unit()
     try:
         poses.validate(num_bones)
     except ArticulaInputError as exc:
         raise ArticulaInputError(f"{path}: {exc}") from exc
-    return poses
+    return poses, [f"{path}: {note}"] if note else []

@@ -11,19 +11,25 @@ its skeleton, exact weights and per-pose bone transforms).
   ``x -> T_b[:3].T x + T_b[3]``.  Returned as ``A (B, 3, 3)``, ``t (B, 3)`` with x -> A x + t.
 
 All readers raise :class:`ArticulaInputError` naming the file and the line or count that is wrong.
-Units are those of the file.
+Units are those of the file.  The first line is checked (and a ``.dmat``'s declared size against the file
+size) and the file size against ``bounded.MAX_SCAN_BYTES`` before a file is read whole.
 """
 import numpy as np
 
 from ..errors import ArticulaInputError
+from .bounded import check_size, read_bytes, read_head, size_text
 
 
-def _read_lines(path):
-    try:
-        with open(path, "r", encoding="utf-8", errors="replace") as f:
-            return f.read().splitlines()
-    except OSError as e:
-        raise ArticulaInputError(f"{path}: cannot read ({e.strerror or e})") from None
+def _read_lines(path, numbers: int):
+    """The file's lines, after checking that its first non-empty line holds ``numbers`` numbers and that
+    it is within the size limit."""
+    head, size = read_head(path)
+    for lineno, line in enumerate(head.decode("utf-8", "replace").splitlines()[:-1] or [""], 1):
+        if line.split() and not line.split()[0].startswith("#"):
+            _floats(path, lineno, line.split(), numbers)
+            break
+    check_size(path, size, what="a single rig file", hint="split it")
+    return read_bytes(path).decode("utf-8", errors="replace").splitlines()
 
 
 def _floats(path, lineno, tokens, n):
@@ -39,7 +45,7 @@ def _floats(path, lineno, tokens, n):
 def read_tgf(path):
     """``(joints (J, 3) float64, bones (B, 2) int64)`` of a ``.tgf`` file (module docstring)."""
     joints, bones, section = [], [], 0
-    for lineno, line in enumerate(_read_lines(path), 1):
+    for lineno, line in enumerate(_read_lines(path, 4), 1):
         tok = line.split()
         if not tok:
             continue
@@ -66,16 +72,22 @@ def read_tgf(path):
 
 def read_dmat(path):
     """The ``(rows, cols)`` float64 matrix of an ASCII ``.dmat`` file."""
-    lines = _read_lines(path)
-    if not lines:
+    first, size = read_head(path, 256)
+    first = first.split(b"\n", 1)[0].decode("utf-8", "replace")
+    if not first.strip():
         raise ArticulaInputError(f"{path}: empty file")
-    head = lines[0].split()
     try:
-        cols, rows = int(head[0]), int(head[1])
+        cols, rows = int(first.split()[0]), int(first.split()[1])
+        if cols < 0 or rows < 0:
+            raise ValueError
     except (ValueError, IndexError):
-        raise ArticulaInputError(f"{path}, line 1: expected the header 'cols rows', got {lines[0]!r}") from None
+        raise ArticulaInputError(f"{path}, line 1: expected the header 'cols rows', got {first!r}") from None
     if cols == 0 and rows == 0:
         raise ArticulaInputError(f"{path}: binary .dmat is not supported (save it as ASCII)")
+    if size is not None and 2 * rows * cols > size:
+        raise ArticulaInputError(f"{path}: header says {rows} x {cols} values, which need at least "
+                                 f"{size_text(2 * rows * cols)}, but the file has {size_text(size)}")
+    lines = _read_lines(path, 2)
     try:
         values = np.array(" ".join(lines[1:]).split(), dtype=np.float64)
     except ValueError:
@@ -87,7 +99,7 @@ def read_dmat(path):
 
 def read_tmat(path, num_bones=None):
     """``(A (B, 3, 3), t (B, 3))`` of a ``.Tmat`` file (module docstring); ``num_bones`` checks B."""
-    rows = [_floats(path, k, line.split(), 3) for k, line in enumerate(_read_lines(path), 1) if line.split()]
+    rows = [_floats(path, k, line.split(), 3) for k, line in enumerate(_read_lines(path, 3), 1) if line.split()]
     T = np.array(rows, dtype=np.float64).reshape(-1, 3)
     if len(T) % 4 or not len(T):
         raise ArticulaInputError(f"{path}: expected 4 rows per bone, got {len(T)} rows")

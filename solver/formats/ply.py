@@ -1,10 +1,16 @@
-"""Stanford PLY mesh reader (pure numpy), ascii or binary in either byte order."""
+"""Stanford PLY mesh reader (pure numpy), ascii or binary in either byte order.  The header is read and
+the element counts it declares are checked against the file size (:func:`check_ply`) before the file
+is read whole."""
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import ArticulaInputError
-from .polymesh import PolyMesh, finish_mesh, parse_numbers, read_bytes
+from .bounded import check_size, read_bytes, read_head, size_text
+from .polymesh import PolyMesh, finish_mesh, parse_numbers
+
+#: The longest PLY header read (comments included) before ``end_header`` must have appeared.
+MAX_HEADER_BYTES = 1 << 20
 
 _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
               "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
@@ -34,6 +40,8 @@ def _ply_header(data: bytes, path: str):
                 fmt = words[1]
             elif words[0] == "element":
                 elements.append((words[1], int(words[2]), []))
+                if elements[-1][1] < 0:
+                    raise ValueError
             elif words[0] == "property" and words[1] == "list":
                 elements[-1][2].append(_PlyProperty(words[4], _PLY_TYPES[words[3]], _PLY_TYPES[words[2]]))
             elif words[0] == "property":
@@ -47,9 +55,42 @@ def _ply_header(data: bytes, path: str):
     return fmt, elements, body_start
 
 
+def check_ply(path: str):
+    """Read and check the header only: a 'ply' ... 'end_header' header within the first
+    :data:`MAX_HEADER_BYTES`, element counts that fit the file size, the file within the scan limit.
+    Returns ``(format, elements, body offset)``."""
+    head, size = read_head(path)
+    if not head.startswith(b"ply") or head[3:4] not in (b"\n", b"\r"):
+        raise ArticulaInputError(f"{path}: not a PLY file (no 'ply' ... 'end_header' header)")
+    if b"end_header" not in head and (size is None or size > len(head)):
+        head, size = read_head(path, MAX_HEADER_BYTES)
+    fmt, elements, body = _ply_header(head, path)
+    if size is not None:
+        _check_counts(path, fmt, elements, size - body)
+    check_size(path, size)
+    return fmt, elements, body
+
+
+def _check_counts(path, fmt, elements, have):
+    """Refuse element counts that need more bytes than the ``have`` bytes after the header: each binary
+    record at least its fixed-size properties and list counts, each ascii value at least 2 characters."""
+    need = 0
+    for name, count, props in elements:
+        if fmt == "ascii":
+            per = 2 * len(props)
+        else:
+            per = sum(np.dtype(p.count_type or p.type).itemsize for p in props)
+        need += count * per
+        if need > have + 1:
+            raise ArticulaInputError(f"{path}: the PLY header declares {count} {name!r} records, which need at "
+                                     f"least {size_text(need)}, but the file has {size_text(have)} after the "
+                                     "header; truncated?")
+
+
 def read_ply(path: str) -> PolyMesh:
     """Stanford PLY, ascii or binary (either byte order): ``vertex`` x/y/z and ``face``
     ``vertex_indices`` (or ``vertex_index``) lists; other elements and properties are skipped."""
+    check_ply(path)
     data = read_bytes(path)
     fmt, elements, body = _ply_header(data, path)
     reader = _PlyAscii(data, body, path) if fmt == "ascii" else \
@@ -122,7 +163,7 @@ class _PlyBinary(_PlyBody):
         return np.dtype(fields)
 
     def _short(self, name, i=None):
-        where = f" (record {i})" if i is not None else ""
+        where = f" (record {i + 1})" if i is not None else ""
         return ArticulaInputError(f"{self.path}: PLY file ends inside element {name!r}{where}; truncated?")
 
     def _fixed(self, name, count, props):
@@ -227,7 +268,7 @@ class _PlyAscii(_PlyBody):
         return out
 
     def _bad_length(self, name, i):
-        return ArticulaInputError(f"{self.path}: bad list length in PLY element {name!r} record {i}")
+        return ArticulaInputError(f"{self.path}: bad list length in PLY element {name!r} record {i + 1}")
 
     def _value(self, name, p, i):
         return self._take(name, 1)[0]

@@ -24,10 +24,14 @@ Writer (:func:`write_png16`): uint16 (or uint8) (H, W) arrays as grayscale PNG w
 filter per row (any of the five, vectorised because forward filtering only reads raw bytes).
 Files are written atomically (temporary file, then rename).
 
-Chunk CRCs are verified; problems raise :class:`~.errors.ArticulaInputError` naming the file.
+Chunk CRCs are verified; problems raise :class:`~.errors.ArticulaInputError` naming the file.  Files
+are read chunk by chunk: the signature and IHDR come first, the image size they declare is checked
+against :data:`MAX_FRAME_BYTES` and the file size against what such an image can take, and the
+image data is inflated no further than the declared size (a "zip bomb" cannot fill the memory).
 """
 from __future__ import annotations
 
+import io
 import os
 import struct
 import zlib
@@ -35,8 +39,13 @@ import zlib
 import numpy as np
 
 from ..errors import ArticulaInputError
+from .bounded import file_size, open_file, size_text
 
 SIGNATURE = b"\x89PNG\r\n\x1a\n"
+#: The largest image read (its uncompressed bytes, W x H x bytes per pixel): 16384 x 16384 16-bit gray.
+MAX_FRAME_BYTES = 16384 * 16384 * 2
+#: Bytes a PNG file may hold beyond its uncompressed image (ancillary chunks, deflate overhead).
+_PNG_SLACK_BYTES = 16_000_000
 FILTER_NAMES = ("none", "sub", "up", "average", "paeth")
 _CHANNELS = {0: 1, 2: 3, 4: 2, 6: 4}  # colour type -> samples per pixel
 
@@ -51,20 +60,21 @@ def read_png16(path) -> np.ndarray:
     millimetres with 0 meaning "no measurement".
     """
     path = os.fspath(path)
-    return decode_png(_read_bytes(path), name=path)
+    info, filtered, ftypes = _inflate_file(path)
+    return _samples(unfilter(filtered, ftypes), info[2])
 
 
-def _read_bytes(path: str) -> bytes:
-    try:
-        with open(path, "rb") as f:
-            return f.read()
-    except OSError as exc:
-        raise ArticulaInputError(f"{path}: cannot read PNG ({exc.strerror or exc})") from exc
+def read_png_header(path) -> tuple:
+    """``(width, height, bit depth, colour type)`` from a PNG's first 33 bytes, checked as when reading
+    (signature, IHDR, supported format, declared size against the limit and the file size)."""
+    path = os.fspath(path)
+    with open_file(path) as f:
+        return _start(f, path, file_size(f))
 
 
 def decode_png(data: bytes, name: str = "<bytes>") -> np.ndarray:
     """Decode PNG file contents (see :func:`read_png16`); ``name`` is used in error messages."""
-    info, filtered, ftypes = _inflate(data, name)
+    info, filtered, ftypes = _inflate(io.BytesIO(data), name, len(data))
     return _samples(unfilter(filtered, ftypes), info[2])
 
 
@@ -73,7 +83,7 @@ def read_png16_many(paths, batch: int = 8) -> list:
     ``[read_png16(p) for p in paths]``, but frames of equal width and pixel format are unfiltered
     together, ``batch`` at a time, which amortises the per-step cost of the Average/Paeth wavefront
     (several times faster on libpng-encoded frames)."""
-    parsed = [_inflate(_read_bytes(os.fspath(p)), os.fspath(p)) for p in paths]
+    parsed = [_inflate_file(os.fspath(p)) for p in paths]
     out = [None] * len(parsed)
     groups = {}
     for i, (info, filtered, ftypes) in enumerate(parsed):
@@ -94,16 +104,21 @@ def read_png16_many(paths, batch: int = 8) -> list:
     return out
 
 
-def _inflate(data: bytes, name: str):
-    """Validate and decompress: ((W, H, depth, ctype), filtered (H, W, bpp) uint8, types (H,))."""
-    header, idat = _parse_chunks(data, name)
+def _inflate_file(path: str):
+    with open_file(path) as f:
+        return _inflate(f, path, file_size(f))
+
+
+def _inflate(f, name: str, size=None):
+    """Validate and decompress the PNG read from file object ``f`` (or bytes; ``size``: bytes, None if
+    unknown): ((W, H, depth, ctype), filtered (H, W, bpp) uint8, types (H,))."""
+    if isinstance(f, (bytes, bytearray, memoryview)):
+        f, size = io.BytesIO(f), len(f)
+    header = _start(f, name, size)
     width, height, depth, ctype = header
     bpp = _CHANNELS[ctype] * depth // 8
-    try:
-        raw = zlib.decompress(idat)
-    except zlib.error as exc:
-        raise ArticulaInputError(f"{name}: corrupt PNG image data ({exc})") from exc
     stride = width * bpp + 1
+    raw = _inflate_chunks(f, name, stride * height, _chunk_limit(stride * height))
     if len(raw) < stride * height:
         raise ArticulaInputError(f"{name}: PNG image data too short ({len(raw)} bytes, "
                                  f"expected {stride * height} for {width}x{height})")
@@ -111,8 +126,77 @@ def _inflate(data: bytes, name: str):
     ftypes = rows[:, 0]
     if ftypes.max(initial=0) > 4:
         bad = int(np.argmax(ftypes > 4))
-        raise ArticulaInputError(f"{name}: invalid PNG filter type {int(ftypes[bad])} in row {bad}")
+        raise ArticulaInputError(f"{name}: invalid PNG filter type {int(ftypes[bad])} in image row {bad + 1}")
     return header, rows[:, 1:].reshape(height, width, bpp), ftypes
+
+
+def _chunk_limit(raw_size: int) -> int:
+    """The most bytes a PNG of ``raw_size`` uncompressed image bytes can sensibly take."""
+    return raw_size + raw_size // 64 + _PNG_SLACK_BYTES
+
+
+def _start(f, name: str, size):
+    """Check the signature and the IHDR chunk (read from ``f``), the declared image against
+    :data:`MAX_FRAME_BYTES` and the file ``size`` against it; ``(W, H, depth, ctype)``."""
+    if f.read(8) != SIGNATURE:
+        raise ArticulaInputError(f"{name}: not a PNG file (bad signature)")
+    length, kind, body = _chunk(f, name, 64)
+    if kind != b"IHDR":
+        raise ArticulaInputError(f"{name}: PNG without IHDR chunk (the first chunk is {kind!r})")
+    header = _check_header(body, name)
+    width, height, depth, ctype = header
+    raw = (width * _CHANNELS[ctype] * depth // 8 + 1) * height
+    if raw > MAX_FRAME_BYTES:
+        raise ArticulaInputError(f"{name}: the PNG header declares a {width}x{height} image "
+                                 f"({size_text(raw)} uncompressed), larger than the {size_text(MAX_FRAME_BYTES)} "
+                                 "limit for a single frame")
+    if size is not None and size > _chunk_limit(raw):
+        raise ArticulaInputError(f"{name}: {size_text(size)} is far larger than a {width}x{height} PNG image can "
+                                 f"take ({size_text(raw)} uncompressed); not a valid depth frame")
+    return header
+
+
+def _chunk(f, name: str, limit: int):
+    """Read one chunk (length, type, body; CRC verified); bodies over ``limit`` bytes are refused
+    before they are read."""
+    head = f.read(8)
+    if len(head) < 8:
+        raise ArticulaInputError(f"{name}: truncated PNG (no IEND chunk)")
+    length, kind = struct.unpack(">I4s", head)
+    if length > limit:
+        raise ArticulaInputError(f"{name}: PNG chunk {kind!r} declares {size_text(length)}, more than this "
+                                 f"image can hold ({size_text(limit)})")
+    body = f.read(length)
+    crc = f.read(4)
+    if len(body) != length or len(crc) != 4:
+        raise ArticulaInputError(f"{name}: truncated PNG chunk {kind!r}")
+    if zlib.crc32(kind + body) & 0xFFFFFFFF != struct.unpack(">I", crc)[0]:
+        raise ArticulaInputError(f"{name}: CRC mismatch in PNG chunk {kind.decode('latin1')!r}")
+    return length, kind, body
+
+
+def _inflate_chunks(f, name: str, raw_size: int, limit: int) -> bytes:
+    """The image data of the chunks after IHDR, inflated as the IDAT chunks come and never beyond
+    ``raw_size`` bytes; stops at IEND."""
+    inflater, parts, got, seen = zlib.decompressobj(), [], 0, False
+    while True:
+        _, kind, body = _chunk(f, name, limit)
+        if kind == b"IEND":
+            break
+        if kind != b"IDAT":
+            continue
+        seen = True
+        try:
+            part = inflater.decompress(body, raw_size + 1 - got)
+        except zlib.error as exc:
+            raise ArticulaInputError(f"{name}: corrupt PNG image data ({exc})") from exc
+        got += len(part)
+        parts.append(part)
+        if got > raw_size or inflater.unconsumed_tail:
+            raise ArticulaInputError(f"{name}: PNG image data is larger than its declared size")
+    if not seen:
+        raise ArticulaInputError(f"{name}: PNG without IDAT chunk")
+    return b"".join(parts)
 
 
 def _samples(pixels, depth):
@@ -120,33 +204,6 @@ def _samples(pixels, depth):
     if depth == 16:
         return (pixels[:, :, 0].astype(np.uint16) << 8) | pixels[:, :, 1]
     return np.ascontiguousarray(pixels[:, :, 0])
-
-
-def _parse_chunks(data: bytes, name: str):
-    """Validate signature, chunk CRCs and IHDR; return ((W, H, depth, ctype), concatenated IDAT)."""
-    if data[:8] != SIGNATURE:
-        raise ArticulaInputError(f"{name}: not a PNG file (bad signature)")
-    pos, header, idat = 8, None, []
-    while pos + 12 <= len(data):
-        length, ctype = struct.unpack(">I4s", data[pos:pos + 8])
-        body = data[pos + 8:pos + 8 + length]
-        if len(body) != length or pos + 12 + length > len(data):
-            raise ArticulaInputError(f"{name}: truncated PNG chunk {ctype!r}")
-        (crc,) = struct.unpack(">I", data[pos + 8 + length:pos + 12 + length])
-        if zlib.crc32(ctype + body) & 0xFFFFFFFF != crc:
-            raise ArticulaInputError(f"{name}: CRC mismatch in PNG chunk {ctype.decode('latin1')!r}")
-        if ctype == b"IHDR":
-            header = _check_header(body, name)
-        elif ctype == b"IDAT":
-            idat.append(body)
-        elif ctype == b"IEND":
-            break
-        pos += 12 + length
-    else:
-        raise ArticulaInputError(f"{name}: truncated PNG (no IEND chunk)")
-    if header is None or not idat:
-        raise ArticulaInputError(f"{name}: PNG without {'IHDR' if header is None else 'IDAT'} chunk")
-    return header, b"".join(idat)
 
 
 def _check_header(body: bytes, name: str):
@@ -325,8 +382,8 @@ def encode_png(image, filter_type="up", level: int = 6, name: str = "<image>") -
                            filtered.reshape(image.shape[0], -1)], axis=1)
     height, width = image.shape
     ihdr = struct.pack(">IIBBBBB", width, height, depth, 0, 0, 0, 0)
-    return (SIGNATURE + _chunk(b"IHDR", ihdr) + _chunk(b"IDAT", zlib.compress(rows.tobytes(), level))
-            + _chunk(b"IEND", b""))
+    return (SIGNATURE + _make_chunk(b"IHDR", ihdr) + _make_chunk(b"IDAT", zlib.compress(rows.tobytes(), level))
+            + _make_chunk(b"IEND", b""))
 
 
 def _filter_types(filter_type, height, name):
@@ -365,5 +422,5 @@ def apply_filters(raw: np.ndarray, types: np.ndarray) -> np.ndarray:
     return out
 
 
-def _chunk(kind: bytes, body: bytes) -> bytes:
+def _make_chunk(kind: bytes, body: bytes) -> bytes:
     return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF)

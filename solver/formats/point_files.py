@@ -32,7 +32,8 @@ import warnings
 import numpy as np
 
 from ..errors import ArticulaInputError
-from .ply import read_ply
+from .bounded import check_size, complete_lines, read_bytes, read_head
+from .ply import check_ply, read_ply
 
 FORMAT = "articula-points/1"
 CLOUD_EXTENSIONS = (".ply", ".xyz", ".npy", ".txt")
@@ -43,7 +44,8 @@ CLOUD_EXTENSIONS = (".ply", ".xyz", ".npy", ".txt")
 def read_point_file(path: str):
     """One point-cloud frame: ``.npy`` (K, 3) or (K, 6) (xyz + rgb, 0..1 or 0..255), ``.xyz``/``.txt``
     (whitespace columns, same layouts) or ``.ply`` (vertex x/y/z).  Returns ``(points (K, 3) float32,
-    colors (K, 3) float32 in 0..1 or None)``; NaN/inf coordinates are refused, naming the row."""
+    colors (K, 3) float32 in 0..1 or None)``; NaN/inf coordinates are refused, naming the row (NPY, from
+    1), line (XYZ) or vertex (PLY, from 1).  Files are checked from their first bytes and size first."""
     arr = _read_array(path)
     if arr.ndim != 2 or arr.shape[1] not in (3, 6) or not np.issubdtype(arr.dtype, np.number):
         raise ArticulaInputError(f"{path}: expected a (K, 3) or (K, 6) array of numbers, got shape "
@@ -53,7 +55,7 @@ def read_point_file(path: str):
     if bad.any():
         rows = np.flatnonzero(bad)
         raise ArticulaInputError(f"{path}: {len(rows)} point(s) with NaN/inf coordinates "
-                                 f"(first at row {int(rows[0])})")
+                                 f"(first at {_where(path, int(rows[0]))})")
     colors = None
     if arr.shape[1] == 6:
         colors = arr[:, 3:6].astype(np.float32)
@@ -64,23 +66,107 @@ def read_point_file(path: str):
     return pts.astype(np.float32), colors
 
 
+def _where(path: str, row: int) -> str:
+    """Where point ``row`` (from 0) is in the file, for messages."""
+    ext = os.path.splitext(path)[1].lower()
+    if ext == ".ply":
+        return f"vertex {row + 1}"
+    if ext == ".npy":
+        return f"row {row + 1}"
+    return f"line {_data_lines(read_bytes(path))[row][0]}"
+
+
+def _data_lines(data: bytes) -> list:
+    """``[(line number from 1, tokens)]`` of the lines of XYZ text holding numbers (not comments)."""
+    out = []
+    for n, line in enumerate(data.splitlines(), 1):
+        tokens = line.split(b"#", 1)[0].split()
+        if tokens:
+            out.append((n, tokens))
+    return out
+
+
 def _read_array(path: str) -> np.ndarray:
     """The file's numbers as a 2-D array (rows = points), by extension."""
     ext = os.path.splitext(path)[1].lower()
     if ext not in CLOUD_EXTENSIONS:
         raise ArticulaInputError(f"{path}: unknown point-cloud format {ext!r}")
+    if ext == ".ply":
+        return np.asarray(read_ply(path).vertices)
+    if ext == ".npy":
+        return _read_npy(path)
+    return _read_xyz(path)
+
+
+def check_point_file(path: str) -> None:
+    """Refuse a point-cloud file from its first bytes and size (format, declared size, the size
+    limit) without reading it, so a list of frames can be checked before any is read."""
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in CLOUD_EXTENSIONS:
+        raise ArticulaInputError(f"{path}: unknown point-cloud format {ext!r}")
+    if ext == ".ply":
+        check_ply(path)
+    elif ext == ".npy":
+        _read_npy(path, check_only=True)
+    else:
+        _check_xyz(path)
+
+
+def _read_npy(path: str, check_only: bool = False):
+    """A .npy array: the magic and header are checked and the array mapped (not read) until its shape,
+    type and size are known to be usable."""
+    head, size = read_head(path, 8)
+    if not head.startswith(b"\x93NUMPY"):
+        raise ArticulaInputError(f"{path}: not a NumPy .npy file (no \\x93NUMPY signature)")
     try:
-        if ext == ".npy":
-            return np.asarray(np.load(path, allow_pickle=False))
-        if ext == ".ply":
-            return np.asarray(read_ply(path).vertices)
+        arr = np.load(path, mmap_mode="r", allow_pickle=False)
+    except ValueError as exc:
+        why = "it holds Python objects, not numbers" if "object" in str(exc) or "pickle" in str(exc) else \
+            "truncated or malformed" if "mmap length" in str(exc) else str(exc)
+        raise ArticulaInputError(f"{path}: cannot read point cloud ({why})") from None
+    except OSError as exc:
+        raise ArticulaInputError(f"{path}: cannot read point cloud ({exc.strerror or exc})") from None
+    if arr.ndim == 2 and arr.shape[1] in (3, 6):
+        check_size(path, arr.nbytes, what="a single point-cloud frame", hint="downsample or split it")
+        return None if check_only else np.array(arr)
+    return arr
+
+
+def _read_xyz(path: str) -> np.ndarray:
+    """Whitespace-separated columns (``#`` comments); the first number line is checked before the file is
+    read, and a bad line is named by its number."""
+    _check_xyz(path)
+    try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # empty file -> refused by the shape check
             return np.loadtxt(path, dtype=np.float64, ndmin=2, comments="#")
-    except ArticulaInputError:
-        raise
     except (OSError, ValueError) as exc:
-        raise ArticulaInputError(f"{path}: cannot read point cloud ({exc})") from exc
+        lines = _data_lines(read_bytes(path, what="a single point-cloud frame", hint="downsample or split it"))
+        width = len(lines[0][1]) if lines else 0
+        n = next((n for n, t in lines if len(t) != width or not _all_numbers(t)), None)
+        if n is None:
+            raise ArticulaInputError(f"{path}: cannot read point cloud ({exc})") from None
+        raise ArticulaInputError(f"{path}, line {n}: cannot read point cloud (expected {width} numbers per "
+                                 "line)") from None
+
+
+def _check_xyz(path: str) -> None:
+    """The first number line of an XYZ file holds 3 or 6 numbers; the file is within the size limit."""
+    head, size = read_head(path)
+    first = _data_lines(b"\n".join(complete_lines(head, size is not None and size <= len(head))))[:1]
+    if b"\0" in head or (first and (len(first[0][1]) not in (3, 6) or not _all_numbers(first[0][1]))):
+        n = first[0][0] if first else 1
+        raise ArticulaInputError(f"{path}, line {n}: not a point-cloud text file (expected 3 or 6 numbers "
+                                 "per line: x y z [r g b])")
+    check_size(path, size, what="a single point-cloud frame", hint="downsample or split it")
+
+
+def _all_numbers(tokens) -> bool:
+    try:
+        [float(t) for t in tokens]
+        return True
+    except ValueError:
+        return False
 
 
 # -------------------------------------------------------------------------------- sequence cache

@@ -12,6 +12,9 @@ MDD
 PC2
     32-byte little-endian header ``char[12] "POINTCACHE2\\0", int32 version (1), int32 points,
     float32 start frame, float32 sample rate, int32 samples``, then ``samples x points x 3`` float32.
+
+The header is read first and the size it declares checked against the file's size and
+:data:`MAX_CACHE_BYTES` before the frames are read, block by block, straight into the result.
 """
 from __future__ import annotations
 
@@ -21,9 +24,13 @@ import struct
 import numpy as np
 
 from ..errors import ArticulaInputError
-from .polymesh import read_bytes
+from .bounded import check_size, open_file, file_size, size_text
 
 CACHE_EXTENSIONS = (".mdd", ".pc2")
+#: The largest point cache read (bytes): the whole sequence is held in memory as float32, about the
+#: file's size.
+MAX_CACHE_BYTES = 4_000_000_000
+_BLOCK_VALUES = 1 << 22     # float32 values converted per read (16 MB)
 
 
 def read_point_cache(path: str) -> np.ndarray:
@@ -40,43 +47,56 @@ def _check(frames: np.ndarray, path: str) -> np.ndarray:
     bad = ~np.isfinite(frames).all(axis=2)
     if bad.any():
         f, v = (int(i) for i in np.argwhere(bad)[0])
-        raise ArticulaInputError(f"{path}: frame {f} vertex {v} has a non-finite coordinate "
+        raise ArticulaInputError(f"{path}: frame {f + 1} vertex {v + 1} has a non-finite coordinate "
                                  f"{frames[f, v].tolist()}")
     return frames
 
 
+def _read_frames(f, path: str, dtype: str, frames: int, points: int) -> np.ndarray:
+    """(frames, points, 3) float32 from the open file's current position, read block by block."""
+    out = np.empty(frames * points * 3, np.float32)
+    for start in range(0, out.size, _BLOCK_VALUES):
+        n = min(_BLOCK_VALUES, out.size - start)
+        block = np.frombuffer(f.read(4 * n), dtype)
+        if block.size != n:
+            raise ArticulaInputError(f"{path}: file ends early (changed while being read?)")
+        out[start:start + n] = block
+    return out.reshape(frames, points, 3)
+
+
 def read_mdd(path: str) -> np.ndarray:
-    data = read_bytes(path)
-    if len(data) < 8:
-        raise ArticulaInputError(f"{path}: too short for an MDD file ({len(data)} bytes)")
-    frames, points = struct.unpack_from(">2i", data)
-    if frames <= 0 or points <= 0:
-        raise ArticulaInputError(f"{path}: not an MDD file (header says {frames} frames, {points} points)")
-    start = 8 + 4 * frames
-    frame_bytes = 12 * points
-    size = len(data) - start
-    if size == frames * frame_bytes:
-        skip = 0
-    elif size == (frames + 1) * frame_bytes:
-        skip = 1  # a leading rest-pose frame
-    else:
-        raise ArticulaInputError(f"{path}: MDD header says {frames} frames of {points} points "
-                                 f"({8 + 4 * frames + frames * frame_bytes} bytes) but the file has "
-                                 f"{len(data)} bytes")
-    pos = np.frombuffer(data, ">f4", (frames + skip) * points * 3, start).reshape(-1, points, 3)[skip:]
-    return _check(pos.astype(np.float32), path)
+    with open_file(path) as f:
+        size, data = file_size(f), f.read(8)
+        if len(data) < 8:
+            raise ArticulaInputError(f"{path}: too short for an MDD file ({len(data)} bytes)")
+        frames, points = struct.unpack(">2i", data)
+        if frames <= 0 or points <= 0:
+            raise ArticulaInputError(f"{path}: not an MDD file (header says {frames} frames, {points} points)")
+        start = 8 + 4 * frames
+        frame_bytes = 12 * points
+        if size is None or size - start == frames * frame_bytes:
+            skip = 0
+        elif size - start == (frames + 1) * frame_bytes:
+            skip = 1  # a leading rest-pose frame
+        else:
+            raise ArticulaInputError(f"{path}: MDD header says {frames} frames of {points} points "
+                                     f"({start + frames * frame_bytes} bytes) but the file has {size} bytes")
+        check_size(path, 4 * 3 * frames * points, MAX_CACHE_BYTES, "a point cache", "export fewer frames")
+        f.seek(start + skip * frame_bytes)
+        return _check(_read_frames(f, path, ">f4", frames, points), path)
 
 
 def read_pc2(path: str) -> np.ndarray:
-    data = read_bytes(path)
-    if len(data) < 32 or data[:12] != b"POINTCACHE2\0":
-        raise ArticulaInputError(f"{path}: not a PC2 file (no POINTCACHE2 header)")
-    _version, points, _start, _rate, samples = struct.unpack_from("<iiffi", data, 12)
-    if points <= 0 or samples <= 0:
-        raise ArticulaInputError(f"{path}: PC2 header says {samples} samples of {points} points")
-    need = 32 + samples * points * 12
-    if len(data) < need:
-        raise ArticulaInputError(f"{path}: PC2 header says {samples} samples of {points} points "
-                                 f"({need} bytes) but the file has {len(data)} bytes")
-    pos = np.frombuffer(data, "<f4", samples * points * 3, 32).reshape(samples, points, 3)
-    return _check(pos.astype(np.float32), path)
+    with open_file(path) as f:
+        size, data = file_size(f), f.read(32)
+        if len(data) < 32 or data[:12] != b"POINTCACHE2\0":
+            raise ArticulaInputError(f"{path}: not a PC2 file (no POINTCACHE2 header)")
+        _version, points, _start, _rate, samples = struct.unpack_from("<iiffi", data, 12)
+        if points <= 0 or samples <= 0:
+            raise ArticulaInputError(f"{path}: PC2 header says {samples} samples of {points} points")
+        need = 32 + samples * points * 12
+        if size is not None and size < need:
+            raise ArticulaInputError(f"{path}: PC2 header says {samples} samples of {points} points "
+                                     f"({size_text(need)}) but the file has {size_text(size)}")
+        check_size(path, need - 32, MAX_CACHE_BYTES, "a point cache", "export fewer frames")
+        return _check(_read_frames(f, path, "<f4", samples, points), path)

@@ -4,7 +4,9 @@ parsing numbers, validating and packing the result.
 Polygons are kept as Blender keeps them: ``face_sizes`` (F,) corners per face and ``corner_verts`` (C,)
 the vertex of every corner, faces one after another.  Faces that use one vertex twice (degenerate, e.g.
 after welding an STL) are dropped, as Blender's own importers do.  Problems raise
-``ArticulaInputError`` with a message naming the file (and line, face or vertex).
+``ArticulaInputError`` with a message naming the file (and line, face or vertex).  Faces and vertices
+in messages are numbered from 1 (the first face is face 1); a vertex *index* as written in the file is
+quoted as written, with the file format's valid range.
 """
 from __future__ import annotations
 
@@ -50,30 +52,18 @@ class PolyMesh:
         bad = np.flatnonzero(other.face_sizes != self.face_sizes)
         if bad.size:
             k = int(bad[0])
-            return f"face {k} has {other.face_sizes[k]} corners vs {self.face_sizes[k]}"
+            return f"face {k + 1} has {other.face_sizes[k]} corners vs {self.face_sizes[k]}"
         diff = np.flatnonzero(other.corner_verts != self.corner_verts)
         if diff.size:
             face = int(np.searchsorted(self.face_starts, diff[0], side="right") - 1)
-            return f"face {face} differs (vertices {_face(other, face)} vs {_face(self, face)})"
+            return f"face {face + 1} differs (vertices {_face(other, face)} vs {_face(self, face)}, numbered from 1)"
         return None
 
 
 def _face(mesh: PolyMesh, k: int) -> list:
+    """Vertices of face ``k`` numbered from 1 (for messages)."""
     s = int(mesh.face_starts[k])
-    return mesh.corner_verts[s:s + int(mesh.face_sizes[k])].tolist()
-
-
-def read_bytes(path: str) -> bytes:
-    """The file's content; a clear error when it is missing or unreadable."""
-    try:
-        with open(path, "rb") as f:
-            return f.read()
-    except FileNotFoundError:
-        raise ArticulaInputError(f"{path}: file not found") from None
-    except IsADirectoryError:
-        raise ArticulaInputError(f"{path}: is a folder, not a file") from None
-    except OSError as exc:
-        raise ArticulaInputError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    return (mesh.corner_verts[s:s + int(mesh.face_sizes[k])] + 1).tolist()
 
 
 def parse_numbers(tokens, dtype, path: str, what: str) -> np.ndarray:
@@ -98,32 +88,35 @@ def fast_numbers(text: bytes, dtype, expected):
 
 
 def check_finite(vertices: np.ndarray, path: str) -> None:
-    """Raise naming the first vertex with a NaN or infinite coordinate."""
+    """Raise naming the first vertex (numbered from 1) with a NaN or infinite coordinate."""
     bad = ~np.isfinite(vertices).all(axis=1)
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise ArticulaInputError(f"{path}: vertex {i} has a non-finite coordinate {vertices[i].tolist()} "
+        raise ArticulaInputError(f"{path}: vertex {i + 1} has a non-finite coordinate {vertices[i].tolist()} "
                                  f"({int(bad.sum())} such vertices)")
 
 
-def finish_mesh(path: str, vertices: np.ndarray, sizes: np.ndarray, corners: np.ndarray) -> PolyMesh:
-    """A reader's result (vertices (V, 3), face sizes (F,), corner vertex indices (C,)) validated and
-    packed: finite vertices, faces with >= 3 corners and indices in range; faces that use a vertex
-    twice are dropped."""
+def finish_mesh(path: str, vertices: np.ndarray, sizes: np.ndarray, corners: np.ndarray,
+                index_base: int = 0) -> PolyMesh:
+    """A reader's result (vertices (V, 3), face sizes (F,), corner vertex indices (C,), 0-based) validated
+    and packed: finite vertices, faces with >= 3 corners and indices in range; faces that use a vertex
+    twice are dropped.  ``index_base``: what the file's first vertex index is (1 for OBJ, 0 for PLY and
+    OFF), so a bad index is quoted as written in the file."""
     vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
     sizes = np.asarray(sizes, np.int64)
     corners = np.asarray(corners, np.int64)
     check_finite(vertices, path)
     if sizes.size and sizes.min() < 3:
         k = int(np.flatnonzero(sizes < 3)[0])
-        raise ArticulaInputError(f"{path}: face {k} has {sizes[k]} corners (at least 3 needed)")
+        raise ArticulaInputError(f"{path}: face {k + 1} has {sizes[k]} corners (at least 3 needed)")
     if corners.size:
         out = (corners < 0) | (corners >= len(vertices))
         if out.any():
             c = int(np.flatnonzero(out)[0])
             k = int(np.searchsorted(np.cumsum(sizes), c, side="right"))
-            raise ArticulaInputError(f"{path}: face {k} uses vertex {corners[c]}, but there are only "
-                                     f"{len(vertices)} vertices")
+            nv = len(vertices)
+            raise ArticulaInputError(f"{path}: face {k + 1} uses vertex index {corners[c] + index_base}, but the "
+                                     f"file has {nv} vertices (indices {index_base}..{nv - 1 + index_base})")
         sizes, corners = _drop_degenerate(sizes, corners)
     return PolyMesh(vertices, sizes.astype(np.int32), corners.astype(np.int32))
 

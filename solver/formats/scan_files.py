@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ArticulaInputError
-from .mesh_files import MESH_EXTENSIONS, read_mesh
+from .mesh_files import MESH_EXTENSIONS, check_mesh, read_mesh
 from .polymesh import PolyMesh
 
 _DIGITS = re.compile(r"(\d+)")
@@ -118,11 +118,14 @@ def assemble(meshes: list, names: list, require_registered: bool = False) -> Sca
 
 
 def read_scan_files(paths, progress=None, require_registered: bool = False) -> ScanSequence:
-    """Read mesh files (one frame each, in the given order) -> :class:`ScanSequence`.
+    """Read mesh files (one frame each, in the given order) -> :class:`ScanSequence`.  Every file is
+    checked from its first bytes (``mesh_files.check_mesh``) before the first is read.
     ``progress(fraction, text)`` is called per file and may raise ``Cancelled``."""
     paths = list(paths)
     if not paths:
         raise ArticulaInputError("no scan files given")
+    for path in paths:      # every file's header and size first: a bad last file fails in milliseconds
+        check_mesh(path)
     asm = SequenceAssembler(require_registered)
     for k, path in enumerate(paths):
         if progress and k % 8 == 0:

@@ -3,8 +3,10 @@
 :class:`LearnOptions` is what :func:`solver.learn.pipeline.learn_rig` takes; the ``articula.learn_rig``
 operator (property defaults and bounds: :func:`property_range`), the Blender half (``addon/learn``) and
 the ``learn-rig`` batch command (argparse defaults) read their defaults from it.  A field's metadata
-holds its hard bounds ``min`` / ``max`` (:meth:`LearnOptions.validate` refuses values outside them) and,
-for the operator's slider only, ``soft_max``.  The method is that of dissertation (model-adaptive
+holds its bounds ``min`` / ``max`` (:meth:`LearnOptions.validate` refuses values outside them, in
+the operator and the batch command alike: the operator's properties get them as soft limits only) and,
+for the operator's slider only, ``soft_max``; :meth:`LearnOptions.validate_for` adds the limits that
+depend on the input (parts per vertex count).  The method is that of dissertation (model-adaptive
 mocap) chapter 3; docs/learn_rig_solver.md describes the steps the settings steer.
 """
 import math
@@ -14,6 +16,7 @@ from dataclasses import dataclass, field, fields
 from ..errors import ArticulaInputError
 
 MIN_SCANS = 3           # the fewest registered scans a rig is learned from
+MIN_VERTICES_PER_PART = 20  # a part (bone) needs this many mesh vertices: parts <= vertices / this
 
 
 def _setting(default, **bounds):
@@ -98,6 +101,31 @@ class LearnOptions:
                 if not _is_finite(value) or value <= 0:
                     raise ArticulaInputError(f"{name}: {value!r} given; every value must be a positive number")
 
+    def validate_for(self, num_scans, num_vertices):
+        """:meth:`validate`, then refuse settings this input cannot serve, before any heavy work: more
+        parts than ``num_vertices / MIN_VERTICES_PER_PART`` (the segmentation needs that many vertices per
+        rigid part) and fewer than MIN_SCANS scans."""
+        self.validate()
+        if num_scans < MIN_SCANS:
+            raise ArticulaInputError(f"{num_scans} scan{'s' if num_scans != 1 else ''}; learning a rig needs at "
+                                     f"least {MIN_SCANS} registered scans in different poses")
+        most = max_parts(num_vertices)
+        if self.parts > most:
+            raise ArticulaInputError(
+                f"parts: {self.parts} given for a mesh of {num_vertices} vertices; each part needs at least "
+                f"{MIN_VERTICES_PER_PART} vertices, so at most {most} parts (or 0: chosen from the motion)")
+
+
+def max_parts(num_vertices) -> int:
+    """The most parts a mesh of ``num_vertices`` vertices is cut into: the ``parts`` bound and
+    ``num_vertices / MIN_VERTICES_PER_PART``."""
+    return int(min(fields_by_name()["parts"].metadata["max"], num_vertices // MIN_VERTICES_PER_PART))
+
+
+def fields_by_name() -> dict:
+    """The :class:`LearnOptions` dataclass fields by name."""
+    return {f.name: f for f in fields(LearnOptions)}
+
 
 def _is_finite(value):
     return isinstance(value, numbers.Real) and not isinstance(value, bool) and math.isfinite(value)
@@ -115,6 +143,9 @@ def _check_number(name, value, bounds, integer):
 
 
 def property_range(name) -> dict:
-    """Keyword arguments of a Blender property for setting ``name``: its default and bounds."""
-    f = next(f for f in fields(LearnOptions) if f.name == name)
-    return dict(default=f.default, **f.metadata)
+    """Keyword arguments of a Blender property for setting ``name``: its default and the bounds as soft
+    limits (the slider's range).  No hard limits: Blender would clamp an out-of-range value silently,
+    whereas :meth:`LearnOptions.validate` refuses it with the message the batch command gives."""
+    f = fields_by_name()[name]
+    bounds = {"min": "soft_min", "max": "soft_max", "soft_max": "soft_max"}
+    return dict(default=f.default, **{bounds[key]: value for key, value in f.metadata.items()})

@@ -4,7 +4,8 @@ of the rig-learning steps.
 ``learn_rig(scans, faces, options)`` →  :class:`LearnResult` ``(model, poses, report)``, the settings in
 :class:`solver.learn.options.LearnOptions`:
 
-1. input checks (shapes, finite values, ≥ 3 scans, one connected mesh, some non-rigid motion, memory);
+1. input checks (shapes, ≥ 3 scans, parts for the vertex count, memory bound, finite values, islands
+   (the largest is learned from, the others carried rigidly), some non-rigid motion);
 2. rest mesh = one scan chosen by the seed; segmentation into k rigid parts by motion (§3.2,
    :mod:`solver.learn.segmentation`; k chosen from the motion unless given);
 3. skeleton (§3.2, :mod:`solver.learn.skeleton`): tree, joints (LS rotation centres), frames, mirror pairs;
@@ -33,10 +34,12 @@ import numpy as np
 from .. import parallel
 from ..errors import ArticulaInputError
 from ..parallel import single_blas_thread
+from .islands import carry_islands, split_islands
 from .key_scans import select_key_scans
+from .memory import check_sizes
 from ..fit.least_squares import GainRatioDamping
-from .joints_poses import JointPoseProblem, optimise_joints_and_poses, relative_joint_prior, sizes
-from ..geometry.mesh_graph import components, uniform_laplacian
+from .joints_poses import JointPoseProblem, optimise_joints_and_poses, relative_joint_prior
+from ..geometry.mesh_graph import uniform_laplacian
 from ..rig.model import Model, Poses
 from ..fit.pose_fit import fit_poses
 from ..fit.pose_init import poses_from_part_fits
@@ -53,8 +56,7 @@ from .report import make_report
 from .weights.colouring import TwoRing
 from .weights.optimise import optimise_weights
 
-BYTES_PER_VERTEX_SCAN = 2600    # working memory per vertex and scan (bytes; see working_memory_bytes)
-MAX_WORK_BYTES = 4e9            # refuse inputs whose estimated working memory exceeds this (bytes)
+REPORT_START = 0.97            # fraction of the run's progress at which the report's distances start
 MIN_JOINT_MOTION_DEG = 1.0      # a joint must rotate at least this much in some scan
 
 
@@ -72,33 +74,23 @@ class LearnResult:
 
 # ----------------------------------------------------------------------------- input checks
 
-def working_memory_bytes(num_scans, num_vertices, num_parts):
-    """Estimated peak working memory (bytes) of :func:`learn_rig`: a measured ~1.7 kB per vertex and scan
-    (posed copies, Laplacian residuals, the BCD's candidate arrays) with a safety factor of 1.5
-    (``BYTES_PER_VERTEX_SCAN``), plus the Gram blocks of the joint/pose step ``8 · M · (n_s + n_o + 1)²``."""
-    n_s, n_o = sizes(num_parts)
-    return BYTES_PER_VERTEX_SCAN * num_scans * num_vertices + 8 * num_scans * (n_s + n_o + 1) ** 2
-
-
 def check_input(scans, faces, options):
     """Validate and convert ``scans (M,V,3)`` and ``faces (F,3)`` for a run with :class:`LearnOptions`
-    ``options``; raises :class:`ArticulaInputError` naming the problem.  The memory estimate is for the
-    scans learned from (at most ``options.key_scans`` of them) plus the array of all scans."""
+    ``options``; raises :class:`ArticulaInputError` naming the problem.  Returns ``(scans float64, faces
+    int32, islands)`` (:func:`solver.learn.islands.split_islands`).  The settings are checked against the
+    input (:meth:`LearnOptions.validate_for`) and the memory bound (:func:`solver.learn.memory.check_memory`:
+    the scans learned from, at most ``options.key_scans``, and all scans) before the scans are converted
+    or scanned for non-finite values."""
+    shape = np.shape(scans)
+    if len(shape) != 3 or shape[2] != 3:
+        raise ArticulaInputError(f"scans: expected shape (M, V, 3) (registered scans sharing one topology), got {shape}")
+    M, V = shape[:2]
+    check_sizes(options, M, V)
     scans, faces = _check_arrays(scans, faces)
-    M, V = scans.shape[:2]
-    k_est = options.parts or options.k_max
-    learned = min(M, options.key_scans) if options.key_scans else M
-    need = working_memory_bytes(learned, V, k_est) + 24 * M * V
-    if need > MAX_WORK_BYTES:
-        raise ArticulaInputError(
-            f"scans: {M} scans x {V} vertices with {k_est} parts needs about {need / 1e9:.1f} GB of working memory "
-            f"(limit {MAX_WORK_BYTES / 1e9:.0f} GB); decimate the meshes or learn from fewer (key) scans")
-    n, lab = components(faces, V)
-    if n > 1:
-        sizes_ = np.sort(np.bincount(lab))[::-1]
-        raise ArticulaInputError(f"mesh: {n} disconnected islands (vertex counts {sizes_[:5].tolist()}...); "
-                                 f"rig learning needs one connected mesh: remove or join the islands")
-    return scans, faces.astype(np.int32)
+    islands = split_islands(faces, V)
+    if islands.others:
+        options.validate_for(M, len(islands.main))
+    return scans, faces.astype(np.int32), islands
 
 
 def _check_arrays(scans, faces):
@@ -173,6 +165,8 @@ def initialise(scans, faces, options, progress, rest_index):
     """Steps 2-4 with scan ``rest_index`` of ``scans (M,V,3)`` as the initial rest mesh, from
     ``options.initial_skeleton`` or by segmentation.  Returns ``(model, poses, info dict, mirror pairs)``."""
     rest = scans[rest_index].copy()
+    say = _say(progress)
+    say(0.0, "checking the motion")
     check_motion(rest, scans, faces)
     info = dict(rest_scan=rest_index)
     if options.initial_skeleton is not None:
@@ -180,6 +174,7 @@ def initialise(scans, faces, options, progress, rest_index):
         pairs = []
     else:
         skeleton, bone_labels, W, tau, pairs = _start_from_segmentation(rest, scans, faces, options, progress, info)
+    say(0.95, "first poses from the parts' rigid motions")
     poses = poses_from_part_fits(skeleton, W, tau)
     check_joint_motion(skeleton, poses)
     V, B = len(rest), skeleton.num_bones
@@ -202,20 +197,29 @@ def _start_from_skeleton(rest, scans, initial_skeleton, info):
 def _start_from_segmentation(rest, scans, faces, options, progress, info):
     """Segmentation into k parts (chosen from the motion unless ``options.parts``), the skeleton built on
     it and the parts' rigid fits in bone order: ``(skeleton, labels (V,), R, t, mirror pairs)``."""
-    symmetry, seed = options.symmetry, options.seed
+    symmetry, seed, say = options.symmetry, options.seed, _say(progress)
     if options.parts:
         k = int(options.parts)
         info["k_curve_mm"] = None
     else:
-        k, curve = choose_num_parts(rest, scans, faces, k_max=options.k_max, seed=seed, progress=progress)
+        k, curve = choose_num_parts(rest, scans, faces, k_max=options.k_max, seed=seed,
+                                    progress=_sub_progress(progress, 0.02, 0.3))
         info["k_curve_mm"] = (curve * 1e3).tolist()
+    say(0.3, "finding the mesh's mirror map")
     mirror = mirror_map(rest, scans, faces) if symmetry and k > 1 else None
-    labels, rms = segment(rest, scans, faces, k, seed=seed, mirror=False if mirror is None else mirror)
+    labels, rms = segment(rest, scans, faces, k, seed=seed, mirror=False if mirror is None else mirror,
+                          progress=_sub_progress(progress, 0.35, 0.8))
     info.update(parts=k, segmentation_rms_mm=rms * 1e3)
+    say(0.8, f"building the skeleton of {k} parts")
     R, t = fit_parts(rest, scans, labels, k)
     skeleton, order, bone_of_part, pairs = build_skeleton(rest, labels, faces, k, R, t, symmetry=symmetry,
                                                           symmetry_scans=scans, mirror=mirror)
     return skeleton, bone_of_part[labels], R[:, order], t[:, order], pairs
+
+
+def _say(progress):
+    """``say(fraction, stage)``: ``progress(fraction, stage, None)``, or nothing without a callback."""
+    return (lambda f, stage: None) if progress is None else (lambda f, stage: progress(f, stage, None))
 
 
 def _sub_progress(progress, lo, hi, offset=0.0):
@@ -343,19 +347,24 @@ def learn_rig(scans, faces, options=None, progress=None, **settings):
 
 
 def _learn_rig(scans, faces, options, progress):
-    """The body of :func:`learn_rig` (validated ``options``): steps 1-6 of the module docstring."""
+    """The body of :func:`learn_rig` (validated ``options``): steps 1-6 of the module docstring, on the
+    largest island of the mesh; the other islands are then carried rigidly (:mod:`solver.learn.islands`)."""
     t_all = time.perf_counter()
     timings = {key: 0.0 for key in ("initialisation", "joints_and_poses", "weights", "rest_vertices")}
-    all_scans, faces = check_input(scans, faces, options)
-    rest_index, keys, scans = _scans_to_learn_from(all_scans, options)
-    end = 1.0 if len(keys) == len(all_scans) else 0.9          # the rest: poses of the other scans
+    all_scans, faces, islands = check_input(scans, faces, options)
+    main_scans = all_scans[:, islands.main] if islands.others else all_scans
+    rest_index, keys, scans = _scans_to_learn_from(main_scans, options)
+    end = REPORT_START if len(keys) == len(all_scans) else REPORT_START - 0.1   # then the other scans' poses
+    if progress is not None:
+        progress(0.0, f"learning from {len(keys)} scans x {len(islands.main)} vertices"
+                      + (f" ({len(islands.others)} islands carried)" if islands.others else ""), None)
 
     t0 = time.perf_counter()
-    model, poses, info, pairs = initialise(scans, faces, options, _sub_progress(progress, 0.0, 0.1),
+    model, poses, info, pairs = initialise(scans, islands.main_faces, options, _sub_progress(progress, 0.0, 0.1),
                                            int(np.searchsorted(keys, rest_index)))
     info["rest_scan"] = rest_index
     timings["initialisation"] = time.perf_counter() - t0
-    L = uniform_laplacian(faces, len(scans[0]))
+    L = uniform_laplacian(islands.main_faces, len(scans[0]))
     sym = continuing_pairs(model.skeleton, pairs) if options.symmetry else []
     alternation = Alternation(scans, options, Settings(options, TwoRing(L)),
                               _problems(model, poses, scans, L, sym, options), timings, progress, end)
@@ -367,17 +376,20 @@ def _learn_rig(scans, faces, options, progress):
     model, poses, log, rounds, converged = alternation.main_rounds(model, poses, problem, E)
 
     info["key_scans"] = keys.tolist()
-    objective = problem.objective
     if len(keys) < len(all_scans):
         t0 = time.perf_counter()
-        poses, info["other_scans"] = poses_of_other_scans(model, poses, all_scans, keys, options,
-                                                          _sub_progress(progress, end, 1.0))
+        poses, info["other_scans"] = poses_of_other_scans(model, poses, main_scans, keys, options,
+                                                          _sub_progress(progress, end, REPORT_START))
         timings["other_scans"] = time.perf_counter() - t0
-        objective = RigObjective(all_scans, L, options.alpha)
+    model, info["islands"] = carry_islands(model, poses, all_scans, all_scans[rest_index], islands)
+    objective = (problem.objective if len(keys) == len(all_scans) and not islands.others else
+                 RigObjective(all_scans, uniform_laplacian(faces, all_scans.shape[1]), options.alpha))
     info.update(objective_log=log, warm_start_log=warm_log, initial_objective=float(E_initial),
                 iterations=rounds, converged=converged, timings_s=timings, alpha=options.alpha,
                 symmetry_lambda=problem.lam, joint_prior=options.joint_prior)
     t0 = time.perf_counter()
+    if progress is not None:
+        progress(REPORT_START, "report: distances of every scan to the learned surface", None)
     report, distances = make_report(model, poses, all_scans, objective, sym)
     report.update(info)
     timings["report"] = time.perf_counter() - t0

@@ -351,9 +351,11 @@ def split_worst(cl, rng, iterations):
     return cl.refine(iterations)
 
 
-def hierarchy(rest, scans, k_max, seed=0, iterations=50, samples=SAMPLES, progress=None):
+def hierarchy(rest, scans, k_max, seed=0, iterations=50, samples=SAMPLES, progress=None,
+              stage="choosing the number of parts"):
     """Steps 1-4 on the cell subsample for k = 1..k_max.  Yields ``(k, Clustering)`` (the same object,
-    updated in place) for every k; centred ``rest (V,3)``, ``scans (M,V,3)``."""
+    updated in place) for every k; centred ``rest (V,3)``, ``scans (M,V,3)``.  ``progress(fraction,
+    text, None)`` after each k, the text ``stage`` and k."""
     rng = np.random.default_rng(seed)
     sample = Sample.of_mesh(rest, scans, samples)
     cl = Clustering(sample, np.zeros(len(sample), dtype=np.int64), 1)
@@ -361,7 +363,7 @@ def hierarchy(rest, scans, k_max, seed=0, iterations=50, samples=SAMPLES, progre
     for k in range(2, min(k_max, len(sample)) + 1):
         split_worst(cl, rng, iterations)
         if progress is not None:
-            progress(k / k_max, f"choosing the number of parts (k={k})", None)
+            progress(k / k_max, f"{stage} (k={k} of {k_max})", None)
         yield k, cl
 
 
@@ -433,31 +435,38 @@ def make_parts_connected(mesh, labels, A):
             n[j] += n_i[0]
 
 
-def connected_refinement(mesh, cl, A, mirror=None, compatible=None):
+def connected_refinement(mesh, cl, A, mirror=None, compatible=None, progress=None):
     """Steps 2-3 (step 6's mirror-aware step 3 with a ``mirror`` map, see :meth:`Clustering.best_labels`)
     alternating with step 5 (at most CONNECT_ROUNDS times) on ``cl`` (a :class:`Clustering` of ``mesh``,
-    updated in place); ``A``: vertex adjacency.  Returns the final labels ``(V,)``, every part connected."""
-    for _ in range(CONNECT_ROUNDS):
+    updated in place); ``A``: vertex adjacency.  Returns the final labels ``(V,)``, every part connected.
+    ``progress(text)`` is called before each round."""
+    for r in range(CONNECT_ROUNDS):
+        if progress is not None:
+            progress(f"round {r + 1}")
         labels = make_parts_connected(mesh, cl.refine(POLISH_ROUNDS, mirror, compatible).labels, A)
         if not cl.relabel(labels):
             break
     return labels
 
 
-def finish(rest, scans, faces, R, t, mirror=None):
+def finish(rest, scans, faces, R, t, mirror=None, progress=None):
     """Steps 2-5 at full resolution from the sample's part transforms ``R (M,k,3,3)``, ``t (M,k,3)``
     (centred ``rest``, ``scans``).  With a vertex ``mirror (V,)`` map, the parts that are mirror images
     of each other are then re-cut alike (step 6; :func:`solver.learn.symmetry.mirror_compatible` says
-    which parts may hold a vertex and its image).  Returns ``(labels (V,), rms metres)``."""
+    which parts may hold a vertex and its image).  Returns ``(labels (V,), rms metres)``.
+    ``progress(text)`` names each full-resolution step as it starts."""
+    say = progress or (lambda text: None)
+    say("assigning every vertex to its best part")
     mesh, k = Mesh(rest, scans), t.shape[1]
     err = rigid_fit_errors(rest, scans, R, t)
     labels = np.argmin(err, axis=1)
     labels = _reseed_empty(labels, err[np.arange(len(labels)), labels], k)
     cl, A = Clustering(mesh, labels, k), adjacency(faces, len(rest))
-    labels = connected_refinement(mesh, cl, A)
+    labels = connected_refinement(mesh, cl, A, progress=lambda r: say(f"connected parts, {r}"))
     compatible = mirror_compatible(labels, mirror, k) if mirror is not None else np.ones((k, k), dtype=bool)
     if not compatible.all():
-        labels = connected_refinement(mesh, cl, A, mirror, compatible)
+        labels = connected_refinement(mesh, cl, A, mirror, compatible,
+                                      progress=lambda r: say(f"mirror-image parts cut alike, {r}"))
     counts = np.bincount(labels, minlength=k)
     if counts.min() < MIN_PART_VERTICES:
         raise ArticulaInputError(
@@ -467,7 +476,7 @@ def finish(rest, scans, faces, R, t, mirror=None):
     return labels, float(np.sqrt(final.total() / (len(rest) * len(scans))))
 
 
-def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES, mirror=True):
+def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES, mirror=True, progress=None):
     """Segment into exactly ``k`` connected rigid parts (each with at least MIN_PART_VERTICES vertices).
 
     rest (V,3), scans (M,V,3) metres, faces (F,3); seed: k-means++ draws of the splits; iterations: at
@@ -476,7 +485,8 @@ def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES, mirro
     per-part rigid fits.  Raises :class:`ArticulaInputError` when a part ends up with too few vertices.
     mirror: True finds the mesh's vertex mirror map (:func:`solver.learn.mirror_map.mirror_map`) and
     cuts mirror-image parts alike (:func:`finish`); False does not; or a map ``(V,)`` (-1: no mirror
-    vertex) to use."""
+    vertex) to use.  ``progress(fraction, stage, None)``: after each split (fraction to 0.7 at k), then
+    at each full-resolution step (may raise Cancelled)."""
     if mirror is True:
         mirror = mirror_map(rest, scans, faces) if k > 1 else None
     elif mirror is False:
@@ -488,11 +498,15 @@ def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES, mirro
     if k < 1 or k > V:
         raise ArticulaInputError(f"parts: {k} parts requested for a mesh of {V} vertices")
     cl = None
-    for kk, cl in hierarchy(rest, scans, k, seed, iterations, samples):
+    split = None if progress is None else (lambda f, text, _: progress(0.7 * f, text, None))
+    for kk, cl in hierarchy(rest, scans, k, seed, iterations, samples, split, f"segmenting into {k} parts"):
         pass
     if kk < k:
         raise ArticulaInputError(f"parts: {k} parts requested for a mesh of {V} vertices; use fewer parts")
-    return finish(rest, scans, faces, cl.R, cl.t, mirror)
+    steps = iter(np.linspace(0.7, 1.0, 2 * CONNECT_ROUNDS + 2))
+    full = None if progress is None else (lambda text: progress(float(next(steps, 1.0)), f"segmentation: {text}",
+                                                                None))
+    return finish(rest, scans, faces, cl.R, cl.t, mirror, full)
 
 
 def parts_from_curve(errors, floor=0.0):

@@ -13,16 +13,27 @@ A vertex with swing weight s_c and twist weight t_c puts s_c on the two S bones 
 on the two N bones that bracket the twist fraction t_c (linear between them).  With one twisting joint
 per vertex this is the hybrid skin with the dual-quaternion twist replaced by n linear segments;
 where several children share a vertex it is an approximation; the deviation is measured, not assumed.
+
+Such vertices get up to 4 bones per twisting child (11 on MakeHuman); :func:`limited_weights` keeps at
+most k per vertex (glTF: 4) with the bones and weights fitted to the hybrid skin over seeded sample
+poses (``influences`` module), not the k largest renormalised.
 """
 import numpy as np
 
 from ..errors import ArticulaInputError
 from .kinematics import forward_kinematics
 from ..geometry.rotations import quat_canonical, quat_normalize, quat_to_matrix, swing_twist_y
+from . import influences
 from . import names as rig_names
+from . import pose_sampling
 
 SEG_PREFIX_SWING = "TWS-"
 SEG_PREFIX_NEUTRAL = "TWN-"
+SAMPLE_POSES = 100            # random poses the deviation is measured on (no action) / weights fitted to
+SAMPLE_TWIST_DEG = 90.0       # their twist range (swings up to pose_sampling's 110°)
+MEASURE_SEED, FIT_SEED = 0, 1
+MAX_SEGMENTS = 16             # limits of the operator and the batch command
+MAX_INFLUENCES = 32
 
 
 def bone_layout(skeleton, segments: int):
@@ -131,14 +142,51 @@ def bone_maps(model, poses, segments: int):
     return Rm, tm
 
 
-def deviation(model, poses, segments: int, chunk: int = 16):
-    """Per-frame maximum |LBS rig - hybrid skin| in metres ``(N,)`` and the overall mean."""
-    from .skinning import hybrid_skin, lbs
-    _, W = lbs_weights(model, segments)
-    worst, total, count = [], 0.0, 0
+def sample_poses(num_bones: int, seed: int, count: int = SAMPLE_POSES):
+    """Seeded random poses (``pose_sampling``, twists up to ±:data:`SAMPLE_TWIST_DEG`) for a rig without
+    an action: seed :data:`MEASURE_SEED` to measure, :data:`FIT_SEED` to fit limited weights."""
+    return pose_sampling.random_poses(count, num_bones, seed=seed, max_twist_deg=SAMPLE_TWIST_DEG)
+
+
+def _chunks(poses, chunk):
     for n0 in range(0, len(poses), chunk):
-        part = type(poses)(poses.rotations[n0:n0 + chunk], poses.translations[n0:n0 + chunk],
-                           poses.scales[n0:n0 + chunk])
+        yield type(poses)(poses.rotations[n0:n0 + chunk], poses.translations[n0:n0 + chunk],
+                          poses.scales[n0:n0 + chunk])
+
+
+def limited_weights(model, segments: int, max_influences: int, poses, chunk: int = 16):
+    """:func:`lbs_weights` with at most ``max_influences`` bones per vertex (0 = unlimited): on vertices
+    with more, the bones and weights that minimise Σ |LBS − hybrid skin|² over ``poses`` (exact; see the
+    ``influences`` module).  Returns ``(layout, W (V, J) float32)``, rows summing to 1."""
+    from .skinning import hybrid_skin
+    if max_influences < 0:
+        raise ArticulaInputError(f"max influences must be >= 0 (0 = unlimited), got {max_influences}")
+    layout, W = lbs_weights(model, segments)
+    if max_influences == 0:
+        return layout, W
+    rows, cand = influences.candidates(W, max_influences)
+    if len(rows) == 0:
+        return layout, W
+    G = np.zeros(cand.shape + cand.shape[1:])
+    rest = model.rest_vertices[rows].astype(np.float64)
+    for part in _chunks(poses, chunk):
+        Rm, tm = bone_maps(model, part, segments)
+        influences.add_gram(G, rest, cand, Rm, tm, hybrid_skin(model, part)[:, rows])
+    w = influences.best_weights(G, cand, max_influences)
+    out = W.astype(np.float64)
+    out[rows] = 0.0
+    np.add.at(out, (np.repeat(rows, cand.shape[1]), np.maximum(cand, 0).ravel()),
+              np.where(cand >= 0, w, 0.0).ravel())
+    return layout, out.astype(np.float32)
+
+
+def deviation(model, poses, segments: int, chunk: int = 16, weights=None):
+    """Per-frame maximum |LBS rig - hybrid skin| in metres ``(N,)`` and the overall mean; ``weights``
+    (V, J) replaces :func:`lbs_weights` (e.g. :func:`limited_weights`)."""
+    from .skinning import hybrid_skin, lbs
+    W = lbs_weights(model, segments)[1] if weights is None else weights
+    worst, total, count = [], 0.0, 0
+    for part in _chunks(poses, chunk):
         Rm, tm = bone_maps(model, part, segments)
         d = np.linalg.norm(lbs(model.rest_vertices, W, Rm, tm) - hybrid_skin(model, part), axis=2)
         worst.append(d.max(axis=1))

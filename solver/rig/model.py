@@ -17,6 +17,7 @@ from ..errors import ArticulaInputError
 
 FRAME_TOL = 1e-6        # orthonormality / det / Y-axis tolerance of rest frames
 QUAT_TOL = 1e-6         # |q| - 1 tolerance of pose quaternions
+QUAT_RENORM_TOL = 1e-4  # |q| - 1 up to which a loaded quaternion is normalised (float32 round-off) with a note
 WEIGHT_TOL = 1e-6       # tolerance of the weight bounds (weights are float32)
 
 
@@ -190,6 +191,23 @@ class Poses:
     def __len__(self) -> int:
         return len(self.rotations)
 
+    def normalise_near_unit(self) -> str:
+        """Normalise, in place, the rotations whose norm is off 1 by more than ``QUAT_TOL`` but at most
+        ``QUAT_RENORM_TOL`` (rounding of float32 or text round trips); others are left for :meth:`validate`
+        to refuse.  Returns a note for the user naming how many were normalised and the worst one, or ""."""
+        r = self.rotations
+        if r.ndim != 3 or r.shape[-1] != 4 or not np.isfinite(r).all():
+            return ""
+        norm = np.linalg.norm(r, axis=2)
+        err = np.abs(norm - 1.0)
+        fix = (err > QUAT_TOL) & (err <= QUAT_RENORM_TOL)
+        if not fix.any():
+            return ""
+        n, b = np.unravel_index(np.argmax(np.where(fix, err, -1.0)), err.shape)
+        self.rotations = np.where(fix[..., None], r / np.where(fix, norm, 1.0)[..., None], r)
+        return (f"pose_rotations: normalised {int(fix.sum())} quaternion(s) whose norm was within "
+                f"{QUAT_RENORM_TOL:g} of 1 (worst: frame {n}, bone {b}, norm {float(norm[n, b])!r})")
+
     def validate(self, num_bones: int = None) -> None:
         r = self.rotations
         if r.ndim != 3 or r.shape[2] != 4 or (num_bones is not None and r.shape[1] != num_bones):
@@ -197,12 +215,13 @@ class Poses:
             raise ArticulaInputError(f"pose_rotations: expected shape {want}, got {r.shape}")
         N = len(r)
         _check_finite("pose_rotations", r)
-        err = np.abs(np.linalg.norm(r, axis=2) - 1.0)
-        bad = np.argwhere(err > QUAT_TOL)
+        norm = np.linalg.norm(r, axis=2)
+        bad = np.argwhere(np.abs(norm - 1.0) > QUAT_TOL)
         if len(bad):
             n, b = bad[0]
             raise ArticulaInputError(f"pose_rotations: frame {n}, bone {b}: quaternion norm "
-                                     f"{np.linalg.norm(r[n, b]):.6g} is not 1")
+                                     f"{float(norm[n, b])!r} is not 1 (off by {abs(norm[n, b] - 1.0):.3g}; the tolerance is {QUAT_TOL:g}, and "
+                                     f"norms within {QUAT_RENORM_TOL:g} of 1 are normalised when a bundle is loaded)")
         _check_shape("pose_translations", self.translations, (N, 3))
         _check_finite("pose_translations", self.translations)
         _check_shape("pose_scales", self.scales, (N,))

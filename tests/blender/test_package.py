@@ -84,13 +84,15 @@ def test_zip_holds_the_extension_and_this_platforms_wheels_only(built):
     assert {"__init__.py", "blender_manifest.toml", "batch.py", "addon", "operators", "solver", "wheels"} <= tops
     assert not [n for n in names if "__pycache__" in n or n.endswith(".pyc") or "/." in "/" + n]
 
-    # Every source file of the extension's packages is in the zip, unchanged (skipping files another
-    # developer saved after the build started).
-    for package in ("addon", "operators", "solver", "sample_scenes"):
-        for path in (REPO / package).rglob("*"):
-            if path.is_file() and "__pycache__" not in path.parts and path.stat().st_mtime < built["started"]:
-                rel = path.relative_to(REPO).as_posix()
-                assert contents.get(rel) == path.read_bytes(), f"{rel} missing or different in the zip"
+    # Every file git tracks in the extension's packages is in the zip, unchanged (skipping files another
+    # developer saved after the build started), and nothing git does not track is.
+    tracked = set(tool.tracked_files(REPO))
+    for rel in tracked:
+        path = REPO / rel
+        if rel.split("/")[0] in ("addon", "operators", "solver", "sample_scenes") and path.is_file() \
+                and path.stat().st_mtime < built["started"]:
+            assert contents.get(rel) == path.read_bytes(), f"{rel} missing or different in the zip"
+    assert not set(contents) - tracked, sorted(set(contents) - tracked)
 
     wheels = sorted(n.split("/", 1)[1] for n in names if n.startswith("wheels/"))
     assert len(wheels) == 2, wheels
@@ -187,3 +189,55 @@ def test_staged_manifest_changes_only_platforms_and_wheels():
     assert staged == original
     with pytest.raises(tool.PackageError, match="one line"):
         tool.manifest_with(text.replace("wheels = []", "wheels = [\n]"), ["linux-x64"], [])
+
+
+def _git(folder, *args):
+    subprocess.run(["git", "-C", str(folder), *args], check=True, capture_output=True)
+
+
+def test_staging_copies_only_the_files_git_tracks(tmp_path, monkeypatch):
+    """What a user's batch run leaves in the checkout (untracked data, a model, an ignored report) and a
+    module not yet added to git stay out of the staged tree that the builder zips."""
+    monkeypatch.setenv("GIT_CEILING_DIRECTORIES", str(tmp_path))
+    src = tmp_path / "src"
+    files = {"blender_manifest.toml": (REPO / "blender_manifest.toml").read_bytes(), "__init__.py": b"",
+             "batch.py": b"", "addon/__init__.py": b"", "addon/rig.py": b"x = 1\n", ".gitignore": b"/out/\n",
+             "docs/a.md": b"doc"}
+    user_files = {"model.npz": b"PK", "data/scans/pose_0000.obj": b"v 0 0 0\n", "out/report.json": b"{}",
+                  "addon/new_module.py": b"y = 2\n"}
+    for rel, data in {**files, **user_files}.items():
+        (src / rel).parent.mkdir(parents=True, exist_ok=True)
+        (src / rel).write_bytes(data)
+    _git(src, "init", "-q")
+    _git(src, "add", *files)
+    assert tool.tracked_files(src) == sorted(files)
+    assert tool.untracked_extension_files(src) == ["addon/new_module.py"]
+    pkg = tool.stage(src, tmp_path / "stage", [], ["linux-x64"])
+    staged = sorted(p.relative_to(pkg).as_posix() for p in pkg.rglob("*") if p.is_file())
+    assert staged == sorted(files)
+    assert (pkg / "addon" / "rig.py").read_bytes() == b"x = 1\n"
+
+
+def test_packaging_outside_a_git_checkout_is_a_clear_error(tmp_path, monkeypatch):
+    monkeypatch.setenv("GIT_CEILING_DIRECTORIES", str(tmp_path))
+    src = tmp_path / "unpacked"
+    src.mkdir()
+    (src / "blender_manifest.toml").write_bytes((REPO / "blender_manifest.toml").read_bytes())
+    with pytest.raises(tool.PackageError, match=r"unpacked is not a git checkout .*files git tracks"):
+        tool.build(["linux-x64"], tmp_path / "dist", tmp_path / "wheels", source=src)
+    assert not (tmp_path / "dist").exists() and not (tmp_path / "wheels").exists()
+
+
+def test_an_untracked_module_in_the_packages_is_refused_before_building(tmp_path, monkeypatch):
+    monkeypatch.setenv("GIT_CEILING_DIRECTORIES", str(tmp_path))
+    src = tmp_path / "src"
+    (src / "solver").mkdir(parents=True)
+    (src / "blender_manifest.toml").write_bytes((REPO / "blender_manifest.toml").read_bytes())
+    (src / "solver" / "__init__.py").write_text("")
+    (src / "solver" / "new_module.py").write_text("")
+    (src / "solver" / "notes.txt").write_text("")
+    _git(src, "init", "-q")
+    _git(src, "add", "blender_manifest.toml", "solver/__init__.py")
+    with pytest.raises(tool.PackageError, match=r"git does not track .*: solver/new_module.py\. git add them"):
+        tool.build(["linux-x64"], tmp_path / "dist", tmp_path / "wheels", source=src)
+    assert not (tmp_path / "dist").exists()

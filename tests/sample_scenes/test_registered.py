@@ -68,9 +68,13 @@ def test_files_reread_equal_memory(tmp_path, fmt, faces):
     names = sorted(os.listdir(tmp_path))
     assert names == ["ground_truth.npz"] + [f"pose_{i:04d}.{fmt}" for i in range(5)]
     tol = 1e-6 if fmt == "obj" else 1e-6 * 3                 # 6 decimals / float32
+    # the files in their format's axes (docs/SAMPLES.md): OBJ Y up, a world point (x, y, z) as (x, z, -y)
+    assert tuple(gt["file_axes"]) == (("NEGATIVE_Z", "Y") if fmt == "obj" else ("Y", "Z"))
     for i in range(5):
         mesh = trimesh.load(tmp_path / f"pose_{i:04d}.{fmt}", process=False)
-        assert np.abs(mesh.vertices - gt["posed_vertices"][i]).max() < tol
+        world = gt["posed_vertices"][i]
+        in_file = np.c_[world[:, 0], world[:, 2], -world[:, 1]] if fmt == "obj" else world
+        assert np.abs(mesh.vertices - in_file).max() < tol
         assert _triangle_set(mesh.faces) == _triangle_set(gt["faces"])   # same oriented triangles
     if faces == "quads":
         lines = (tmp_path / "pose_0004.obj").read_text().splitlines()

@@ -9,6 +9,7 @@ import trimesh
 from articula.sample_scenes import depth_noise as dn
 from articula.sample_scenes import unregistered as unreg
 from articula.solver.depth import camera
+from articula.solver.formats.obj import read_obj
 from articula.solver.formats.ply import read_ply
 from articula.solver.errors import ArticulaInputError
 
@@ -93,3 +94,16 @@ def test_bad_parameters(tmp_path):
         unreg.generate_unregistered(tmp_path, frames, faces, rig=unreg.ScanRig(n_cameras=0))
     with pytest.raises(ArticulaInputError, match="format"):
         unreg.generate_unregistered(tmp_path, frames, faces, fmt="stl")
+
+
+def test_obj_scans_are_written_y_up_like_blenders_exporter(tmp_path):
+    """Same seed, two formats: the PLY scan holds world coordinates (Z up), the OBJ scan the same points in
+    OBJ's Y-up convention, (x, y, z) -> (x, z, -y); ground_truth.npz says which (``file_axes``)."""
+    frames, faces, _ = _sphere_frames()
+    for fmt in ("ply", "obj"):
+        unreg.generate_unregistered(tmp_path / fmt, frames[:1], faces, rig=RIG, noise=dn.NOISELESS, seed=2, fmt=fmt)
+    world = read_ply(str(tmp_path / "ply" / "scan_0000.ply")).vertices
+    in_obj = read_obj(str(tmp_path / "obj" / "scan_0000.obj")).vertices
+    np.testing.assert_allclose(in_obj, np.c_[world[:, 0], world[:, 2], -world[:, 1]], atol=2e-6)
+    assert np.load(tmp_path / "ply" / "ground_truth.npz")["file_axes"].tolist() == ["Y", "Z"]
+    assert np.load(tmp_path / "obj" / "ground_truth.npz")["file_axes"].tolist() == ["NEGATIVE_Z", "Y"]

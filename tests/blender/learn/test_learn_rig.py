@@ -8,6 +8,7 @@ the solver's hybrid skin, written as OBJ files and imported with ``articula.impo
 import argparse
 import json
 import os
+import re
 import sys
 from types import SimpleNamespace
 
@@ -43,7 +44,9 @@ def write_scans(pkg, folder, scans, faces):
 
 def import_sequence(pkg, tmp_path, scans, faces, name="body"):
     folder = write_scans(pkg, str(tmp_path / name), scans, faces)
-    assert bpy.ops.articula.import_scans(directory=folder, frame_start=FRAME_START) == {'FINISHED'}
+    # the files hold the scans as given (Z up), not in OBJ's Y-up convention: import them as written
+    assert bpy.ops.articula.import_scans(directory=folder, frame_start=FRAME_START, axis_forward='Y',
+                                         axis_up='Z') == {'FINISHED'}
     return bpy.context.view_layer.objects.active
 
 
@@ -175,9 +178,10 @@ def test_operator_and_batch_command_defaults_are_the_options(pkg):
     props = bpy.ops.articula.learn_rig.get_rna_type().properties
     for name in ("parts", "alpha", "symmetry", "max_iterations", "key_scans", "joint_prior", "seed"):
         assert props[name].default == pytest.approx(getattr(opts, name), rel=1e-6), name
-    assert (props["parts"].hard_min, props["parts"].hard_max) == (0, 64)
-    assert (props["alpha"].hard_min, props["alpha"].soft_max) == (0.0, 1000.0)
-    assert (props["key_scans"].hard_min, props["key_scans"].hard_max) == (0, 100000)
+    # soft limits only (the slider): hard limits would clamp out-of-range values silently
+    assert (props["parts"].soft_min, props["parts"].soft_max, props["parts"].hard_max) == (0, 64, 2 ** 31 - 1)
+    assert (props["alpha"].soft_min, props["alpha"].soft_max) == (0.0, 1000.0)
+    assert (props["key_scans"].soft_min, props["key_scans"].soft_max) == (0, 100000)
     parser = argparse.ArgumentParser()
     pkg("addon.cli.learn").add_commands(parser.add_subparsers())
     args = parser.parse_args(["learn-rig", "--scans", "scans", "--out", "model.npz"])
@@ -353,7 +357,7 @@ def test_cancel_leaves_scene_unchanged(pkg, tmp_path, truth, monkeypatch):
     class CancelHalfWay(jobs.Progress):
         def __call__(self, fraction, text=""):
             seen.append((fraction, text))
-            if fraction >= 0.09:              # after the initialisation, before the first round
+            if "Q = " in text:               # the initialisation's objective: before the first round
                 self.cancel()
             super().__call__(fraction, text)
 
@@ -474,3 +478,37 @@ def test_key_scans_learn_from_some_and_pose_every_scan(pkg, tmp_path, truth):
         bpy.context.scene.frame_set(FRAME_START + k)
         np.testing.assert_allclose(evaluated(pkg, rig_mesh), posed[k], atol=5e-5)
     assert np.sqrt(np.mean(np.sum((posed[other] - scans[other]) ** 2, axis=1))) < 0.01     # metres
+
+
+@pytest.mark.parametrize("parts, message", [
+    (10000, "parts: 10000 given; it must be from 0 to 64"),
+    (30, "parts: 30 given for a mesh of 509 vertices; each part needs at least 20 vertices, so at most 25 parts"),
+])
+def test_operator_and_batch_command_refuse_the_same_parts(pkg, tmp_path, truth, capsys, parts, message):
+    """The operator no longer clamps parts to its slider: it and the batch command refuse with the same
+    message, before reading more than the first file."""
+    model, poses, scans = truth
+    folder = write_scans(pkg, str(tmp_path / "scans"), scans, model.faces)
+    before = scene_state()
+    with pytest.raises(RuntimeError, match=re.escape(message)):
+        bpy.ops.articula.learn_rig(directory=folder, parts=parts)
+    assert scene_state() == before
+    out = str(tmp_path / "m.npz")
+    assert pkg("addon.cli.main").main(["learn-rig", "--scans", folder, "--parts", str(parts), "--out", out]) == 2
+    assert message in capsys.readouterr().err and not os.path.exists(out)
+
+
+def test_operator_learns_with_a_separate_island(pkg, tmp_path):
+    """A detached "eye" near the head: the operator learns, the rig's mesh has every vertex, and the
+    summary and the stored report say the island was carried rigidly."""
+    from ...solver.learn.test_islands import with_eye
+    truth, scans = with_eye(6)
+    folder = write_scans(pkg, str(tmp_path / "eye"), scans, truth.faces)
+    assert bpy.ops.articula.learn_rig(directory=folder, parts=8, max_iterations=0, name="Eye") == {'FINISHED'}
+    arm = bpy.data.objects["Eye"]
+    report = json.loads(arm[pkg("addon.learn.report").REPORT_PROPERTY])
+    assert report["islands"]["count"] == 1 and report["islands"]["vertices"] == 8
+    meshes = [o for o in bpy.data.objects if o.type == 'MESH' and o.parent == arm]
+    assert any(len(o.data.vertices) == truth.num_vertices for o in meshes)
+    text = pkg("addon.learn.report").islands_text(report)
+    assert text.startswith("1 separate island (8 vertices) carried rigidly by bone ")

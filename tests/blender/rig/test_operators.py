@@ -141,3 +141,73 @@ def test_build_with_large_fork_twists_needs_no_warning(pkg, tmp_path):
     pkg("solver.formats.bundle").save_bundle(path, model, p)
     rig, action = pkg("addon.rig.bundle_io").build_from_bundle(bpy.context, path)
     assert action is not None and rig.warnings == ()
+
+
+def _break_format(a, model):
+    a["format"] = np.array("articula-model/9")
+
+
+def _random_bytes(path):
+    with open(path, "wb") as fh:
+        fh.write(np.random.default_rng(1).bytes(5000))
+
+
+@pytest.mark.parametrize("make, expected", [
+    (lambda path, arrays: _random_bytes(path), "bad.npz: not a model bundle (not a valid .npz archive of arrays)"),
+    (lambda path, arrays: (_break_format(arrays, None), write_raw_bundle(path, arrays)),
+     "bad.npz: key 'format' is 'articula-model/9', expected 'articula-model/1'"),
+])
+def test_unreadable_bundles_are_named_plainly_on_both_paths(pkg, tmp_path, capfd, make, expected):
+    model, p = _small(pkg)
+    path = str(tmp_path / "bad.npz")
+    make(path, bundle_arrays(pkg, model, p))
+    before = _counts()
+    for op in (bpy.ops.articula.build_rig, bpy.ops.articula.bake_poses):
+        result, error = _run(op, filepath=path)
+        assert result == {'CANCELLED'} and expected in error, error
+        assert "allow_pickle" not in error and "array(" not in error
+    assert _counts() == before
+    cli = pkg("addon.cli.main")
+    capfd.readouterr()
+    assert cli.main(["build-rig", "--bundle", path]) == 2
+    err = capfd.readouterr().err
+    assert expected in err and "allow_pickle" not in err and "array(" not in err
+    assert _counts() == before
+
+
+def test_empty_bundle_path_says_no_file_given(pkg, tmp_path, capfd):
+    before = _counts()
+    for op in (bpy.ops.articula.build_rig, bpy.ops.articula.bake_poses):
+        result, error = _run(op, filepath="")
+        assert result == {'CANCELLED'} and "no bundle file given" in error and ": :" not in error, error
+    capfd.readouterr()
+    assert pkg("addon.cli.main").main(["build-rig", "--bundle", ""]) == 2
+    err = capfd.readouterr().err
+    assert "no bundle file given" in err and ": :" not in err, err
+    assert _counts() == before
+
+
+def test_near_unit_quaternions_are_normalised_with_a_warning(pkg, tmp_path, capfd):
+    """Float32 round-off (norms within 1e-4 of 1) is normalised on load and said so, on the operator and
+    the batch path; the baked action holds the unit quaternions."""
+    model, p = _small(pkg)
+    arrays = bundle_arrays(pkg, model, p)
+    arrays["pose_rotations"] = arrays["pose_rotations"] * 1.00005
+    path = str(tmp_path / "f32.npz")
+    write_raw_bundle(path, arrays)
+    capfd.readouterr()
+    assert bpy.ops.articula.build_rig(filepath=path) == {'FINISHED'}
+    out = "".join(capfd.readouterr())
+    assert "normalised" in out and "f32.npz" in out, out
+    arm = bpy.context.view_layer.objects.active
+    read = pkg("addon.rig.reader").read_poses(arm, arm.animation_data.action)
+    np.testing.assert_allclose(np.linalg.norm(read.rotations, axis=2), 1.0, atol=1e-6)
+    assert bpy.ops.articula.bake_poses(filepath=path, armature=arm.name) == {'FINISHED'}
+    assert "normalised" in "".join(capfd.readouterr())
+    cli = pkg("addon.cli.main")
+    blend = str(tmp_path / "rig.blend")
+    assert cli.main(["build-rig", "--bundle", path, "--blend", blend]) == 0
+    assert "warning: " in capfd.readouterr().out
+    assert cli.main(["bake", "--bundle", path, "--blend", blend, "--armature", "f32"]) == 0
+    out = capfd.readouterr().out
+    assert "warning: " in out and "normalised" in out, out

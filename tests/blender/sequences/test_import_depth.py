@@ -2,6 +2,7 @@
 bad input (scene untouched), real Kinect frames.  Synthetic recordings are exact ray casts
 (tests/solver/depth_scene.py)."""
 import os
+import re
 
 import bpy
 import numpy as np
@@ -135,7 +136,7 @@ def test_save_and_reload_keep_playback(tmp_path):
     folder, _ = make_recording(tmp_path / "rec", n=4)
     assert bpy.ops.articula.import_depth(directory=folder) == {'FINISHED'}
     ob = bpy.data.objects["rec Points"]
-    assert ob.articula.cache_file.startswith("//")       # beside the saved .blend, relative
+    assert ob.articula.cache_file.startswith("//scene_articula/rec-")      # beside the saved .blend, relative
     expect = [sensor_points(ob, k).copy() for k in range(4)]
     bpy.context.scene.frame_set(2)
     bpy.ops.wm.save_mainfile()
@@ -153,7 +154,7 @@ def test_save_and_reload_keep_playback(tmp_path):
     import shutil
     moved = tmp_path / "moved"
     moved.mkdir()
-    for name in ("scene.blend", "rec.points.npz"):
+    for name in ("scene.blend", "scene_articula"):      # the .blend and its cache folder
         shutil.move(str(tmp_path / name), str(moved / name))
     pkg_pcs().forget_cache()
     bpy.ops.wm.open_mainfile(filepath=str(moved / "scene.blend"))
@@ -283,7 +284,7 @@ def test_bad_input_is_reported_and_leaves_the_scene_untouched(tmp_path):
     bad = good.copy()
     bad[13, 2] = np.nan
     np.save(clouds / "c_1.npy", bad)
-    _assert_fails(r"c_1.npy: 1 point\(s\) with NaN/inf coordinates \(first at row 13\)", directory=str(clouds))
+    _assert_fails(r"c_1.npy: 1 point\(s\) with NaN/inf coordinates \(first at row 14\)", directory=str(clouds))
     np.save(clouds / "c_1.npy", good)
     (clouds / "c_2.ply").write_bytes(b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nend_header\n1\n2\n")
     _assert_fails(r"c_2.ply", directory=str(clouds))
@@ -388,8 +389,9 @@ def test_batch_command(tmp_path, pkg):
     cli = pkg("addon.cli.main")
     blend = tmp_path / "out" / "depth.blend"
     assert cli.main(["import-depth", "--depth", folder, "--voxel", "0.02", "--blend", str(blend)]) == 0
-    assert blend.exists() and (tmp_path / "out" / "rec.points.npz").exists()
-    assert bpy.data.objects["rec Points"].articula.cache_file == "//rec.points.npz"
+    cache = bpy.data.objects["rec Points"].articula.cache_file
+    assert blend.exists() and re.fullmatch(r"//depth_articula/rec-[0-9a-f]{8}\.points\.npz", cache), cache
+    assert os.path.isfile(tmp_path / "out" / cache[2:])
     assert cli.main(["import-depth", "--depth", str(tmp_path / "missing")]) == 2
 
 

@@ -141,7 +141,7 @@ def test_unregistered_sequence_rebuilds_topology(tmp_path, pkg):
     ("missing", "gone.obj: file or folder not found"),
     ("empty", "no scan files"),
     ("garbage", "bad.ply: not a PLY file"),
-    ("nan", "scan2.obj: vertex 3 has a non-finite"),
+    ("nan", "scan2.obj: vertex 4 has a non-finite"),
     ("nothing", "nothing to import"),
 ])
 def test_bad_input_reports_and_leaves_scene_untouched(tmp_path, case, message, cache_home):

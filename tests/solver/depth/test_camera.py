@@ -48,7 +48,7 @@ def test_json_round_trip_and_open3d_format(tmp_path):
     ({"width": 0}, "width must be a positive integer"),
     ({"height": 480.5}, "height must be a positive integer"),
     ({"cy": float("nan")}, "cy must be a finite number"),
-    ({"cx": 5000.0}, "far outside"),
+    ({"cx": 5000.0}, r"principal point \(cx, cy\) = \(5000, 239.5\) is outside the 640x480 image"),
     ({"format": "other/2"}, "unknown intrinsics format"),
 ])
 def test_bad_intrinsics_files_name_file_and_key(tmp_path, change, message):

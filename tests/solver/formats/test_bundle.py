@@ -107,7 +107,8 @@ def bad_case(model):
     frames = sk.frames.copy()
     frames[1] = frames[1] @ np.diag([1.0, 1.0, -1.0])
     cases.append(("left-handed frame", dict(frames=frames), r"frames: frame of bone 1 has det -1"))
-    cases.append(("wrong format", dict(format=np.array("other/9")), r"'format'"))
+    cases.append(("wrong format", dict(format=np.array("articula-model/9")),
+                  r"key 'format' is 'articula-model/9', expected 'articula-model/1'$"))
     cases.append(("missing key", dict(anchor=None), r"missing key 'anchor'"))
     cases.append(("bad anchor", dict(anchor=np.full(model.num_vertices, B, dtype=np.int32)), r"anchor: vertex 0"))
     cases.append(("float faces", dict(faces=model.faces.astype(float)), r"'faces' must be integer"))
@@ -135,8 +136,66 @@ def test_pickled_object_arrays_are_refused(tmp_path, model):
     arrays = raw_arrays(path)
     arrays["bone_names"] = np.array(model.skeleton.names, dtype=object)
     np.savez(path, **arrays)
-    with pytest.raises(ArticulaInputError, match="obj.npz"):
+    with pytest.raises(ArticulaInputError, match=r"obj.npz: key 'bone_names' holds Python objects") as err:
         load_bundle(path)
+    assert "allow_pickle" not in str(err.value)
+
+
+def test_empty_path_says_no_bundle_file_given():
+    with pytest.raises(ArticulaInputError, match=r"^no bundle file given$"):
+        load_bundle("")
+
+
+def test_random_bytes_are_not_a_model_bundle(tmp_path):
+    path = tmp_path / "noise.npz"
+    path.write_bytes(np.random.default_rng(0).bytes(4096))
+    with pytest.raises(ArticulaInputError) as err:
+        load_bundle(path)
+    assert str(err.value) == f"{path}: not a model bundle (not a valid .npz archive of arrays)"
+
+
+def test_zip_of_other_files_is_not_a_model_bundle(tmp_path):
+    import zipfile
+    path = tmp_path / "notes.npz"
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr("readme.txt", "hello")
+    with pytest.raises(ArticulaInputError, match=r"notes.npz: not a model bundle \(not a valid .npz archive"):
+        load_bundle(path)
+
+
+def test_weights_summing_above_one_on_child_bones_only_are_refused_on_load(tmp_path, model):
+    """Each weight in [0, 1] and on a child of the anchor: only the weight-sum rule refuses the file."""
+    sk = model.skeleton
+    v = next(v for v in range(model.num_vertices) if len(sk.children(int(model.anchor[v]))) >= 2)
+    c1, c2 = sk.children(int(model.anchor[v]))[:2]
+    path = tmp_path / "sum.npz"
+    save_bundle(path, model)
+    w = model.twist_weights.copy()
+    w[v] = 0
+    w[v, c1], w[v, c2] = 0.7, 0.7
+    rewrite(path, twist_weights=w)
+    with pytest.raises(ArticulaInputError, match=rf"sum.npz: twist_weights: vertex {v}: weights sum to 1\.4 > 1"):
+        load_bundle(path)
+
+
+def test_near_unit_quaternions_are_normalised_on_load_with_a_note(tmp_path, model):
+    poses = synthetic.random_poses(3, model.skeleton.num_bones, seed=1)
+    path = tmp_path / "f32.npz"
+    save_bundle(path, model, poses)
+    rot = poses.rotations.astype(np.float32)        # a float32 round trip: norms off by ~1e-7
+    rot[1, 2] *= np.float32(1.00005)
+    rewrite(path, pose_rotations=rot)
+    b = load_bundle(path)
+    norms = np.linalg.norm(b.poses.rotations, axis=2)
+    assert abs(norms[1, 2] - 1.0) < 1e-12 and np.abs(norms - 1.0).max() <= 1e-6
+    np.testing.assert_allclose(b.poses.rotations, poses.rotations, atol=1e-6)
+    assert len(b.notes) == 1 and str(path) in b.notes[0] and "frame 1, bone 2" in b.notes[0]
+    rot[1, 2] *= np.float32(1.001)
+    rewrite(path, pose_rotations=rot)
+    with pytest.raises(ArticulaInputError, match=r"f32.npz: pose_rotations: frame 1, bone 2: quaternion norm 1\.00"):
+        load_bundle(path)
+    save_bundle(path, model, poses)
+    assert load_bundle(path).notes == []
 
 
 def test_save_refuses_invalid_model_and_leaves_no_file(tmp_path, model):

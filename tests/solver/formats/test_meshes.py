@@ -97,7 +97,7 @@ def test_topology_difference_names_the_face():
     a = PolyMesh(CUBE_VERTS, np.array([4, 3]), np.array([0, 1, 2, 3, 4, 5, 6]))
     b = PolyMesh(CUBE_VERTS, np.array([4, 3]), np.array([0, 1, 2, 3, 4, 6, 5]))
     assert a.topology_difference(a) is None
-    assert "face 1 differs" in a.topology_difference(b)
+    assert "face 2 differs (vertices [5, 7, 6] vs [5, 6, 7]" in a.topology_difference(b)
     assert "vertex count 7 vs 8" in a.topology_difference(PolyMesh(CUBE_VERTS[:7], a.face_sizes, a.corner_verts))
 
 
@@ -105,7 +105,7 @@ def test_topology_difference_names_the_face():
 def test_nan_named_with_vertex(tmp_path):
     path = tmp_path / "nan.obj"
     path.write_text("v 0 0 0\nv 1 nan 0\nv 0 1 0\nf 1 2 3\n")
-    with pytest.raises(ArticulaInputError, match=r"nan\.obj: vertex 1 has a non-finite"):
+    with pytest.raises(ArticulaInputError, match=r"nan\.obj: vertex 2 has a non-finite"):
         read_obj(str(path))
 
 
@@ -114,14 +114,14 @@ def test_inf_in_binary_ply(tmp_path):
     v[5, 2] = np.inf
     path = str(tmp_path / "inf.ply")
     write_ply(path, v, CUBE_FACES, "binary_little_endian")
-    with pytest.raises(ArticulaInputError, match="vertex 5 has a non-finite"):
+    with pytest.raises(ArticulaInputError, match="vertex 6 has a non-finite"):
         read_ply(path)
 
 
 @pytest.mark.parametrize("name, content, message", [
     ("g.obj", b"v 0 0 0\nv 1 0 0\nv zero 1 0\nf 1 2 3\n", "bad vertex coordinate"),
-    ("r.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", "face 0 uses vertex 3, but there are only 3"),
-    ("z.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1/1 0/1 2/1\n", "face 1 uses vertex index 0"),
+    ("r.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", r"face 1 uses vertex index 4, but the file has 3 vertices \(indices 1..3\)"),
+    ("z.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1/1 0/1 2/1\n", "line 5: face 2 uses vertex index 0"),
     ("b.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n", "bad face index 'x'"),
     ("e.obj", b"# nothing\n", "no vertices"),
     ("bin.obj", b"\0\1\2garbage", "not an OBJ"),
@@ -205,7 +205,7 @@ def test_ply_record_by_record_with_two_lists(tmp_path, fmt, faces):
 
 
 @pytest.mark.parametrize("fmt, message", [("ascii", r"ends inside element 'face'; truncated"),
-                                          ("binary_little_endian", r"ends inside element 'face' \(record 6\)")])
+                                          ("binary_little_endian", r"ends inside element 'face' \(record 7\)")])
 def test_ply_truncated_inside_a_record(tmp_path, fmt, message):
     path = tmp_path / "cut.ply"
     path.write_bytes(_two_list_ply(fmt, CUBE_FACES, cut=6))

@@ -135,7 +135,7 @@ def test_unsupported_formats_raise(tmp_path, depth, ctype, interlace, message):
 def test_bad_filter_byte_and_missing_file(tmp_path):
     path = tmp_path / "f.png"
     path.write_bytes(_png(2, 2, 16, 0, b"\x00" + b"\x01" * 4 + b"\x07" + b"\x01" * 4))
-    with pytest.raises(ArticulaInputError, match="filter type 7 in row 1"):
+    with pytest.raises(ArticulaInputError, match="filter type 7 in image row 2"):
         png16.read_png16(path)
     with pytest.raises(ArticulaInputError, match="missing.png"):
         png16.read_png16(tmp_path / "missing.png")

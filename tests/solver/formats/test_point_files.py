@@ -19,7 +19,7 @@ def test_point_cloud_files(tmp_path):
     bad = a.copy()
     bad[7, 1] = np.nan
     np.save(tmp_path / "f_2.npy", bad)
-    with pytest.raises(ArticulaInputError, match=r"f_2.npy: 1 point\(s\) with NaN/inf coordinates \(first at row 7\)"):
+    with pytest.raises(ArticulaInputError, match=r"f_2.npy: 1 point\(s\) with NaN/inf coordinates \(first at row 8\)"):
         read_point_file(str(tmp_path / "f_2.npy"))
     np.save(tmp_path / "f_3.npy", a[:, :2])
     with pytest.raises(ArticulaInputError, match=r"f_3.npy: expected a \(K, 3\) or \(K, 6\)"):
@@ -28,8 +28,15 @@ def test_point_cloud_files(tmp_path):
     with pytest.raises(ArticulaInputError, match=r"f_5.obj: unknown point-cloud format '.obj'"):
         read_point_file(str(tmp_path / "f_5.obj"))
     (tmp_path / "f_6.xyz").write_text("1 2 x\n")
-    with pytest.raises(ArticulaInputError, match=r"f_6.xyz: cannot read point cloud"):
+    with pytest.raises(ArticulaInputError, match=r"f_6.xyz, line 1: not a point-cloud text file"):
         read_point_file(str(tmp_path / "f_6.xyz"))
+    (tmp_path / "f_7.xyz").write_text("# x y z\n1 2 3\n\n4 5 6\n7 8\n")
+    with pytest.raises(ArticulaInputError, match=r"f_7.xyz, line 5: cannot read point cloud \(expected 3 numbers"):
+        read_point_file(str(tmp_path / "f_7.xyz"))
+    bad = np.r_[a[:3], [[np.inf, 0, 1]]]
+    np.savetxt(tmp_path / "f_8.xyz", bad, header="a comment line")
+    with pytest.raises(ArticulaInputError, match=r"f_8.xyz: 1 point\(s\) with NaN/inf coordinates \(first at line 5\)"):
+        read_point_file(str(tmp_path / "f_8.xyz"))
     # binary PLY point cloud (vertex element only, with colour properties that are skipped)
     rec = np.zeros(50, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1")])
     rec["x"], rec["y"], rec["z"] = a[:50].T

@@ -45,9 +45,9 @@ def test_unregistered_accepted_and_explained(tmp_path):
     files = list_scan_files(str(tmp_path))
     seq = read_scan_files(files)
     assert not seq.registered and len(seq.meshes) == 3
-    assert seq.why_unregistered.startswith("s2.obj differs from s1.obj: face 0 has 3 corners vs 4")
+    assert seq.why_unregistered.startswith("s2.obj differs from s1.obj: face 1 has 3 corners vs 4")
     assert np.array_equal(seq.meshes[2].vertices, frames[2][:7])
-    with pytest.raises(ArticulaInputError, match="not registered: s2.obj differs from s1.obj: face 0 has"):
+    with pytest.raises(ArticulaInputError, match="not registered: s2.obj differs from s1.obj: face 1 has"):
         read_scan_files(files, require_registered=True)
 
 
@@ -74,7 +74,7 @@ def test_folder_errors(tmp_path):
 def test_garbage_frame_named(tmp_path):
     write_obj(str(tmp_path / "f1.obj"), CUBE_VERTS, CUBE_FACES)
     (tmp_path / "f2.obj").write_bytes(b"v 1 2\n")
-    with pytest.raises(ArticulaInputError, match="f2.obj: vertex 0 has fewer than 3"):
+    with pytest.raises(ArticulaInputError, match="f2.obj, line 1: vertex 1 has fewer than 3"):
         read_scan_files(list_scan_files(str(tmp_path)))
 
 
@@ -112,7 +112,7 @@ def test_point_cache_nan_names_frame_and_vertex(tmp_path):
     frames[2, 6, 1] = np.nan
     path = str(tmp_path / "n.pc2")
     write_pc2(path, frames)
-    with pytest.raises(ArticulaInputError, match="n.pc2: frame 2 vertex 6 has a non-finite"):
+    with pytest.raises(ArticulaInputError, match="n.pc2: frame 3 vertex 7 has a non-finite"):
         read_point_cache(path)
 
 

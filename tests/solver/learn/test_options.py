@@ -58,9 +58,11 @@ def test_numpy_numbers_and_limits_are_accepted():
     LearnOptions(parts=64, max_iterations=1000, key_scans=100000, alpha=0.0, tol=0.0).validate()
 
 
-def test_property_range_is_the_field_default_and_bounds():
-    assert property_range("alpha") == dict(default=100.0, min=0.0, soft_max=1000.0)
-    assert property_range("parts") == dict(default=0, min=0, max=64)
+def test_property_range_is_the_field_default_and_soft_bounds():
+    """Soft limits only: Blender clamps to hard limits silently (parts=10000 became 64); the operator's
+    out-of-range values must reach LearnOptions.validate and be refused with its message."""
+    assert property_range("alpha") == dict(default=100.0, soft_min=0.0, soft_max=1000.0)
+    assert property_range("parts") == dict(default=0, soft_min=0, soft_max=64)
     assert property_range("symmetry") == dict(default=True)
 
 

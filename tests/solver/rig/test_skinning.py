@@ -371,3 +371,79 @@ def test_zero_frames_give_empty_results(human):
     assert skinning.hybrid_skin(model, none).shape == (0, 120, 3)
     A, b = skinning.affine_form(model, none)
     assert A.shape == (0, 120, 3, 3) and b.shape == (0, 120, 3)
+
+
+def _explicit_hamilton(a, b):
+    """Hamilton product of two quaternions (w, x, y, z), written out for the test."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw])
+
+
+def _explicit_twist_blend(x, heads, axes, angles, weights, neutral_weight):
+    """Blender's Preserve Volume blend of rotations about ``axes`` (K, 3) through ``heads`` (K, 3) by
+    ``angles`` (K,) with ``weights`` (K,), written out: the neutral (identity, weight ``neutral_weight``)
+    starts the running sum, each dual quaternion is negated when its real part points away from the sum
+    so far, the sum is normalised and applied to ``x`` (3,).  Returns (posed x, flipped flags)."""
+    acc_r = np.array([neutral_weight, 0.0, 0.0, 0.0])
+    acc_d = np.zeros(4)
+    flipped = []
+    for h, u, angle, w in zip(heads, axes, angles, weights):
+        q = np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * u])
+        R = rot.quat_to_matrix(q)
+        d = 0.5 * _explicit_hamilton(np.concatenate([[0.0], h - R @ h]), q)
+        sign = -1.0 if (q @ acc_r < 0 and w > 0) else 1.0
+        flipped.append(sign < 0)
+        acc_r, acc_d = acc_r + sign * w * q, acc_d + sign * w * d
+    n = np.linalg.norm(acc_r)
+    qr, qd = acc_r / n, acc_d / n
+    t = 2.0 * _explicit_hamilton(qd, qr * np.array([1.0, -1.0, -1.0, -1.0]))[1:]
+    return rot.quat_to_matrix(qr) @ x + t, flipped
+
+
+def test_twist_hemisphere_rule_starts_from_the_neutral_remainder_weight():
+    """Two opposite children of a fork (the collarbones) twisted together, chosen so that the flip of the
+    second child depends on the neutral's weight 1 − Σw at the start of the running sum: frame 0
+    (100° each, w = 0.3 + 0.3) does not flip with the remainder 0.4 but would without the neutral;
+    frame 1 (120° each, w = 0.45 + 0.45) flips with the remainder 0.1 but would not with a neutral of
+    weight 1.  hybrid_skin and dualquat.dlb ("running") must equal the blend written out here."""
+    model = synthetic.random_model(200, seed=4)
+    sk = model.skeleton
+    fork, kids = min(((a, pair) for a in range(sk.num_bones) for pair in
+                      [(c, d) for c in sk.children(a) for d in sk.children(a) if c < d]),
+                     key=lambda ap: sk.frames[ap[1][0], :, 1] @ sk.frames[ap[1][1], :, 1])
+    kids = list(kids)
+    sel = np.flatnonzero(model.anchor == fork)
+    half_a, half_b = sel[: len(sel) // 2], sel[len(sel) // 2:]
+    assert len(half_a) and len(half_b)
+    wt = np.zeros_like(model.twist_weights)
+    wt[half_a[:, None], kids] = 0.3
+    wt[half_b[:, None], kids] = 0.45
+    model = Model(model.rest_vertices, model.faces, sk, model.anchor, wt, np.zeros_like(wt))
+    angles = np.radians([100.0, 120.0])
+    r = np.zeros((2, sk.num_bones, 3))
+    r[0, kids, 1], r[1, kids, 1] = angles[0], angles[1]       # twist about each child's own Y axis
+    poses = Poses(rot.rotvec_to_quat(r), np.zeros((2, 3)), np.ones(2))
+    got = skinning.hybrid_skin(model, poses)
+
+    heads, axes = sk.heads[kids], sk.frames[kids][:, :, 1]
+    for n, (half, w, discriminating_neutral) in enumerate([(half_a, 0.3, 0.0), (half_b, 0.45, 1.0)]):
+        w = float(np.float32(w))                               # the model stores weights as float32
+        weights = np.array([w, w])
+        # the case is built so the neutral's weight decides the second child's flip
+        _, flips_true = _explicit_twist_blend(np.zeros(3), heads, axes, [angles[n]] * 2, weights, 1 - 2 * w)
+        _, flips_wrong = _explicit_twist_blend(np.zeros(3), heads, axes, [angles[n]] * 2, weights,
+                                               discriminating_neutral)
+        assert flips_true[1] != flips_wrong[1] and not flips_true[0]
+        expected = np.array([_explicit_twist_blend(model.rest_vertices[v], heads, axes, [angles[n]] * 2,
+                                                   weights, 1 - 2 * w)[0] for v in half])
+        np.testing.assert_allclose(got[n, half], expected, rtol=0, atol=1e-12)
+        wrong = np.array([_explicit_twist_blend(model.rest_vertices[v], heads, axes, [angles[n]] * 2,
+                                                weights, discriminating_neutral)[0] for v in half])
+        assert np.abs(wrong - expected).max() > 1e-3              # the neutral's weight matters here
+        dqs_ = np.stack([dq.dq_rotation_about(rot.rotvec_to_quat(angles[n] * u), h) for u, h in zip(axes, heads)])
+        blended = dq.dlb(weights, dqs_, pivot="running")
+        np.testing.assert_allclose(dq.dq_apply(blended, model.rest_vertices[half]), expected, rtol=0, atol=1e-12)
+    flips = skinning.twist_flips(model, poses)
+    assert flips[1, half_b].all() and not flips[0, half_a].any()
