@@ -267,7 +267,7 @@ def distance_to_surface(points, vertices, faces):
     return best
 
 
-def per_vertex_scan_distances(points, surfaces, faces):
+def per_vertex_scan_distances(points, surfaces, faces, progress=None):
     """``(M, N)``: distance of ``points[m, i]`` (``(M, N, 3)``) to the surface of frame m, vertices
     ``surfaces (M, V, 3)`` sharing triangles ``faces (F, 3)``.  For a registered sequence either side may be
     the scans: scan vertices to the posed model (what the learned rig's report and heat map use) or posed
@@ -275,7 +275,10 @@ def per_vertex_scan_distances(points, surfaces, faces):
 
     Small frames are measured several at a time (:func:`_side_by_side`, at least ``BATCH_POINTS`` points
     per call), so that the searches' fixed costs are paid per batch instead of per frame; the batches
-    go to the solver's threads (the distances equal the frame-by-frame ones to rounding)."""
+    go to the solver's threads (the distances equal the frame-by-frame ones to rounding).
+    progress(fraction): with it the batches go to the threads one at a time and it is called in the
+    calling thread as each is done, in order (:func:`parallel.map_in_order`; the same distances); it
+    may raise (e.g. ``Cancelled``): the batches not started are dropped."""
     points = np.asarray(points, dtype=np.float64)
     surfaces = np.asarray(surfaces, dtype=np.float64)
     M, N = points.shape[:2]
@@ -290,7 +293,11 @@ def per_vertex_scan_distances(points, surfaces, faces):
                                           ).reshape(sl.stop - sl.start, N)
 
     starts = np.arange(0, M, per_batch)
-    parallel.map_pieces(batches, [starts[idx] for idx in parallel.split(len(starts))])
+    if progress is None:
+        parallel.map_pieces(batches, [starts[idx] for idx in parallel.split(len(starts))])
+    else:
+        parallel.map_in_order(batches, [[m0] for m0 in starts], parallel.workers(),
+                              lambda i, _: progress((i + 1) / len(starts)))
     return out
 
 

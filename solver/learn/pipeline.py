@@ -265,6 +265,8 @@ def alternation_round(model, poses, problem, scans, settings, fix_joints, timing
     state = settings.at(objective)
     sub = (lambda lo, hi, off=0.0: _sub_progress(progress, lo, hi, off))
     log = []
+    if progress is not None:                  # after the preconditioner's factorisation at a new α
+        progress(0.0, "starting the round", None)
     t0 = time.perf_counter()
     E = problem.value(model, poses) if E is None else E
     model, poses, gn_log = optimise_joints_and_poses(
@@ -284,7 +286,7 @@ def alternation_round(model, poses, problem, scans, settings, fix_joints, timing
     t0 = time.perf_counter()
     trial = copy.copy(model)
     trial.rest_vertices, posed = solve_rest_vertices(model, poses, scans, objective.L, objective.alpha,
-                                                     state.shape, with_posed=True)
+                                                     state.shape, with_posed=True, progress=sub(2 / 3, 1.0))
     E_trial = objective.value(posed) + sym_term
     if E_trial <= E:
         model, E = trial, E_trial
@@ -390,7 +392,8 @@ def _learn_rig(scans, faces, options, progress):
     t0 = time.perf_counter()
     if progress is not None:
         progress(REPORT_START, "report: distances of every scan to the learned surface", None)
-    report, distances = make_report(model, poses, all_scans, objective, sym)
+    report, distances = make_report(model, poses, all_scans, objective, sym,
+                                    _sub_progress(progress, REPORT_START, 1.0))
     report.update(info)
     timings["report"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_all

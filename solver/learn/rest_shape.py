@@ -97,6 +97,8 @@ def _solve_spd(N, rhs):
 
 CG_RTOL = 1e-9           # ‖N x − rhs‖ / ‖rhs‖ at which conjugate gradients stop
 CG_MAX_ITERATIONS = 200  # then the direct solve
+CG_TICK_EVERY = 10       # conjugate-gradient iterations between progress calls
+STAGE = "rest vertices (sparse least squares)"
 
 
 class ShapePreconditioner:
@@ -121,18 +123,21 @@ class ShapePreconditioner:
         return apply
 
 
-def conjugate_gradients(N, rhs, x0, precondition, rtol=CG_RTOL, max_iterations=CG_MAX_ITERATIONS):
+def conjugate_gradients(N, rhs, x0, precondition, rtol=CG_RTOL, max_iterations=CG_MAX_ITERATIONS, tick=None):
     """Preconditioned conjugate gradients for SPD ``N (n,n)``: ``(x, converged)`` from ``x0 (n,)`` with
-    ``precondition(r) ≈ N⁻¹ r``; converged when ``‖N x − rhs‖ ≤ rtol ‖rhs‖`` within max_iterations."""
+    ``precondition(r) ≈ N⁻¹ r``; converged when ``‖N x − rhs‖ ≤ rtol ‖rhs‖`` within max_iterations.
+    tick(fraction of max_iterations): every ``CG_TICK_EVERY`` iterations (may raise to stop)."""
     x = np.array(x0, dtype=np.float64)
     r = rhs - N @ x
     goal = rtol * np.linalg.norm(rhs)
     z = precondition(r)
     d = z.copy()
     rz = r @ z
-    for _ in range(max_iterations):
+    for it in range(max_iterations):
         if np.linalg.norm(r) <= goal:
             return x, True
+        if tick is not None and it and it % CG_TICK_EVERY == 0:
+            tick(it / max_iterations)
         Nd = N @ d
         step = rz / (d @ Nd)
         x += step * d
@@ -143,18 +148,26 @@ def conjugate_gradients(N, rhs, x0, precondition, rtol=CG_RTOL, max_iterations=C
     return x, bool(np.linalg.norm(r) <= goal)
 
 
-def solve_rest_vertices(model, poses, scans, L, alpha, preconditioner=None, with_posed=False):
+def solve_rest_vertices(model, poses, scans, L, alpha, preconditioner=None, with_posed=False, progress=None):
     """The rest vertices ``(V,3)`` minimising Q with everything else fixed (metres): by the direct sparse
     solve, or with a :class:`ShapePreconditioner` for (L, α) by conjugate gradients from the model's
     current rest vertices (the direct solve if they do not converge).  with_posed: return
     ``(x, posed (M,V,3))``, the posed vertices ``A x + b`` of the affine form already at hand (equal to
-    ``hybrid_skin`` of the model with rest vertices x up to rounding, at a tenth of its cost)."""
+    ``hybrid_skin`` of the model with rest vertices x up to rounding, at a tenth of its cost).
+    progress(fraction, stage, None): after the affine form, the normal equations, every
+    ``CG_TICK_EVERY`` CG iterations and before a direct solve; may raise ``Cancelled`` (nothing is
+    changed: the model is only read)."""
+    say = (lambda f, stage=STAGE: None) if progress is None else (lambda f, stage=STAGE: progress(f, stage, None))
     A, b = affine_form(model, poses)
+    say(0.1)
     N, rhs = normal_equations(A, b, np.asarray(scans, dtype=np.float64), L, alpha)
+    say(0.3)
     ok = False
     if preconditioner is not None:
-        x, ok = conjugate_gradients(N, rhs, model.rest_vertices.ravel(),
-                                    preconditioner.inverse(N), CG_RTOL, CG_MAX_ITERATIONS)
+        x, ok = conjugate_gradients(N, rhs, model.rest_vertices.ravel(), preconditioner.inverse(N), CG_RTOL,
+                                    CG_MAX_ITERATIONS, lambda f: say(0.3 + 0.6 * f))
+    if not ok:
+        say(0.9, "rest vertices (direct sparse solve)")
     x = (x if ok else _solve_spd(N, rhs)).reshape(-1, 3)
     if not with_posed:
         return x

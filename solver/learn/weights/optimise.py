@@ -11,6 +11,8 @@ from .skin import CandidateSkin
 from .state import State, Tracker
 from .sweeps import kept_steps, sweep
 
+STAGE = "skinning weights (block coordinate descent)"
+
 
 def _setup(model, poses, objective, graph=None):
     """Copy of the model, :class:`State`, :class:`CandidateSkin`, Q, the :class:`TwoRing` (built from
@@ -41,6 +43,9 @@ def optimise_weights(model, poses, objective, max_sweeps=20, steps=STEPS, rel_to
     a sweep gains less than ``rel_tol`` of Q.  graph: the mesh's :class:`TwoRing` (built if None).
     prune_steps: after each sweep only the steps δ that won at least ``STEP_MIN_SHARE`` of its twist
     moves are offered in the next (:func:`kept_steps`; the smallest always).
+    progress(fraction, stage, objective): after every sweep with its Q, and within a sweep (colour
+    classes, chunks of the joint move) without one; may raise ``Cancelled`` (the caller's model is
+    untouched: the sweeps work on a copy).
     Runs with numpy's BLAS on one thread (small products only: spinning BLAS threads just compete)."""
     model, state, skin, Q, graph, tracker = _setup(model, poses, objective, graph)
     log = []
@@ -49,7 +54,9 @@ def optimise_weights(model, poses, objective, max_sweeps=20, steps=STEPS, rel_to
         if not active_set:
             tracker.dirty[:] = tracker.stale[:] = True
         wins = np.zeros(len(steps), dtype=np.int64)
-        Q, moved = sweep(model, skin, state, objective, graph, tracker, Q, steps, jacobi, wins)
+        tick = None if progress is None else (
+            lambda f, i=i: progress((i + f) / max_sweeps, STAGE, None))
+        Q, moved = sweep(model, skin, state, objective, graph, tracker, Q, steps, jacobi, wins, tick)
         jacobi = jacobi and moved           # a rejected joint move is not tried again
         if prune_steps:
             steps = kept_steps(steps, wins)
@@ -57,7 +64,7 @@ def optimise_weights(model, poses, objective, max_sweeps=20, steps=STEPS, rel_to
             break
         log.append(Q)
         if progress is not None:
-            progress((i + 1) / max_sweeps, "skinning weights (block coordinate descent)", Q)
+            progress((i + 1) / max_sweeps, STAGE, Q)
         if Q_start - Q < rel_tol * Q_start:
             break
     return model, log, jacobi
