@@ -41,7 +41,8 @@ class ARTICULA_PT_main(_ArticulaPanel, bpy.types.Panel):
 
 
 def _draw_cache_problem(layout, ob) -> None:
-    """A red box saying why a sequence object cannot play (its frame cache is missing or unusable)."""
+    """A red box saying why a sequence object cannot play (its frame cache is missing or unusable) and
+    what to do (:func:`playback.cache_problem`: put the named cache folder back, or import again)."""
     problem = playback.cache_problem(ob)
     if not problem:
         return
@@ -50,7 +51,6 @@ def _draw_cache_problem(layout, ob) -> None:
     box.label(text="Cannot play this sequence", icon='ERROR')
     for line in _wrap(problem, 48):
         box.label(text=line)
-    box.label(text="Import the source again to rebuild the cache")
 
 
 def _wrap(text: str, width: int) -> list:

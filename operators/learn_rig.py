@@ -7,6 +7,7 @@ the solver's readers, coordinates as written; ``axis_forward``/``axis_up`` place
 active object.  The rig gets the scans' object matrix; the bundle stays in the scans' coordinates.  The work is in :mod:`addon.learn`; the settings' defaults and bounds come from
 :class:`solver.learn.options.LearnOptions`.
 """
+import contextlib
 import os
 from dataclasses import replace
 
@@ -19,7 +20,7 @@ from ..addon.learn import inputs, result, solve
 from ..addon.learn.report import summary_text
 from .import_scans import axis_property
 from ..solver.errors import ArticulaInputError
-from ..solver.learn.options import LearnOptions, property_range
+from ..solver.learn.options import LearnOptions, fields_by_name, name_setting, property_range
 
 
 class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
@@ -107,7 +108,25 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
         return bool(self.source_object or self.directory or any(f.name for f in self.files))
 
     # -- job parts -----------------------------------------------------------------------------------
+    def setting_names(self) -> dict:
+        """LearnOptions field -> what the user sees: the UI name of the property of the same identifier
+        (e.g. parts -> "Parts"); workers come from the preferences' Threads."""
+        names = {p.identifier: p.name for p in self.properties.bl_rna.properties if p.identifier in fields_by_name()}
+        names["workers"] = "Threads (Articula preferences)"
+        return names
+
     def prepare(self, context):
+        """:meth:`_prepare` and its work, their messages naming the settings as the user sees them."""
+        names = self.setting_names()
+        with _named_settings(names):
+            work = self._prepare(context)
+
+        def named_work(progress):
+            with _named_settings(names):
+                return work(progress)
+        return named_work
+
+    def _prepare(self, context):
         options = LearnOptions(parts=self.parts, alpha=self.alpha, symmetry=self.symmetry,
                                max_iterations=self.max_iterations, seed=self.seed, key_scans=self.key_scans,
                                workers=preferences.threads(context), joint_prior=self.joint_prior)
@@ -159,6 +178,15 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
                               f"{len(outcome.poses)} poses on frames {outcome.input.frame_start}.."
                               f"{outcome.input.frame_start + len(outcome.poses) - 1}; "
                               f"{summary_text(outcome)}{saved}")
+
+
+@contextlib.contextmanager
+def _named_settings(names: dict):
+    """Re-raise a settings error with the field replaced by ``names[field]`` (:func:`name_setting`)."""
+    try:
+        yield
+    except ArticulaInputError as exc:
+        raise ArticulaInputError(name_setting(str(exc), names)) from None
 
 
 classes = (ARTICULA_OT_learn_rig,)

@@ -7,7 +7,9 @@ empty scene (no default cube, camera and light).  The importers write their cach
 opened file, and saving (:func:`save_blend`, Blender's own save: a ``.blend1`` backup of the file it
 replaces, as the preferences' save versions say) carries them beside the .blend with relative paths
 (``addon/sequences/playback.py``).  A command that fails saves nothing: an existing file keeps its bytes,
-no new file is made, and the caches the command wrote are removed.
+no new file is made, and the caches the command wrote are removed.  So does a command given no
+``--blend`` (also with ``--open file.blend``: the opened file is never saved over unasked); its last
+line says so (:data:`NOT_SAVED`).
 """
 import contextlib
 import io
@@ -17,7 +19,10 @@ import sys
 import bpy
 
 from ...solver.errors import ArticulaInputError
+from .. import console
 from ..sequences import playback
+
+NOT_SAVED = "not saved: give --blend FILE to keep it"
 
 
 def _without_report(printed: str, report: str) -> str:
@@ -62,7 +67,8 @@ def open_blend(path: str) -> None:
     if not os.path.isfile(blend):
         raise ArticulaInputError(f"{path}: no such .blend file")
     try:
-        call_operator(bpy.ops.wm.open_mainfile, filepath=blend)
+        with console.without_lines(console.READ_BLEND):
+            call_operator(bpy.ops.wm.open_mainfile, filepath=blend)
     except ArticulaInputError as exc:
         raise ArticulaInputError(f"{path}: cannot open it as a .blend file ({exc})") from None
 
@@ -80,19 +86,28 @@ def start_scene(blend: str = "") -> None:
 
 @contextlib.contextmanager
 def editing(blend: str = ""):
-    """Run a command's body in :func:`start_scene`'s scene; when it raises, the caches it made are
-    deleted (nothing is saved, so nothing references them)."""
+    """Run a command's body in :func:`start_scene`'s scene; when it raises, or when there is no ``blend``
+    to save to, the caches it made are deleted (nothing is saved, so nothing references them)."""
     start_scene(blend)
     before = playback.referenced_caches()
     try:
         yield
     except BaseException:
-        for path in playback.referenced_caches() - before:
-            if playback.is_unsaved_cache(path) or playback.is_blend_cache(path):
-                playback.remove_path(path)
-                if playback.is_blend_cache(path) and not os.listdir(os.path.dirname(path)):
-                    os.rmdir(os.path.dirname(path))      # the cache folder this command made
+        _remove_new_caches(before)
         raise
+    if not blend:
+        _remove_new_caches(before)
+
+
+def _remove_new_caches(before: set) -> None:
+    """Delete the caches Articula wrote since ``before`` (:func:`playback.referenced_caches`), and a
+    ``<name>_articula`` folder they leave empty; caches at a path the user chose stay."""
+    for path in playback.referenced_caches() - before:
+        if playback.is_unsaved_cache(path) or playback.is_blend_cache(path):
+            playback.remove_path(path)
+            folder = os.path.dirname(path)
+            if playback.is_blend_cache(path) and os.path.isdir(folder) and not os.listdir(folder):
+                os.rmdir(folder)      # the cache folder this command made
 
 
 def save_blend(path: str) -> None:
@@ -121,11 +136,16 @@ def save_blend_as(path: str) -> None:
     save_blend(path)
 
 
-def finish(summary: str, blend: str = "") -> int:
+def finish(summary: str, blend: str = "", scene: bool = True) -> int:
     """End a command: print its one-line ``summary``; with ``blend``, save the scene there
-    (:func:`save_blend`) and say so.  Returns exit code 0."""
+    (:func:`save_blend`) and say so, else, for a command that makes a scene (``scene``; False for one
+    that only writes other files), say that nothing was saved and how to keep it (:data:`NOT_SAVED`,
+    the last line; :func:`editing` then removes the caches).  Returns exit code 0."""
     print(summary)
     if blend:
         save_blend(blend)
         print(f"saved {blend}")
+    elif scene:
+        opened = f" ({os.path.basename(bpy.data.filepath)} is unchanged)" if bpy.data.filepath else ""
+        print(NOT_SAVED + opened)
     return 0

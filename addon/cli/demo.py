@@ -29,7 +29,7 @@ from ...solver.errors import ArticulaInputError
 from ...solver.learn.options import MIN_SCANS
 from ..learn import heat_map
 from ..learn import report as learn_report
-from ..scene import render
+from ..scene import frames, render
 from ..sequences import scans as scan_sequence
 from .common import save_blend
 
@@ -98,6 +98,16 @@ def build_scene(paths: dict) -> dict:
     return {"scans": scans, "depth": depth, "rig": rig}
 
 
+def cover_sequences(scene, objects) -> None:
+    """Widen the scene's frame range to every sequence object among ``objects`` (baking a rig's poses,
+    the built one's and the learned one's, sets it to the poses' frames, fewer than the depth
+    recording's)."""
+    for ob in objects:
+        data = ob.articula
+        if ob.type == 'MESH' and data.kind != 'NONE' and data.frame_count:
+            frames.include_frames(scene, data.frame_start, data.frame_start + data.frame_count - 1)
+
+
 def learn_scene(scans: list, parts: int = 0, iterations: int = 2, seed: int = 0) -> tuple:
     """Learn a rig from the imported scan-sequence object (one of ``scans``) with ``articula.learn_rig``
     and place it beside the scans; return ``(objects, report)``, the report being the solver's report
@@ -162,6 +172,7 @@ def run(args) -> int:
         titles["learned"] = learned_title(_heat_scale(built["learned"]))
         t = _stage(f"learned rig {LEARNED_NAME!r}: {learned_summary(report)}", t)
     scene = bpy.context.scene
+    cover_sequences(scene, built["scans"] + built["depth"])
     scene.frame_set(max(1, args.scans // 2))
     png = os.path.join(out, "demo.png")
     render.render_overview(scene, png, {titles[k]: v for k, v in built.items()},

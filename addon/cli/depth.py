@@ -48,7 +48,8 @@ def _import(args) -> int:
     call_operator(bpy.ops.articula.import_depth, **props)
     ob = bpy.context.view_layer.objects.active
     code = finish(f"{ob.name}: {ob.articula.frame_count} frames", args.blend)
-    print(f"cache {ob.articula.cache_file}")       # where it is once saved
+    if args.blend:
+        print(f"cache {ob.articula.cache_file}")       # where it is once saved
     return code
 
 

@@ -15,10 +15,11 @@ import bpy
 
 from ...solver.errors import ArticulaInputError
 from ...solver.rig import linear_blend as lbs
+from .. import console
 from ..jobs import scene_guard
 from ..rig import linear_blend as lbs_rig
 from ..rig import reader as rig_reader
-from .common import finish, save_blend_as
+from .common import finish, open_blend, save_blend_as
 
 OUT_FORMATS = (".blend", ".glb", ".gltf", ".fbx")
 
@@ -43,21 +44,23 @@ def _check(args) -> str:
 
 
 def _export(rig, path: str, ext: str) -> None:
-    """Write the LBS armature and mesh alone to a glTF / FBX file."""
+    """Write the LBS armature and mesh alone to a glTF / FBX file (without the glTF add-on's lines about
+    its optional compression libraries, which read like a failure)."""
     for ob in bpy.context.view_layer.objects:
         ob.select_set(ob in (rig.armature, rig.mesh))
     animated = rig.armature.animation_data is not None and rig.armature.animation_data.action is not None
     if ext == ".fbx":
         bpy.ops.export_scene.fbx(filepath=path, use_selection=True, add_leaf_bones=False,
                                  bake_anim=animated)
-    else:
+        return
+    with console.without_lines(console.GLTF_LIBRARIES):
         bpy.ops.export_scene.gltf(filepath=path, use_selection=True, export_animations=animated,
                                   export_format='GLB' if ext == ".glb" else 'GLTF_SEPARATE')
 
 
 def export_lbs(args) -> int:
     ext = _check(args)
-    bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
+    open_blend(args.blend)
     arm = rig_reader.find_armature(args.armature, bpy.context)
     with scene_guard():
         rig = lbs_rig.build_lbs_rig(bpy.context, arm, args.segments, args.max_influences)
@@ -65,7 +68,7 @@ def export_lbs(args) -> int:
         save_blend_as(args.out)
     else:
         _export(rig, os.path.abspath(args.out), ext)
-    return finish(f"{lbs_rig.summary(rig)}; wrote {args.out}")
+    return finish(f"{lbs_rig.summary(rig)}; wrote {args.out}", scene=False)
 
 
 def add_commands(sub):

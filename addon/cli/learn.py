@@ -20,12 +20,16 @@ import bpy
 import numpy as np
 
 from ...solver.errors import ArticulaInputError
-from ...solver.learn.options import LearnOptions
+from ...solver.learn.options import LearnOptions, name_setting
 from .. import jobs
 from ..learn import inputs, result, solve
 from ..learn.report import error_summary, jsonable, report_json, summary_text
 from .common import call_operator, check_blend_output, editing, save_blend
 from .scans import add_axis_arguments, axis_props
+
+# LearnOptions field -> the flag that sets it (error messages name the flag the user typed)
+FLAGS = {"parts": "--parts", "alpha": "--alpha", "joint_prior": "--joint-prior", "max_iterations": "--iterations",
+         "seed": "--seed", "key_scans": "--key-scans", "workers": "--threads"}
 
 
 def report_document(outcome) -> dict:
@@ -74,10 +78,8 @@ def _save_blend(blend: str, paths, outcome, axes: dict) -> None:
         save_blend(blend)
 
 
-def run(args) -> int:
-    for path in (args.out, args.report, args.blend):
-        result.check_output_path(path or "")
-    check_blend_output(args.blend)
+def _learn(args):
+    """Read the scans and learn: ``(scan paths, solve.learn's outcome)``."""
     options = LearnOptions(parts=args.parts, alpha=args.alpha, symmetry=not args.no_symmetry,
                            max_iterations=args.iterations, seed=args.seed, key_scans=args.key_scans,
                            workers=args.threads, joint_prior=args.joint_prior)
@@ -86,7 +88,17 @@ def run(args) -> int:
     matrix = inputs.files_matrix(paths, (args.forward, args.up))
     progress = jobs.Progress("learn-rig", echo=True)
     inp = inputs.input_from_files(paths, progress, matrix, options)
-    outcome = solve.learn(inp, options, progress)
+    return paths, solve.learn(inp, options, progress)
+
+
+def run(args) -> int:
+    for path in (args.out, args.report, args.blend):
+        result.check_output_path(path or "")
+    check_blend_output(args.blend)
+    try:
+        paths, outcome = _learn(args)
+    except ArticulaInputError as exc:
+        raise ArticulaInputError(name_setting(str(exc), FLAGS)) from None
     result.save(args.out, outcome)
     print(f"wrote {args.out}: {outcome.model.num_vertices} vertices, {outcome.model.skeleton.num_bones} bones, "
           f"{len(outcome.poses)} poses; {summary_text(outcome)}")

@@ -43,7 +43,7 @@ def export_bundle(args) -> int:
     model, poses = rig_io.export_bundle(args.out, args.armature, args.action,
                                         'NONE' if args.no_poses else 'ACTIVE', bpy.context)
     frames = f", {len(poses)} poses" if poses is not None else ""
-    return finish(f"wrote {args.out}: {model.num_vertices} vertices, {model.skeleton.num_bones} bones{frames}")
+    return finish(f"wrote {args.out}: {model.num_vertices} vertices, {model.skeleton.num_bones} bones{frames}", scene=False)
 
 
 def add_commands(sub):

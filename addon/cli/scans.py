@@ -46,7 +46,8 @@ def _import(args) -> int:
     data = ob.articula
     code = finish(f"{ob.name}: {data.frame_count} frames of {len(ob.data.vertices)} vertices, "
                   f"{'registered' if data.registered else 'unregistered'}", args.blend)
-    print(f"cache {data.cache_file}")       # where it is once saved
+    if args.blend:
+        print(f"cache {data.cache_file}")       # where it is once saved
     return code
 
 

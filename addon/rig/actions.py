@@ -21,6 +21,7 @@ import numpy as np
 from ...solver.errors import ArticulaInputError
 from ...solver.rig.model import Poses
 from .. import compat
+from ..scene import frames
 
 _LINEAR = None
 
@@ -64,8 +65,9 @@ def write_action(arm, names, poses, name: str = "Articula Poses", frame_start: i
                  nla: bool = False, scene=None):
     """Write ``poses`` (N frames, bones ``names`` in bundle order) to a new action on armature object
     ``arm`` and make it active (or, when ``nla``, put it on a new NLA track and leave the active action
-    alone).  A replaced active action without other users gets a fake user so it is not lost.  Sets the
-    scene frame range.  Returns the action."""
+    alone).  A replaced active action without other users gets a fake user so it is not lost.  The scene's
+    frame range covers the action (set outright when the scene holds only this rig, else only widened).
+    Returns the action."""
     poses.validate(len(names))
     missing = [n for n in names if n not in arm.pose.bones]
     if missing:
@@ -90,8 +92,16 @@ def write_action(arm, names, poses, name: str = "Articula Poses", frame_start: i
             old.use_fake_user = True                               # keep the replaced action
         compat.assign_action(arm, action, slot)
     scene = scene or bpy.context.scene
-    scene.frame_start, scene.frame_end = frame_start, frame_start + max(N, 1) - 1
+    frames.include_frames(scene, frame_start, frame_start + max(N, 1) - 1, _rig_objects(arm))
     return action
+
+
+
+def _rig_objects(arm) -> list:
+    """The objects that make up the rig of armature object ``arm``: itself, its children (twist armature,
+    mesh) and its bones' widget shapes."""
+    widgets = {pb.custom_shape for pb in arm.pose.bones if pb.custom_shape is not None}
+    return [arm, *arm.children_recursive, *widgets]
 
 
 def _fcurve_values(fc, frames) -> np.ndarray:

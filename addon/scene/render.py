@@ -13,21 +13,14 @@ have an active colour attribute of their own show it too in that case.
 """
 from __future__ import annotations
 
-import contextlib
-import os
-import re
-import sys
-import tempfile
-
 import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
+from .. import console
+
 PALETTE = ((0.80, 0.62, 0.50, 1.0), (0.55, 0.70, 0.85, 1.0), (0.60, 0.80, 0.55, 1.0),
            (0.85, 0.75, 0.45, 1.0), (0.75, 0.55, 0.80, 1.0))
-# What Blender prints from C (stderr) when a headless process creates its first GPU context (bpy 4.2 once,
-# 5.2 three times): the render still succeeds through Mesa llvmpipe, so these lines are only noise.
-EGL_NOISE = re.compile(r"^EGL Error \(0x3009\): EGL_BAD_MATCH")
 LABEL_COLOR = (0.1, 0.1, 0.1, 1.0)
 GROUND_COLOR = (0.92, 0.92, 0.92, 1.0)
 
@@ -204,27 +197,5 @@ def render_overview(scene, filepath: str, exhibits: dict, attribute_colors=(),
     lo = lo - np.array([0.0, 0.3, 0.0])  # keep the labels in frame
     frame_camera(scene, lo, hi)
     scene.render.filepath = filepath
-    with without_egl_noise():
+    with console.without_lines(console.EGL):    # the render succeeds through Mesa llvmpipe all the same
         bpy.ops.render.render(write_still=True)
-
-
-@contextlib.contextmanager
-def without_egl_noise():
-    """Run the block with the process's C-level stderr (file descriptor 2) sent to a temporary file, then
-    write every captured line except :data:`EGL_NOISE` to ``sys.stderr``: real errors still show."""
-    sys.stderr.flush()
-    saved = os.dup(2)
-    with tempfile.TemporaryFile() as captured:
-        os.dup2(captured.fileno(), 2)
-        try:
-            yield
-        finally:
-            sys.stderr.flush()
-            os.dup2(saved, 2)
-            os.close(saved)
-            captured.seek(0)
-            lines = captured.read().decode("utf-8", errors="replace").splitlines(keepends=True)
-            kept = "".join(line for line in lines if not EGL_NOISE.match(line))
-            if kept:
-                sys.stderr.write(kept)
-                sys.stderr.flush()

@@ -34,7 +34,9 @@ module decides which objects to update, which frame they show, and keeps their c
   cannot be found is also looked for by name in the open file's cache folder (an undo step from before
   a save still names the old place).
 * An object whose cache is missing or unusable gets the ID property ``articula_warning`` (the panel
-  shows it) and one console line; the property goes when the object plays again.
+  shows it) and one console line, saying what to do (:func:`cache_advice`: put the named
+  ``<blend name>_articula`` folder back beside the .blend, or import again); the property goes when the
+  object plays again.
 
 docs/scans.md and docs/import_depth.md describe both kinds of object.
 """
@@ -66,6 +68,7 @@ class Player:
     label: str           # what a frame is called in messages, e.g. "scan" -> "cannot show scan frame 3"
     show: Callable       # show(ob, k): write sequence frame k into ob.data; raise when it cannot
     forget: Callable     # forget(): drop the loaded caches (a file was loaded, the add-on is disabled)
+    source: str = "source"   # what is imported again to rebuild a cache, e.g. "scans"
 
 
 _players: dict = {}      # ob.articula.kind -> Player
@@ -200,12 +203,31 @@ def show_scene(scene, force: bool = False) -> None:
                 del ob[WARNING]
 
 
+def cache_advice(path: str, source: str = "source") -> str:
+    """What to do about the cache ``path`` that cannot be read: when it is missing from a .blend's
+    ``<blend name>_articula/`` folder, put that folder (named) back beside the .blend; in any case, or
+    import ``source`` again (which writes a new cache)."""
+    again = f"import the {source} again"
+    folder = os.path.dirname(os.path.normpath(path))
+    name = os.path.basename(folder)
+    if os.path.exists(path) or not path:
+        return again
+    if name.endswith(FOLDER_SUFFIX):
+        parent = os.path.dirname(folder)
+        opened = bpy.data.filepath
+        blend = (os.path.basename(opened) if opened and os.path.dirname(os.path.abspath(opened)) == parent
+                 else name[:-len(FOLDER_SUFFIX)] + ".blend")
+        return f"put the folder {name} back beside {blend} (in {parent}), or {again}"
+    return f"put {os.path.basename(path)} back in {folder}, or {again}"
+
+
 def cache_problem(ob) -> str:
-    """What keeps ``ob`` from playing, for the panel: its cache file is missing (checked now), else the
-    last playback error (:data:`WARNING`); "" when it plays."""
+    """What keeps ``ob`` from playing and what to do, for the panel: its cache file is missing (checked
+    now, with :func:`cache_advice`), else the last playback error (:data:`WARNING`); "" when it plays."""
     path = cache_abspath(ob)
     if path and not os.path.exists(path):
-        return f"frame cache missing: {path}"
+        player = _players.get(ob.articula.kind)
+        return f"frame cache missing: {path}; {cache_advice(path, player.source if player else 'source')}"
     return str(ob.get(WARNING, ""))
 
 

@@ -31,6 +31,7 @@ from ...solver.depth import camera
 from ...solver.errors import ArticulaInputError
 from ...solver.formats.point_files import PointSequence
 from .. import compat
+from ..scene import frames
 from . import playback
 
 SENSOR_TO_BLENDER_CAMERA = camera.blender_from_cv(np.eye(4))  # diag(1, -1, -1, 1): points in the camera
@@ -57,12 +58,21 @@ def set_camera_intrinsics(cam_data, scene, intr: camera.Intrinsics) -> None:
 _sequences = playback.FileCache(PointSequence.load)
 
 
-def load_sequence(path: str) -> PointSequence:
-    """The cached :class:`PointSequence` of ``path`` (read once, re-read when the file changed)."""
+SOURCE = "depth recording"   # what is imported again to rebuild a cache (messages)
+
+
+def load_sequence(path: str, name: str = "") -> PointSequence:
+    """The cached :class:`PointSequence` of ``path`` (read once, re-read when the file changed); a
+    missing or unreadable cache raises naming the object ``name`` and what to do
+    (:func:`playback.cache_advice`)."""
+    who = f"{name}: " if name else ""
     try:
         return _sequences.get(path)
-    except OSError as exc:
-        raise ArticulaInputError(f"{path}: point cache missing ({exc.strerror or exc})") from exc
+    except OSError:
+        raise ArticulaInputError(f"{who}its point cache {path or '(none)'} is missing; "
+                                 f"{playback.cache_advice(path, SOURCE)}") from None
+    except ArticulaInputError as exc:
+        raise ArticulaInputError(f"{who}{exc}; {playback.cache_advice(path, SOURCE)}") from None
 
 
 def forget_cache(path: str | None = None) -> None:
@@ -103,11 +113,11 @@ def write_frame(mesh, seq: PointSequence, k: int) -> None:
 
 def show_frame(ob, k: int) -> None:
     """Put frame ``k`` of the object's cache into its mesh (the player of :mod:`.playback`)."""
-    write_frame(ob.data, load_sequence(playback.cache_abspath(ob)), k)
+    write_frame(ob.data, load_sequence(playback.cache_abspath(ob), ob.name), k)
 
 
 def register_extra():
-    playback.add_player('POINT_CLOUD_SEQUENCE', playback.Player("point-cloud", show_frame, forget_cache))
+    playback.add_player('POINT_CLOUD_SEQUENCE', playback.Player("point-cloud", show_frame, forget_cache, SOURCE))
 
 
 def unregister_extra():
@@ -181,7 +191,9 @@ def add_points_modifier(ob, radius: float):
 def create_sequence_objects(context, name: str, seq: PointSequence, cache_file: str, source: str,
                             frame_start: int = 1, point_radius: float = 0.004, set_scene: bool = True):
     """Create the collection, camera (when ``seq.intrinsics``) and point-cloud object; return
-    ``(points_object, camera_object or None)``.  Call inside ``jobs.scene_guard()``."""
+    ``(points_object, camera_object or None)``.  With ``set_scene`` the scene's frame range is made to
+    cover the sequence (:func:`addon.scene.frames.include_frames`) and its camera set when it has none.  Call
+    inside ``jobs.scene_guard()``."""
     scene = context.scene
     coll = bpy.data.collections.new(name)
     scene.collection.children.link(coll)
@@ -214,8 +226,8 @@ def create_sequence_objects(context, name: str, seq: PointSequence, cache_file: 
     data.cache_file = cache_file
     add_points_modifier(ob, point_radius)
     if set_scene:
-        scene.frame_start = frame_start
-        scene.frame_end = frame_start + max(seq.frame_count, 1) - 1
+        frames.include_frames(scene, frame_start, frame_start + max(seq.frame_count, 1) - 1,
+                                [o for o in (ob, cam_ob) if o is not None])
     _sequences.put(playback.cache_abspath(ob), seq)
     if seq.frame_count:
         playback.show(ob, scene.frame_current, force=True)

@@ -32,8 +32,10 @@ from mathutils import Matrix
 from ...solver.errors import ArticulaInputError
 from ...solver.formats.polymesh import PolyMesh
 from ...solver.formats.scan_files import ScanSequence
-from ..scene import mesh_io
+from ..scene import frames, mesh_io
 from . import playback
+
+SOURCE = "scans"   # what is imported again to rebuild a cache (messages)
 
 # -- Blender mesh <-> PolyMesh ----------------------------------------------------------------------
 
@@ -141,8 +143,9 @@ def cache_data(ob: bpy.types.Object):
     try:
         return _loaded.get(path)
     except (OSError, ValueError):
-        raise ArticulaInputError(f"{ob.name}: its frame cache {path or '(none)'} is missing or unreadable; "
-                                 f"import the scans again") from None
+        what = "unreadable" if path and os.path.exists(path) else "missing"
+        raise ArticulaInputError(f"{ob.name}: its frame cache {path or '(none)'} is {what}; "
+                                 f"{playback.cache_advice(path, SOURCE)}") from None
 
 
 def _frame_mesh(data, k: int) -> PolyMesh:
@@ -158,7 +161,8 @@ def _frame_mesh(data, k: int) -> PolyMesh:
 def create_object(context, name: str, seq: ScanSequence, cache_path: str, frame_start: int,
                   source: str, matrix=None) -> bpy.types.Object:
     """Create the scan-sequence object (its cache already written at ``cache_path``), link it to the
-    active collection, make it active and set the scene's frame range to the sequence.  ``matrix``
+    active collection, make it active and make the scene's frame range cover the sequence
+    (:func:`addon.scene.frames.include_frames`: widened, set outright only in an otherwise empty scene).  ``matrix``
     (4, 4): its object matrix, e.g. the files' axis conversion (the frames stay in file coordinates)."""
     me = bpy.data.meshes.new(name)
     topo = seq.topology
@@ -176,8 +180,7 @@ def create_object(context, name: str, seq: ScanSequence, cache_path: str, frame_
     data.frame_count = len(seq)
     data.cache_file = playback.stored_path(cache_path)
     scene = context.scene
-    scene.frame_start = frame_start
-    scene.frame_end = frame_start + len(seq) - 1
+    frames.include_frames(scene, frame_start, frame_start + len(seq) - 1, [ob])
     for other in context.view_layer.objects.selected:
         other.select_set(False)
     context.view_layer.objects.active = ob
@@ -197,13 +200,15 @@ def show_frame(ob: bpy.types.Object, k: int) -> None:
     data = cache_data(ob)
     if ob.articula.registered:
         if data.ndim != 3 or data.shape[1] != len(me.vertices) or k >= len(data):
-            raise ArticulaInputError(f"frame cache {ob.articula.cache_file} not matching the mesh")
+            raise ArticulaInputError(f"frame cache {ob.articula.cache_file} not matching the mesh (was it "
+                                     f"edited?); import the {SOURCE} again")
         if len(me.vertices):
             me.attributes["position"].data.foreach_set("vector", np.ascontiguousarray(data[k]).reshape(-1))
             me.update()
     else:
         if k + 1 >= len(data["vertex_offsets"]):
-            raise ArticulaInputError(f"frame cache {ob.articula.cache_file} has no frame {k + 1}")
+            raise ArticulaInputError(f"frame cache {ob.articula.cache_file} has no frame {k + 1}; "
+                                     f"import the {SOURCE} again")
         m = _frame_mesh(data, k)
         set_geometry(me, m.vertices, m.face_sizes, m.corner_verts)
 
@@ -239,7 +244,7 @@ def scan_frame_meshes(ob: bpy.types.Object) -> list:
 
 
 def register_extra():
-    playback.add_player('SCAN_SEQUENCE', playback.Player("scan", show_frame, _loaded.forget))
+    playback.add_player('SCAN_SEQUENCE', playback.Player("scan", show_frame, _loaded.forget, SOURCE))
 
 
 def unregister_extra():

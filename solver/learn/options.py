@@ -11,6 +11,7 @@ mocap) chapter 3; docs/learn_rig_solver.md describes the steps the settings stee
 """
 import math
 import numbers
+import re
 from dataclasses import dataclass, field, fields
 
 from ..errors import ArticulaInputError
@@ -120,6 +121,16 @@ def max_parts(num_vertices) -> int:
     """The most parts a mesh of ``num_vertices`` vertices is cut into: the ``parts`` bound and
     ``num_vertices / MIN_VERTICES_PER_PART``."""
     return int(min(fields_by_name()["parts"].metadata["max"], num_vertices // MIN_VERTICES_PER_PART))
+
+
+def name_setting(message: str, names: dict) -> str:
+    """``message`` (from :meth:`LearnOptions.validate` / ``validate_for``, which start with the field,
+    possibly after a source's ``"...: "``) with the field replaced by ``names[field]``: how the CLI (its
+    flag) or the operator (its property's name) calls that setting."""
+    if not names:
+        return message
+    pattern = r"(^|: )(" + "|".join(map(re.escape, names)) + r")(?=: )"
+    return re.sub(pattern, lambda m: m.group(1) + names[m.group(2)], message, count=1)
 
 
 def fields_by_name() -> dict:

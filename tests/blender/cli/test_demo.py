@@ -1,4 +1,4 @@
-"""``demo`` end to end, small: 4 MakeHuman scans, 2 depth frames, a learned rig of few parts and one
+"""``demo`` end to end, small: 4 MakeHuman scans, 6 depth frames, a learned rig of few parts and one
 outer round, a small picture.  Run as users run it (``python batch.py demo ...`` in a fresh process),
 then the saved ``demo.blend`` is opened here and checked: the learned rig is there beside the scans
 with one baked key per scan, its report's error is small, its mesh carries the heat map, and the
@@ -15,6 +15,7 @@ import pytest
 from ...conftest import REPO
 
 SCANS = 4
+DEPTH_FRAMES = 6     # more than the scans: the frame range must cover the longer exhibit
 
 
 def _demo(tmp, *args):
@@ -27,7 +28,7 @@ def _demo(tmp, *args):
 def demo_run(tmp_path_factory):
     """(stdout, output folder) of one small demo run, shared by the tests of this module."""
     tmp = tmp_path_factory.mktemp("demo")
-    res = _demo(tmp, "--scans", str(SCANS), "--depth-frames", "2", "--parts", "6", "--learn-iterations", "1",
+    res = _demo(tmp, "--scans", str(SCANS), "--depth-frames", str(DEPTH_FRAMES), "--parts", "6", "--learn-iterations", "1",
                 "--resolution", "480x270")
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-3000:]
     return res.stdout, tmp / "out"
@@ -91,6 +92,23 @@ def test_demo_learns_a_rig_beside_the_scans(pkg, demo_run):
     labels = {ob.data.body for ob in bpy.data.objects if ob.type == 'FONT'}
     assert demo.TITLES["scans"] in labels
     assert demo.learned_title(me[heat_map.SCALE_PROPERTY]) in labels          # the heat map's scale in its title
+
+
+def test_demo_frame_range_covers_every_exhibit(pkg, demo_run):
+    """The scene's range covers the depth recording (6 frames) as well as the scans and rigs (4 poses)."""
+    _stdout, out = demo_run
+    bpy.ops.wm.open_mainfile(filepath=str(out / "demo.blend"))
+    scene = bpy.context.scene
+    ends = {ob.name: (ob.articula.frame_start, ob.articula.frame_start + ob.articula.frame_count - 1)
+            for ob in bpy.data.objects if ob.articula.frame_count}
+    assert sorted(e - s + 1 for s, e in ends.values()) == [SCANS, DEPTH_FRAMES], ends
+    assert scene.frame_start == min(s for s, _e in ends.values())
+    assert scene.frame_end == max(e for _s, e in ends.values()) == DEPTH_FRAMES
+    rigs = [ob for ob in bpy.data.objects if ob.type == 'ARMATURE' and ob.animation_data
+            and ob.animation_data.action]
+    assert len(rigs) == 2                                         # the built rig and the learned rig
+    for arm in rigs:
+        assert max(_key_frames(pkg, arm)) <= scene.frame_end
 
 
 def test_demo_picture_shows_the_heat_map(pkg, demo_run):

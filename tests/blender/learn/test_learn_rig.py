@@ -201,7 +201,7 @@ def test_operator_and_batch_command_defaults_are_the_options(pkg):
     ("no_armature", "initial armature: no object named 'ghost'"),
     ("bad_folder", "no scan files"),
     ("bundle_folder", "does not exist"),
-    ("two_key_scans", "key_scans: 2 given; learning a rig needs at least 3 scans"),
+    ("two_key_scans", "Key Scans: 2 given; learning a rig needs at least 3 scans"),
 ])
 def test_bad_input_is_refused_and_leaves_scene_unchanged(pkg, tmp_path, truth, case, message):
     model, poses, scans = truth
@@ -481,21 +481,21 @@ def test_key_scans_learn_from_some_and_pose_every_scan(pkg, tmp_path, truth):
 
 
 @pytest.mark.parametrize("parts, message", [
-    (10000, "parts: 10000 given; it must be from 0 to 64"),
-    (30, "parts: 30 given for a mesh of 509 vertices; each part needs at least 20 vertices, so at most 25 parts"),
+    (10000, "10000 given; it must be from 0 to 64"),
+    (30, "30 given for a mesh of 509 vertices; each part needs at least 20 vertices, so at most 25 parts"),
 ])
 def test_operator_and_batch_command_refuse_the_same_parts(pkg, tmp_path, truth, capsys, parts, message):
     """The operator no longer clamps parts to its slider: it and the batch command refuse with the same
-    message, before reading more than the first file."""
+    message (naming the property "Parts" and the flag "--parts"), before reading more than the first file."""
     model, poses, scans = truth
     folder = write_scans(pkg, str(tmp_path / "scans"), scans, model.faces)
     before = scene_state()
-    with pytest.raises(RuntimeError, match=re.escape(message)):
+    with pytest.raises(RuntimeError, match=re.escape("Parts: " + message)):
         bpy.ops.articula.learn_rig(directory=folder, parts=parts)
     assert scene_state() == before
     out = str(tmp_path / "m.npz")
     assert pkg("addon.cli.main").main(["learn-rig", "--scans", folder, "--parts", str(parts), "--out", out]) == 2
-    assert message in capsys.readouterr().err and not os.path.exists(out)
+    assert "--parts: " + message in capsys.readouterr().err and not os.path.exists(out)
 
 
 def test_operator_learns_with_a_separate_island(pkg, tmp_path):

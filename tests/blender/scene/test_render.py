@@ -6,10 +6,10 @@ import subprocess
 import sys
 import tempfile
 
-from ...conftest import REPO
+from ...conftest import PKGROOT
 
 SCRIPT = r"""
-import importlib.util, os, sys, tempfile
+import os, sys, tempfile
 os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp())
 import bpy
 bpy.ops.wm.read_homefile(use_empty=True)
@@ -30,9 +30,8 @@ if sys.argv[1] == "plain":
     scene.camera = cam
     bpy.ops.render.render(write_still=True)
 else:
-    spec = importlib.util.spec_from_file_location("render_under_test", sys.argv[3])
-    render = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(render)
+    sys.path.insert(0, sys.argv[3])
+    from articula.addon.scene import render
     render.render_overview(scene, out, {"Quad": [ob]}, width=64, height=48)
     print("stderr after the render still works", file=sys.stderr)
 """
@@ -40,7 +39,7 @@ else:
 
 def _render(kind, tmp):
     out = os.path.join(tmp, f"{kind}.png")
-    res = subprocess.run([sys.executable, "-c", SCRIPT, kind, out, os.path.join(REPO, "addon", "scene", "render.py")],
+    res = subprocess.run([sys.executable, "-c", SCRIPT, kind, out, PKGROOT],
                          capture_output=True, text=True, timeout=600)
     assert res.returncode == 0, res.stdout + res.stderr
     assert os.path.getsize(out) > 0

@@ -141,7 +141,7 @@ def test_missing_cache_is_shown_on_the_object_and_in_the_panel(tmp_path, pkg):
     bpy.ops.wm.open_mainfile(filepath=str(blend))
     scans = bpy.data.objects["Scans"]
     assert path in scans[playback.WARNING] and "missing" in scans[playback.WARNING]
-    assert playback.cache_problem(scans) == f"frame cache missing: {path}"
+    assert playback.cache_problem(scans).startswith(f"frame cache missing: {path}; ")
     assert playback.cache_problem(bpy.data.objects["rec Points"]) == ""
     panels = pkg("addon.panels")
     lines = panels._wrap(playback.cache_problem(scans), 48)
