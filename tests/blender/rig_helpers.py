@@ -41,3 +41,15 @@ def evaluate_frames(pkg, mesh_ob, frames):
 
 def bbox_diagonal(vertices):
     return float(np.linalg.norm(vertices.max(0) - vertices.min(0)))
+
+
+def key_frames(pkg, arm):
+    """The keyed frames of every F-curve of ``arm``'s active action, one tuple of ints per F-curve (a set:
+    equal tuples collapse, so one baked pose per frame gives one tuple)."""
+    compat = pkg("addon.compat")
+    frames = set()
+    for fc in compat.object_action_fcurves(arm, arm.animation_data.action):
+        co = np.empty(2 * len(fc.keyframe_points), np.float32)
+        fc.keyframe_points.foreach_get("co", co)
+        frames.add(tuple(co[0::2].astype(int).tolist()))
+    return frames

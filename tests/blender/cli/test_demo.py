@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from ...conftest import REPO
+from ..rig_helpers import key_frames
 
 SCANS = 4
 DEPTH_FRAMES = 6     # more than the scans: the frame range must cover the longer exhibit
@@ -32,16 +33,6 @@ def demo_run(tmp_path_factory):
                 "--resolution", "480x270")
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-3000:]
     return res.stdout, tmp / "out"
-
-
-def _key_frames(pkg, arm):
-    compat = pkg("addon.compat")
-    frames = set()
-    for fc in compat.object_action_fcurves(arm, arm.animation_data.action):
-        co = np.empty(2 * len(fc.keyframe_points), np.float32)
-        fc.keyframe_points.foreach_get("co", co)
-        frames.update(co[0::2].astype(int).tolist())
-    return frames
 
 
 def _centre_x(ob):
@@ -75,7 +66,7 @@ def test_demo_learns_a_rig_beside_the_scans(pkg, demo_run):
     assert 0.0 < err["mean"] < min(30.0, 0.15 * static_mm) and err["median"] < 20.0, (err, static_mm)
 
     start = scans.articula.frame_start
-    assert _key_frames(pkg, arm) == set(range(start, start + SCANS))      # one baked pose per scan
+    assert key_frames(pkg, arm) == {tuple(range(start, start + SCANS))}    # one baked pose per scan
 
     meshes = [ob for ob in bpy.data.objects if ob.type == 'MESH' and ob.parent == arm]
     assert len(meshes) == 1
@@ -108,7 +99,7 @@ def test_demo_frame_range_covers_every_exhibit(pkg, demo_run):
             and ob.animation_data.action]
     assert len(rigs) == 2                                         # the built rig and the learned rig
     for arm in rigs:
-        assert max(_key_frames(pkg, arm)) <= scene.frame_end
+        assert max(max(keys) for keys in key_frames(pkg, arm)) <= scene.frame_end
 
 
 def test_demo_picture_shows_the_heat_map(pkg, demo_run):

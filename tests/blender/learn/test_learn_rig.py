@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from ...solver.learn_data import hybrid_truth
+from ..rig_helpers import key_frames
 
 M_SCANS = 6
 FRAME_START = 3
@@ -57,17 +58,6 @@ def scene_state():
 
 def evaluated(pkg, ob):
     return pkg("addon.scene.mesh_io").evaluated_positions(ob)
-
-
-def key_frames(pkg, arm):
-    """The set of keyed-frame tuples over the F-curves of ``arm``'s active action."""
-    compat = pkg("addon.compat")
-    frames = set()
-    for fc in compat.object_action_fcurves(arm, arm.animation_data.action):
-        co = np.empty(2 * len(fc.keyframe_points), np.float32)
-        fc.keyframe_points.foreach_get("co", co)
-        frames.add(tuple(co[0::2].astype(int).tolist()))
-    return frames
 
 
 def blender_distances(pkg, rig_mesh, scans, faces):
