@@ -21,7 +21,13 @@ The problem implements (``idx``: int array of problem indices, in increasing ord
   trials; robust weights and priors are the problem's business, and a line search fits here too);
 * ``accept(which)``: adopt the trials of the last ``try_steps`` where ``which (k,)`` is True;
 * ``predicted_decrease(idx, steps) -> (k,)``: ``−2gᵀδ − δᵀHδ`` (only for :class:`GainRatioDamping`);
-* ``step_norm(steps) -> (k,)``: ``‖δ‖``.
+* ``step_norm(steps) -> (k,)``: ``‖δ‖``;
+* ``slope(idx, steps) -> (k,)``: ``2gᵀδ``, the derivative of E along the step (only with a line search).
+
+Line search (opt-in, ``line_search=ArmijoLineSearch()``): the damped step gives the direction and a
+backtracking search its length, as in dissertation (model-adaptive mocap) §4.1.4 ("Levenberg–Marquardt
+determines the direction, a line search the step width"); steps must then be arrays with the problems on
+the first axis.  Without it every caller's iterations are exactly those of plain Levenberg–Marquardt.
 """
 from dataclasses import dataclass
 
@@ -69,6 +75,36 @@ class FixedRatioDamping:
 
     def exhausted(self, idx):
         return self.mu[idx] > self.mu_max
+
+
+class ArmijoLineSearch:
+    """Backtracking along the damped step δ: the first ``α`` of ``factors`` (1, 1/2, …, 1/64) with
+    ``E(x + αδ) ≤ E(x) + c · α · 2gᵀδ`` (Armijo's sufficient decrease) is taken; if none satisfies it the
+    step is rejected and the damping raised, as a plain rejected step.  The accepted step is ``αδ`` (for the
+    gain ratio and the step tolerance)."""
+
+    def __init__(self, factors=tuple(0.5 ** k for k in range(7)), c=1e-4):
+        self.factors, self.c = tuple(float(a) for a in factors), float(c)
+
+    def search(self, problem, idx, steps, energy):
+        """Try ``steps`` of problems ``idx`` at ``energy (k,)``, adopting each problem's first acceptable
+        length (``problem.accept`` after each length tried).  Returns ``(E_new (k,), ok (k,), alpha (k,))``
+        (alpha 0 where rejected)."""
+        steps = np.asarray(steps)
+        slope = np.asarray(problem.slope(idx, steps), dtype=np.float64)
+        E_new, ok, alpha = energy.copy(), np.zeros(len(idx), dtype=bool), np.zeros(len(idx))
+        rows = np.flatnonzero(slope < 0)                    # not a descent direction: rejected outright
+        for a in self.factors:
+            if not len(rows):
+                break
+            scale = np.full((len(rows),) + (1,) * (steps.ndim - 1), a)
+            E_try = np.asarray(problem.try_steps(idx[rows], scale * steps[rows]), dtype=np.float64)
+            good = (E_try <= energy[rows] + self.c * a * slope[rows]) & (E_try < energy[rows])
+            if good.any():
+                problem.accept(good)
+                E_new[rows[good]], ok[rows[good]], alpha[rows[good]] = E_try[good], True, a
+            rows = rows[~good]
+        return E_new, ok, alpha
 
 
 @dataclass
@@ -119,11 +155,11 @@ def solve_damped(H, g, mu, floor):
     return np.linalg.solve(A, -g[..., None])[..., 0]
 
 
-def levenberg_marquardt(problem, damping, limits, progress=None):
+def levenberg_marquardt(problem, damping, limits, progress=None, line_search=None):
     """Run the problems to their limits (module docstring; the parameters live in ``problem``).
 
     damping: :class:`GainRatioDamping` or :class:`FixedRatioDamping` with ``mu (n,)``, updated in place;
-    limits: :class:`Limits`.  progress: optional ``progress(idx, iterations, energy)`` after every round in
+    limits: :class:`Limits`; line_search: None (plain steps) or :class:`ArmijoLineSearch`.  progress: optional ``progress(idx, iterations, energy)`` after every round in
     which problems ``idx`` ended an iteration (the trials at one normal system: an accepted step, or a stop
     after rejections), ``iterations (k,)`` the normal systems they used.  Returns :class:`Outcome`."""
     n = problem.size
@@ -137,7 +173,7 @@ def levenberg_marquardt(problem, damping, limits, progress=None):
     state = _State(E, trials, steps, E <= 0.0, np.zeros(n, dtype=np.int64), np.full(n, np.nan), E <= 0.0)
     while not state.done.all():
         act = np.flatnonzero(~state.done)
-        accepted, ended = _round(problem, damping, limits, state, act)
+        accepted, ended = _round(problem, damping, limits, state, act, line_search)
         if progress is not None and len(ended):
             progress(ended, state.steps[ended] + ~np.isin(ended, accepted), state.energy[ended])
         refresh = accepted[~state.done[accepted]]
@@ -161,13 +197,17 @@ class _State:
     done: np.ndarray
 
 
-def _round(problem, damping, limits, st, act):
-    """One trial step of every active problem ``act``: solve, try, accept or reject, update μ and the
-    stop flags.  Returns ``(accepted, ended)`` problem indices."""
+def _round(problem, damping, limits, st, act, line_search=None):
+    """One trial step of every active problem ``act``: solve, try (or search along the step), accept or
+    reject, update μ and the stop flags.  Returns ``(accepted, ended)`` problem indices."""
     trial_steps = problem.solve(act, damping.mu[act])
-    E_new = np.asarray(problem.try_steps(act, trial_steps), dtype=np.float64)
+    if line_search is None:
+        E_new = np.asarray(problem.try_steps(act, trial_steps), dtype=np.float64)
+        ok = E_new < st.energy[act]
+    else:
+        E_new, ok, alpha = line_search.search(problem, act, trial_steps, st.energy[act])
+        trial_steps = alpha.reshape((-1,) + (1,) * (np.ndim(trial_steps) - 1)) * trial_steps
     st.trials[act] += 1
-    ok = E_new < st.energy[act]
     acc, rej = act[ok], act[~ok]
     decrease = st.energy[acc] - E_new[ok]
     if damping.needs_gain_ratio and len(acc):
@@ -179,7 +219,8 @@ def _round(problem, damping, limits, st, act):
     small = (decrease <= limits.decrease_tol * st.energy[acc]) | \
         (np.asarray(problem.step_norm(trial_steps))[ok] <= limits.step_tol) | \
         stalls(st.last_decrease[acc], decrease, E_new[ok], limits.gain_tol)
-    problem.accept(ok)
+    if line_search is None:
+        problem.accept(ok)
     st.energy[acc], st.last_decrease[acc] = E_new[ok], decrease
     st.steps[acc] += 1
     st.rejections[acc] = 0

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares as scipy_least_squares
 
-from articula.solver.fit.least_squares import (FixedRatioDamping, GainRatioDamping, Limits, levenberg_marquardt,
-                                               solve_damped, stalls)
+from articula.solver.fit.least_squares import (ArmijoLineSearch, FixedRatioDamping, GainRatioDamping, Limits,
+                                               levenberg_marquardt, solve_damped, stalls)
 
 
 class Dense:
@@ -47,6 +47,9 @@ class Dense:
 
     def step_norm(self, steps):
         return np.linalg.norm(steps, axis=1)
+
+    def slope(self, idx, steps):
+        return 2.0 * np.einsum("ki,ki->k", self.g[idx], steps)
 
 
 def _rules(n):
@@ -207,3 +210,68 @@ def test_solve_damped_equals_the_explicit_system():
         d = np.diag(H[k])
         A = H[k] + mu[k] * np.diag(d + 1e-6 * d.mean())
         assert np.allclose(A @ step[k], -g[k], rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("rule", [0, 1])
+def test_line_search_halves_a_step_that_overshoots(rule):
+    """atan from x = 2: the Gauss–Newton step δ = −5 atan 2 lands at a larger |atan| (plain LM rejects it,
+    test above); the line search takes α = 1/2 of it in the same trial: x = 2 − 2.5 atan 2, lower E."""
+    prob = _arctan_problem([2.0])
+    damping = [GainRatioDamping([1e-12]), FixedRatioDamping([1e-12])][rule]
+    E0 = prob.energy(np.arange(1))[0]
+    out = levenberg_marquardt(prob, damping, Limits(trials=1), line_search=ArmijoLineSearch())
+    assert out.trials[0] == 1 and out.steps[0] == 1
+    assert np.isclose(prob.x[0, 0], 2.0 - 2.5 * np.arctan(2.0), rtol=1e-9)
+    assert out.energy[0] == np.arctan(prob.x[0, 0]) ** 2 < E0
+
+
+def test_line_search_takes_each_problem_s_own_length_and_reaches_the_minima():
+    """Two problems in one batch: a linear one (full step), atan from 2 (half step); then both to 0."""
+    def residual(x, idx):
+        return np.where((np.asarray(idx) == 0)[:, None], x - 1.0, np.arctan(x))
+
+    def jacobian(x, idx):
+        return np.where((np.asarray(idx) == 0)[:, None], 1.0, 1.0 / (1.0 + x * x))[:, :, None]
+    prob = Dense(residual, jacobian, [[3.0], [2.0]])
+    search = ArmijoLineSearch()
+    levenberg_marquardt(prob, FixedRatioDamping([1e-12, 1e-12]), Limits(trials=1), line_search=search)
+    assert np.isclose(prob.x[0, 0], 1.0, atol=1e-9)
+    assert np.isclose(prob.x[1, 0], 2.0 - 2.5 * np.arctan(2.0), rtol=1e-9)
+    out = levenberg_marquardt(prob, FixedRatioDamping([1e-3, 1e-3]), Limits(trials=100, decrease_tol=1e-15,
+                                                                             step_tol=1e-12), line_search=search)
+    assert np.abs(prob.x - [[1.0], [0.0]]).max() < 1e-6 and out.energy.max() < 1e-12
+
+
+def test_line_search_rejects_an_uphill_direction_and_raises_the_damping():
+    """A wrong-signed Jacobian: no length passes Armijo's test, the step is rejected as in plain LM."""
+    prob = _linear(n=1, sign=-1.0)[2]
+    x0 = prob.x.copy()
+    damping = FixedRatioDamping([1e-3])
+    out = levenberg_marquardt(prob, damping, Limits(trials=3), line_search=ArmijoLineSearch())
+    assert out.steps[0] == 0 and out.trials[0] == 3 and np.array_equal(prob.x, x0)
+    assert np.isclose(damping.mu[0], 1e-3 * 4.0 ** 3)
+
+
+def test_armijo_condition_in_closed_form():
+    """E(α) = (1 − α)² from E = 1 along δ = 1 (slope −2): α = 1 passes; with c = 0.9 only α ≤ 0.2 would,
+    so the first passing factor of (1, ½, ¼, …) is ⅛."""
+    class Quadratic:
+        def __init__(self):
+            self.x, self.tried = np.zeros(1), []
+
+        def slope(self, idx, steps):
+            return -2.0 * steps[:, 0]
+
+        def try_steps(self, idx, steps):
+            self.tried.append(steps[0, 0])
+            self.trial = steps[:, 0]
+            return (1.0 - steps[:, 0]) ** 2
+
+        def accept(self, which):
+            self.x[which] = self.trial[which]
+    q = Quadratic()
+    E, ok, alpha = ArmijoLineSearch().search(q, np.arange(1), np.ones((1, 1)), np.ones(1))
+    assert ok[0] and alpha[0] == 1.0 and E[0] == 0.0 and q.x[0] == 1.0
+    q = Quadratic()
+    E, ok, alpha = ArmijoLineSearch(c=0.9).search(q, np.arange(1), np.ones((1, 1)), np.ones(1))
+    assert ok[0] and alpha[0] == 0.125 and q.tried == [1.0, 0.5, 0.25, 0.125] and q.x[0] == 0.125

@@ -1,0 +1,303 @@
+"""One frame's pose of a fixed model fitted to an unregistered capture: ICP with a robust data term, the
+pose prior and box limits.
+
+Model-adaptive mocap dissertation §4.1.3-4.1.4 (a): correspondences are refreshed before every update
+(:func:`.correspondences.correspondences` on the posed model), then one Levenberg–Marquardt update
+(:func:`solver.fit.least_squares.levenberg_marquardt` with the Armijo line search) minimises, with the
+pairs and their IRLS weights ω_c held fixed, the least-squares majoriser of ``Q^data + w_pose Q^pose``:
+
+    E(p) = (1 / 2C) Σ_c ω_c ‖m_c(p) − y_c‖² + (w_pose / P) Σ_p e_p(p)²      (m; C pairs, P prior pairs)
+
+where the model point ``m_c = Σ_i β_ci x'_{v_ci}`` is a barycentric combination of skinned vertices, so
+its Jacobian is the same combination of the vertex Jacobians (:func:`solver.rig.jacobians.dense_jacobian`),
+and ``e_p = sqrt(1 − P~_p)`` are the pose prior's residuals (:mod:`.pose_prior`).  Parameters: root
+translation, optional uniform scale, the root rotation and every joint rotation in the layout of
+:func:`solver.rig.jacobians.pose_layout`.
+
+Box limits (§4.1.4, active set): a bone with a finite bound is parametrised additively in its exp-map
+vector r (``δ = J_r⁻¹ Δr`` to first order, exact on update), so a DoF that a step would push outside its
+interval is clamped onto the bound, its row and column leave the damped system (its fixed value moves to
+the right-hand side) and the system is solved again until no further DoF is violated.
+
+Stopping: the relative change of Q between two refreshes below ``rel_tol`` (1e-4), or ``max_iterations``
+(50) updates; non-monotone: Q may rise for ``patience`` (5) refreshes, the best pose seen is returned.
+Units: metres and radians.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import ArticulaInputError
+from ..fit.least_squares import ArmijoLineSearch, FixedRatioDamping, Limits, levenberg_marquardt, solve_damped
+from ..parallel import single_blas_thread
+from ..geometry.rotations import quat_canonical, quat_normalize, quat_to_rotvec, rotvec_to_quat
+from ..rig.jacobians import apply_pose_increment, dense_jacobian
+from ..rig.model import Poses
+from ..rig.skinning import AnchorGroups, check_pose_shapes, hybrid_skin
+from .correspondences import CorrespondenceOptions, correspondences
+from .pose_prior import PosePrior, rotvec_increment_jacobian
+from .visibility import vertex_normals
+
+DAMP_FLOOR = 1e-9      # ε of the damping matrix diag(H) + ε mean diag(H)
+MU0, MU_MIN = 1e-3, 1e-8   # damping relative to diag H (Marquardt's scaling): start and floor
+REJECTIONS = 14        # rejected damped steps (×10 each) before an update gives up (μ from the floor to 1e6)
+
+
+@dataclasses.dataclass
+class Capture:
+    """One unregistered capture: ``points (N, 3)`` metres, unit ``normals (N, 3)``, ``triangles (G, 3)``
+    or None (point cloud), ``cameras``: list of ``(cam_to_world (4, 4), Intrinsics)`` or None."""
+    points: np.ndarray
+    normals: np.ndarray
+    triangles: np.ndarray = None
+    cameras: list = None
+
+    @classmethod
+    def from_mesh(cls, points, triangles, cameras=None) -> "Capture":
+        """A triangulated capture with area-weighted vertex normals."""
+        return cls(np.asarray(points, np.float64), vertex_normals(points, triangles), np.asarray(triangles),
+                   cameras)
+
+
+@dataclasses.dataclass(frozen=True)
+class FrameFitOptions:
+    """Settings of :func:`fit_frame`.  w_pose: weight of Q^pose (the dissertation's value for metre-scale
+    data, §4.1.5); fit_scale: also fit the uniform scale; lm_steps: accepted damped steps per
+    correspondence refresh (1: the dissertation's ICP)."""
+    w_pose: float = 1e-3
+    fit_scale: bool = False
+    max_iterations: int = 50
+    rel_tol: float = 1e-4
+    patience: int = 5
+    lm_steps: int = 1
+    line_search: bool = True
+    correspondence: CorrespondenceOptions = CorrespondenceOptions()
+
+
+@dataclasses.dataclass
+class FrameFit:
+    """Result of :func:`fit_frame`.  pose: :class:`Poses` of one frame (the best Q seen); stats: of its
+    correspondences: ``median_mm``, ``mean_mm`` (capture point to model, capture pairs), ``removed_capture``,
+    ``removed_model`` (fractions trimmed), ``capture_pairs``, ``model_pairs`` (kept); iterations: updates
+    made; converged: the relative change fell below rel_tol (False: iteration or patience limit);
+    log: per refresh ``Q``, ``data`` (Q^data, m), ``pose`` (Q^pose), ``pairs``, ``trials`` (damped systems
+    solved by the update after it)."""
+    pose: Poses
+    stats: dict
+    iterations: int
+    converged: bool
+    log: dict
+
+
+def data_system(J, posed, pairs, scale):
+    """Normal equations of ``Σ_c scale_c ‖e_c‖²``, ``e_c = Σ_i β_ci x'_{v_ci} − y_c``: ``H (P, P)``, ``g (P,)``
+    (half the gradient) and the value, from the vertex Jacobian ``J (V, 3, P)``, posed vertices
+    ``posed (V, 3)``, ``pairs`` (:class:`.correspondences.Correspondences`: vertex_ids, weights β, targets y)
+    and ``scale (C,)``.  ``H = Jᵀ (A ⊗ I₃) J`` with the sparse vertex coupling ``A = Σ_c scale_c β_c β_cᵀ``
+    over the vertices the pairs use, so no per-pair Jacobian is formed."""
+    used, local = np.unique(pairs.vertex_ids, return_inverse=True)
+    local = local.reshape(pairs.vertex_ids.shape)
+    e = np.einsum("ci,cij->cj", pairs.weights, posed[pairs.vertex_ids]) - pairs.targets
+    U, P = len(used), J.shape[-1]
+    Ju = J[used]
+    sb = scale[:, None] * pairs.weights                                          # (C, 3)
+    A = sp.csr_matrix(((sb[:, :, None] * pairs.weights[:, None, :]).ravel(),
+                       (np.repeat(local, 3, axis=1).ravel(), np.tile(local, (1, 3)).ravel())), shape=(U, U))
+    K = A @ Ju.reshape(U, 3 * P)
+    H = Ju.reshape(3 * U, P).T @ K.reshape(3 * U, P)
+    b = np.stack([np.bincount(local.ravel(), (sb[:, :, None] * e[:, None, :])[..., k].ravel(), U)
+                  for k in range(3)], axis=1)
+    return H, np.einsum("ukp,uk->p", Ju, b), float(np.einsum("c,cj,cj->", scale, e, e))
+
+
+def pose_columns(num_bones, fit_scale):
+    """Jacobian pieces of :func:`solver.rig.jacobians.dense_jacobian` in the ``pose_layout`` columns."""
+    return {"t": 0, **({"s": 3} if fit_scale else {}), **{("rot", b): 4 + 3 * b for b in range(num_bones)}}
+
+
+class _Update:
+    """One update of one frame as a problem of the LM core (size 1): the pairs, IRLS weights and the
+    bounded bones' reparametrisation fixed at the starting pose.  Steps ``z (1, P_free)``: translation,
+    [scale], δ_b for free bones and Δr_b for bounded ones."""
+    size = 1
+
+    def __init__(self, model, groups, pose, pairs, prior, options):
+        self.model, self.groups, self.pose, self.pairs, self.prior = model, groups, pose, pairs, prior
+        B = model.skeleton.num_bones
+        self.w_pose = options.w_pose if prior.num_pairs else 0.0
+        self.scale = pairs.irls_weights / (2.0 * max(len(pairs.irls_weights), 1))
+        self.cols = pose_columns(B, options.fit_scale)
+        self.free = np.ones(4 + 3 * B, dtype=bool)
+        self.free[3] = options.fit_scale
+        self.bounded = np.isfinite(prior.lower).any(axis=1) | np.isfinite(prior.upper).any(axis=1) \
+            if prior.enabled else np.zeros(B, dtype=bool)
+        self.r0 = quat_to_rotvec(pose.rotations[0])                              # (B, 3)
+
+    def energy_at(self, pose):
+        posed = hybrid_skin(self.model, pose, self.groups)[0]
+        e = self.pairs.model_points(posed) - self.pairs.targets
+        E = float(np.einsum("c,cj,cj->", self.scale, e, e))
+        if self.w_pose:
+            E += self.w_pose / self.prior.num_pairs * float(np.sum(self.prior.residuals(pose.rotations) ** 2))
+        return E
+
+    def energy(self, idx):
+        return np.array([self.energy_at(self.pose)])
+
+    def build(self, idx):
+        posed, J = dense_jacobian(self.model, self.pose, self.cols, len(self.free), self.groups)
+        H, g, E = data_system(J[0], posed[0], self.pairs, self.scale)
+        if self.w_pose:
+            w = self.w_pose / self.prior.num_pairs
+            Jp, ep = self.prior.jacobian(self.pose.rotations)[0], self.prior.residuals(self.pose.rotations)[0]
+            H, g, E = H + w * Jp.T @ Jp, g + w * Jp.T @ ep, E + w * float(ep @ ep)
+        M = self._reparametrisation()
+        H, g = M.T @ H @ M, M.T @ g
+        self.H, self.g = H[self.free][:, self.free], g[self.free]
+        return np.array([E])
+
+    def _reparametrisation(self):
+        """``dδ/dz (P, P)``: identity, with ``J_r(r_b)⁻¹`` (:func:`.pose_prior.rotvec_increment_jacobian`)
+        on the blocks of bounded bones."""
+        M = np.eye(len(self.free))
+        for b in np.flatnonzero(self.bounded):
+            s = slice(4 + 3 * b, 7 + 3 * b)
+            M[s, s] = np.linalg.inv(rotvec_increment_jacobian(self.r0[b]))
+        return M
+
+    def solve(self, idx, mu):
+        """The damped step with the box limits as an active set (module docstring)."""
+        z = solve_damped(self.H[None], self.g[None], mu, DAMP_FLOOR)[0]
+        if not self.bounded.any():
+            return z[None]
+        active = np.zeros(len(z), dtype=bool)
+        rows = np.flatnonzero(self.free)                                          # z index -> layout column
+        for _ in range(len(z)):
+            bad, value = self._violations(z, rows)
+            bad &= ~active
+            if not bad.any():
+                break
+            active |= bad
+            z[active] = value[active]
+            f = ~active
+            rhs = self.g[f] + self.H[f][:, active] @ z[active]
+            z[f] = solve_damped(self.H[f][:, f][None], rhs[None], mu, DAMP_FLOOR)[0]
+        return z[None]
+
+    def _violations(self, z, rows):
+        """Per entry of ``z``: whether it takes a bounded DoF outside its interval, and the step onto it."""
+        full = np.zeros(len(self.free))
+        full[rows] = z
+        dr = full[4:].reshape(-1, 3)
+        r = np.where(self.bounded[:, None], self.r0 + dr, self.r0)
+        bad, clamped = self.prior.box_violations(r)
+        bad &= self.bounded[:, None]
+        step = np.concatenate([np.zeros(4), (clamped - self.r0).ravel()])
+        return np.concatenate([np.zeros(4, bool), bad.ravel()])[rows], step[rows]
+
+    def try_steps(self, idx, steps):
+        self.trial = self.moved(steps[0])
+        return np.array([self.energy_at(self.trial)])
+
+    def moved(self, z):
+        """The pose moved by the step ``z (P_free,)``."""
+        full = np.zeros(len(self.free))
+        full[self.free] = z
+        delta = full.copy()
+        delta[4:].reshape(-1, 3)[self.bounded] = 0.0
+        out = apply_pose_increment(self.pose, delta[None])
+        b = np.flatnonzero(self.bounded)
+        out.rotations[0, b] = rotvec_to_quat(self.r0[b] + full[4:].reshape(-1, 3)[b])
+        return out
+
+    def accept(self, which):
+        if which[0]:
+            self.pose = self.trial
+
+    def slope(self, idx, steps):
+        return 2.0 * steps @ self.g
+
+    def predicted_decrease(self, idx, steps):
+        return -2.0 * steps @ self.g - np.einsum("ki,ij,kj->k", steps, self.H, steps)
+
+    def step_norm(self, steps):
+        return np.linalg.norm(steps, axis=1)
+
+
+def _refresh(model, groups, pose, capture, options):
+    """Correspondences of the model posed at ``pose`` and ``capture``."""
+    posed = hybrid_skin(model, pose, groups)[0]
+    tris = model.faces
+    return correspondences(posed, tris, vertex_normals(posed, tris), capture.points, capture.normals,
+                           capture.triangles, capture.cameras, options.correspondence)
+
+
+def pair_stats(pairs) -> dict:
+    """Scan-to-model distances (mm) and trimming of one frame's correspondences."""
+    d = pairs.distances[pairs.from_capture] * 1e3
+    return {"median_mm": float(np.median(d)) if len(d) else float("nan"),
+            "mean_mm": float(d.mean()) if len(d) else float("nan"),
+            "removed_capture": pairs.stats["removed_capture"], "removed_model": pairs.stats["removed_model"],
+            "capture_pairs": int(pairs.from_capture.sum()), "model_pairs": int((~pairs.from_capture).sum())}
+
+
+def _start_pose(model, init):
+    check_pose_shapes(model, init)
+    if len(init) != 1:
+        raise ArticulaInputError(f"init: expected the pose of one frame, got {len(init)}")
+    init.validate(model.skeleton.num_bones)
+    return Poses(quat_normalize(init.rotations), init.translations.copy(), init.scales.copy())
+
+
+def fit_frame(model, capture: Capture, init: Poses, prior: PosePrior = None,
+              options: FrameFitOptions = FrameFitOptions(), groups: AnchorGroups = None) -> FrameFit:
+    """Fit the pose of ``model`` (fixed; metres) to one unregistered ``capture`` starting from ``init``
+    (one frame, e.g. the previous frame's pose).  prior: a :class:`PosePrior` (None or
+    ``PosePrior.none(skeleton)``: no prior term and no bounds); groups: the model's :class:`AnchorGroups`
+    to reuse across frames.  Returns :class:`FrameFit` (module docstring).  Runs numpy's BLAS on one
+    thread (:func:`solver.parallel.single_blas_thread`: its small products lose to thread start-up)."""
+    with single_blas_thread():
+        return _fit_frame(model, capture, init, prior, options, groups)
+
+
+def _fit_frame(model, capture, init, prior, options, groups):
+    """The body of :func:`fit_frame`."""
+    groups = AnchorGroups(model) if groups is None else groups
+    prior = PosePrior.none(model.skeleton) if prior is None else prior
+    pose = _start_pose(model, init)
+    damping = FixedRatioDamping([MU0], decrease=10.0, increase=10.0, mu_min=MU_MIN)
+    search = ArmijoLineSearch() if options.line_search else None
+    log = {key: [] for key in ("Q", "data", "pose", "pairs", "trials")}
+    best, stale, converged, updates = None, 0, False, 0
+    while True:
+        pairs = _refresh(model, groups, pose, capture, options)
+        if not len(pairs.distances):
+            raise ArticulaInputError("capture: no correspondences between the model and the capture "
+                                     "(empty, or too far from the starting pose)")
+        q_pose = float(prior.value(pose.rotations)[0]) if prior.num_pairs else 0.0
+        Q = pairs.energy + options.w_pose * q_pose
+        for key, value in (("Q", Q), ("data", pairs.energy), ("pose", q_pose), ("pairs", len(pairs.distances))):
+            log[key].append(value)
+        if best is not None and abs(log["Q"][-2] - Q) <= options.rel_tol * log["Q"][-2]:
+            converged = True
+        if best is None or Q < best[0]:
+            best, stale = (Q, pose, pairs), 0
+        else:
+            stale += 1
+        if converged or stale >= options.patience or updates >= options.max_iterations:
+            break
+        update = _Update(model, groups, pose, pairs, prior, options)
+        out = levenberg_marquardt(update, damping, Limits(steps=options.lm_steps, rejections=REJECTIONS),
+                                  line_search=search)
+        log["trials"].append(int(out.trials[0]))
+        updates += 1
+        if out.steps[0] == 0:                      # no decrease even for short steps: a minimum
+            converged = True
+            break
+        pose = update.pose
+    _, pose, pairs = best
+    pose = Poses(quat_canonical(quat_normalize(pose.rotations)), pose.translations, pose.scales)
+    return FrameFit(pose, pair_stats(pairs), updates, converged, {k: np.array(v) for k, v in log.items()})
