@@ -39,7 +39,8 @@ def working_memory_bytes(num_scans, num_vertices, num_parts, all_scans=0):
 
 def available_memory_bytes():
     """Memory (bytes) the machine can give a new process now: ``MemAvailable`` of /proc/meminfo (Linux),
-    else free physical pages (``os.sysconf``); None if neither is known."""
+    else the total physical memory (``os.sysconf``: free-page counts elsewhere, e.g. macOS, leave out the
+    reclaimable file cache and would refuse runs that fit); None if neither is known (Windows: no check)."""
     try:
         with open("/proc/meminfo") as fh:
             for line in fh:
@@ -48,7 +49,7 @@ def available_memory_bytes():
     except OSError:
         pass
     try:
-        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+        return int(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
     except (AttributeError, ValueError, OSError):
         return None
 
