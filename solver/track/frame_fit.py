@@ -19,8 +19,15 @@ vector r (``δ = J_r⁻¹ Δr`` to first order, exact on update), so a DoF that 
 interval is clamped onto the bound, its row and column leave the damped system (its fixed value moves to
 the right-hand side) and the system is solved again until no further DoF is violated.
 
-Stopping: the relative change of Q between two refreshes below ``rel_tol`` (1e-4), or ``max_iterations``
-(50) updates; non-monotone: Q may rise for ``patience`` (5) refreshes, the best pose seen is returned.
+Model pairs (model vertex -> capture point) are point-to-plane by default: their residual is
+``n (n · (x'_v − y))`` along the capture normal n, since the nearest noisy capture point of a vertex is
+biased sideways and inwards (docs/track.md "Per-frame fit").  Coarse to fine: ICP stages with only the
+bones up to a tree depth free (``depth_stages``, root first), each from the previous stage's result, then
+all bones, so that extremities are not caught by neighbouring parts while the trunk is still far off.
+
+Stopping, per stage: the relative change of Q between two refreshes below ``rel_tol`` (1e-4), or
+``max_iterations`` (50) updates over all stages; non-monotone: Q may rise for ``patience`` (5) refreshes,
+the best pose seen is returned.
 Units: metres and radians.
 """
 from __future__ import annotations
@@ -37,6 +44,7 @@ from ..geometry.rotations import quat_canonical, quat_normalize, quat_to_rotvec,
 from ..rig.jacobians import apply_pose_increment, dense_jacobian
 from ..rig.model import Poses
 from ..rig.skinning import AnchorGroups, check_pose_shapes, hybrid_skin
+from . import robust
 from .correspondences import CorrespondenceOptions, correspondences
 from .pose_prior import PosePrior, rotvec_increment_jacobian
 from .visibility import vertex_normals
@@ -66,7 +74,13 @@ class Capture:
 class FrameFitOptions:
     """Settings of :func:`fit_frame`.  w_pose: weight of Q^pose (the dissertation's value for metre-scale
     data, §4.1.5); fit_scale: also fit the uniform scale; lm_steps: accepted damped steps per
-    correspondence refresh (1: the dissertation's ICP)."""
+    correspondence refresh (1: the dissertation's ICP); to_plane: which pairs' residual is the distance
+    along the capture point's normal (point-to-plane) instead of the 3-D difference: "none", "model"
+    (model pairs: the nearest noisy capture point to a vertex is biased sideways and inwards,
+    docs/track.md "Per-frame fit") or "all"; depth_stages: coarse-to-fine, one ICP stage per entry
+    with only the bones at most that deep in the tree free (0: root only), then all bones; each coarse
+    stage stops at ``coarse_rel_tol``, takes ``coarse_lm_steps`` steps per refresh and at most
+    ``coarse_iterations`` updates (all stages share ``max_iterations``)."""
     w_pose: float = 1e-3
     fit_scale: bool = False
     max_iterations: int = 50
@@ -74,6 +88,11 @@ class FrameFitOptions:
     patience: int = 5
     lm_steps: int = 1
     line_search: bool = True
+    to_plane: str = "model"
+    depth_stages: tuple = (0, 3, 6)
+    coarse_rel_tol: float = 1e-3
+    coarse_lm_steps: int = 2
+    coarse_iterations: int = 10
     correspondence: CorrespondenceOptions = CorrespondenceOptions()
 
 
@@ -92,16 +111,48 @@ class FrameFit:
     log: dict
 
 
-def data_system(J, posed, pairs, scale):
-    """Normal equations of ``Σ_c scale_c ‖e_c‖²``, ``e_c = Σ_i β_ci x'_{v_ci} − y_c``: ``H (P, P)``, ``g (P,)``
-    (half the gradient) and the value, from the vertex Jacobian ``J (V, 3, P)``, posed vertices
-    ``posed (V, 3)``, ``pairs`` (:class:`.correspondences.Correspondences`: vertex_ids, weights β, targets y)
-    and ``scale (C,)``.  ``H = Jᵀ (A ⊗ I₃) J`` with the sparse vertex coupling ``A = Σ_c scale_c β_c β_cᵀ``
-    over the vertices the pairs use, so no per-pair Jacobian is formed."""
+def pair_residuals(pairs, posed, plane=None):
+    """``(C, 3)`` residuals ``m_c − y_c`` of ``pairs`` on the posed vertices ``posed (V, 3)``; the rows of
+    the ``plane (C,)`` mask are projected onto the target's normal (point-to-plane: ``n (n · e)``)."""
+    e = pairs.model_points(posed) - pairs.targets
+    if plane is not None:
+        n = pairs.target_normals[plane]
+        e[plane] = n * np.einsum("cj,cj->c", n, e[plane])[:, None]
+    return e
+
+
+def data_system(J, posed, pairs, scale, plane=None):
+    """Normal equations of ``Σ_c scale_c ‖e_c‖²`` (:func:`pair_residuals`; ``plane (C,)`` bool or None):
+    ``H (P, P)``, ``g (P,)`` (half the gradient) and the value, from the vertex Jacobian ``J (V, 3, P)``,
+    posed vertices ``posed (V, 3)``, ``pairs`` (:class:`.correspondences.Correspondences`: vertex_ids,
+    weights β, targets y, target normals n) and ``scale (C,)``.  Point pairs: ``H = Jᵀ (A ⊗ I₃) J`` with the
+    sparse vertex coupling ``A = Σ_c scale_c β_c β_cᵀ`` over the vertices they use, so no per-pair Jacobian
+    is formed; plane pairs add ``Σ_c scale_c j_c j_cᵀ`` with the row ``j_c = Σ_i β_ci n_cᵀ J_{v_ci}``."""
+    plane = np.zeros(len(scale), dtype=bool) if plane is None else plane
+    H, g, E = _point_system(J, posed, _subset(pairs, ~plane), scale[~plane])
+    if plane.any():
+        sub, s = _subset(pairs, plane), scale[plane]
+        rows = np.einsum("ci,ck,cikp->cp", sub.weights, sub.target_normals, J[sub.vertex_ids])
+        r = np.einsum("cj,cj->c", sub.target_normals, sub.model_points(posed) - sub.targets)
+        H, g, E = H + rows.T @ (s[:, None] * rows), g + rows.T @ (s * r), E + float(s @ (r * r))
+    return H, g, E
+
+
+def _subset(pairs, mask):
+    """The rows ``mask`` of the pairs' arrays that :func:`data_system` reads."""
+    return dataclasses.replace(pairs, vertex_ids=pairs.vertex_ids[mask], weights=pairs.weights[mask],
+                               targets=pairs.targets[mask], target_normals=pairs.target_normals[mask])
+
+
+def _point_system(J, posed, pairs, scale):
+    """:func:`data_system` of point-to-point pairs only."""
+    P = J.shape[-1]
+    if not len(scale):
+        return np.zeros((P, P)), np.zeros(P), 0.0
     used, local = np.unique(pairs.vertex_ids, return_inverse=True)
     local = local.reshape(pairs.vertex_ids.shape)
     e = np.einsum("ci,cij->cj", pairs.weights, posed[pairs.vertex_ids]) - pairs.targets
-    U, P = len(used), J.shape[-1]
+    U = len(used)
     Ju = J[used]
     sb = scale[:, None] * pairs.weights                                          # (C, 3)
     A = sp.csr_matrix(((sb[:, :, None] * pairs.weights[:, None, :]).ravel(),
@@ -111,6 +162,14 @@ def data_system(J, posed, pairs, scale):
     b = np.stack([np.bincount(local.ravel(), (sb[:, :, None] * e[:, None, :])[..., k].ravel(), U)
                   for k in range(3)], axis=1)
     return H, np.einsum("ukp,uk->p", Ju, b), float(np.einsum("c,cj,cj->", scale, e, e))
+
+
+def bone_depths(parents):
+    """``(B,)`` depth of every bone in the tree (roots 0); parents listed before their children."""
+    depth = np.zeros(len(parents), dtype=np.int64)
+    for b, p in enumerate(parents):
+        depth[b] = 0 if p < 0 else depth[p] + 1
+    return depth
 
 
 def pose_columns(num_bones, fit_scale):
@@ -124,21 +183,24 @@ class _Update:
     [scale], δ_b for free bones and Δr_b for bounded ones."""
     size = 1
 
-    def __init__(self, model, groups, pose, pairs, prior, options):
+    def __init__(self, model, groups, pose, pairs, prior, options, max_depth=None):
         self.model, self.groups, self.pose, self.pairs, self.prior = model, groups, pose, pairs, prior
         B = model.skeleton.num_bones
         self.w_pose = options.w_pose if prior.num_pairs else 0.0
         self.scale = pairs.irls_weights / (2.0 * max(len(pairs.irls_weights), 1))
+        self.plane = plane_mask(pairs, options.to_plane)
         self.cols = pose_columns(B, options.fit_scale)
         self.free = np.ones(4 + 3 * B, dtype=bool)
         self.free[3] = options.fit_scale
+        if max_depth is not None:
+            self.free[4:] = np.repeat(bone_depths(model.skeleton.parents) <= max_depth, 3)
         self.bounded = np.isfinite(prior.lower).any(axis=1) | np.isfinite(prior.upper).any(axis=1) \
             if prior.enabled else np.zeros(B, dtype=bool)
         self.r0 = quat_to_rotvec(pose.rotations[0])                              # (B, 3)
 
     def energy_at(self, pose):
         posed = hybrid_skin(self.model, pose, self.groups)[0]
-        e = self.pairs.model_points(posed) - self.pairs.targets
+        e = pair_residuals(self.pairs, posed, self.plane)
         E = float(np.einsum("c,cj,cj->", self.scale, e, e))
         if self.w_pose:
             E += self.w_pose / self.prior.num_pairs * float(np.sum(self.prior.residuals(pose.rotations) ** 2))
@@ -149,7 +211,7 @@ class _Update:
 
     def build(self, idx):
         posed, J = dense_jacobian(self.model, self.pose, self.cols, len(self.free), self.groups)
-        H, g, E = data_system(J[0], posed[0], self.pairs, self.scale)
+        H, g, E = data_system(J[0], posed[0], self.pairs, self.scale, self.plane)
         if self.w_pose:
             w = self.w_pose / self.prior.num_pairs
             Jp, ep = self.prior.jacobian(self.pose.rotations)[0], self.prior.residuals(self.pose.rotations)[0]
@@ -231,8 +293,25 @@ def _refresh(model, groups, pose, capture, options):
     """Correspondences of the model posed at ``pose`` and ``capture``."""
     posed = hybrid_skin(model, pose, groups)[0]
     tris = model.faces
-    return correspondences(posed, tris, vertex_normals(posed, tris), capture.points, capture.normals,
-                           capture.triangles, capture.cameras, options.correspondence)
+    pairs = correspondences(posed, tris, vertex_normals(posed, tris), capture.points, capture.normals,
+                            capture.triangles, capture.cameras, options.correspondence)
+    plane = plane_mask(pairs, options.to_plane)
+    return pairs if plane is None else to_plane(pairs, posed, plane, options.correspondence.eps)
+
+
+def plane_mask(pairs, which):
+    """``(C,)`` bool: the pairs taken point-to-plane (``which``: "none" -> None, "model", "all")."""
+    if which not in ("none", "model", "all"):
+        raise ArticulaInputError(f"to_plane: expected 'none', 'model' or 'all', got {which!r}")
+    return None if which == "none" else ~pairs.from_capture | (which == "all")
+
+
+def to_plane(pairs, posed, plane, eps):
+    """``pairs`` with the distances, IRLS weights and Q^data of the ``plane (C,)`` rows taken along the
+    capture normal (:func:`pair_residuals`), the others unchanged."""
+    d = np.linalg.norm(pair_residuals(pairs, posed, plane), axis=1)
+    return dataclasses.replace(pairs, distances=d, irls_weights=robust.irls_weights(d, eps),
+                               energy=robust.data_energy(d, eps))
 
 
 def pair_stats(pairs) -> dict:
@@ -264,13 +343,30 @@ def fit_frame(model, capture: Capture, init: Poses, prior: PosePrior = None,
 
 
 def _fit_frame(model, capture, init, prior, options, groups):
-    """The body of :func:`fit_frame`."""
+    """The body of :func:`fit_frame`: the ICP stages of ``options.depth_stages``, each from the previous
+    stage's best pose, then all bones (coarse-to-fine: extremities are not caught by neighbouring parts
+    while the trunk is still far off)."""
     groups = AnchorGroups(model) if groups is None else groups
     prior = PosePrior.none(model.skeleton) if prior is None else prior
     pose = _start_pose(model, init)
+    log = {key: [] for key in ("Q", "data", "pose", "pairs", "trials")}
+    coarse = dataclasses.replace(options, rel_tol=options.coarse_rel_tol, lm_steps=options.coarse_lm_steps,
+                                 max_iterations=options.coarse_iterations)
+    stages = [(coarse, d) for d in options.depth_stages] + [(options, None)]
+    updates = 0
+    for stage, depth in stages:
+        pose, pairs, done, converged = _icp(model, groups, capture, pose, prior, stage, log,
+                                            min(stage.max_iterations, options.max_iterations - updates), depth)
+        updates += done
+    pose = Poses(quat_canonical(quat_normalize(pose.rotations)), pose.translations, pose.scales)
+    return FrameFit(pose, pair_stats(pairs), updates, converged, {k: np.array(v) for k, v in log.items()})
+
+
+def _icp(model, groups, capture, pose, prior, options, log, budget, max_depth=None):
+    """Refresh-and-update rounds from ``pose`` until the stopping rule (module docstring) or ``budget``
+    updates; appends to ``log``.  Returns ``(best pose, its pairs, updates made, converged)``."""
     damping = FixedRatioDamping([MU0], decrease=10.0, increase=10.0, mu_min=MU_MIN)
     search = ArmijoLineSearch() if options.line_search else None
-    log = {key: [] for key in ("Q", "data", "pose", "pairs", "trials")}
     best, stale, converged, updates = None, 0, False, 0
     while True:
         pairs = _refresh(model, groups, pose, capture, options)
@@ -287,9 +383,9 @@ def _fit_frame(model, capture, init, prior, options, groups):
             best, stale = (Q, pose, pairs), 0
         else:
             stale += 1
-        if converged or stale >= options.patience or updates >= options.max_iterations:
+        if converged or stale >= options.patience or updates >= budget:
             break
-        update = _Update(model, groups, pose, pairs, prior, options)
+        update = _Update(model, groups, pose, pairs, prior, options, max_depth)
         out = levenberg_marquardt(update, damping, Limits(steps=options.lm_steps, rejections=REJECTIONS),
                                   line_search=search)
         log["trials"].append(int(out.trials[0]))
@@ -298,6 +394,4 @@ def _fit_frame(model, capture, init, prior, options, groups):
             converged = True
             break
         pose = update.pose
-    _, pose, pairs = best
-    pose = Poses(quat_canonical(quat_normalize(pose.rotations)), pose.translations, pose.scales)
-    return FrameFit(pose, pair_stats(pairs), updates, converged, {k: np.array(v) for k, v in log.items()})
+    return best[1], best[2], updates, converged

@@ -40,9 +40,11 @@ def _pairs_at(model, pose, capture):
     return ff._refresh(model, AnchorGroups(model), pose, capture, ff.FrameFitOptions())
 
 
-def test_data_normal_equations_match_central_differences(tube):
-    """H = JᵀSJ and g = JᵀS r of the barycentric model points, J by central differences of the residuals
-    over the pose increments of rig.jacobians (translation, scale, every bone's rotation)."""
+@pytest.mark.parametrize("plane", ["none", "model", "all"])
+def test_data_normal_equations_match_central_differences(tube, plane):
+    """H = JᵀSJ and g = JᵀS r of the barycentric model points (point-to-point, or point-to-plane along the
+    target normal for the pairs of ``plane``), J by central differences of the residuals over the pose
+    increments of rig.jacobians (translation, scale, every bone's rotation)."""
     model, truth = tube
     rng = np.random.default_rng(1)
     posed = hybrid_skin(model, truth)[0]
@@ -51,14 +53,17 @@ def test_data_normal_equations_match_central_differences(tube):
     pose.scales[:] = 1.1
     pairs = _pairs_at(model, pose, capture)
     assert len(pairs.distances) > 1000 and (pairs.weights[:, 1:] > 0).any()      # surface points take part
+    mask = ff.plane_mask(pairs, plane)
     scale = rng.uniform(0.5, 2.0, len(pairs.distances))
     B = model.skeleton.num_bones
     cols = ff.pose_columns(B, True)
     posed, J = dense_jacobian(model, pose, cols, 4 + 3 * B)
-    H, g, E = ff.data_system(J[0], posed[0], pairs, scale)
+    H, g, E = ff.data_system(J[0], posed[0], pairs, scale, mask)
 
     def residual(delta):
-        return pairs.model_points(hybrid_skin(model, apply_pose_increment(pose, delta[None]))[0]) - pairs.targets
+        e = pairs.model_points(hybrid_skin(model, apply_pose_increment(pose, delta[None]))[0]) - pairs.targets
+        n = pairs.target_normals
+        return e if mask is None else np.where(mask[:, None], np.sum(n * e, axis=1, keepdims=True) * n, e)
     h = 1e-6
     Jfd = np.stack([(residual(h * e) - residual(-h * e)) / (2 * h) for e in np.eye(4 + 3 * B)], axis=-1)
     r = residual(np.zeros(4 + 3 * B))
@@ -67,6 +72,26 @@ def test_data_normal_equations_match_central_differences(tube):
     assert np.isclose(E, np.einsum("c,ci,ci->", scale, r, r), rtol=1e-12)
     assert np.abs(H - H_ref).max() < 1e-6 * np.abs(H_ref).max()
     assert np.abs(g - g_ref).max() < 1e-6 * np.abs(g_ref).max()
+
+
+def test_bone_depths_count_ancestors():
+    assert ff.bone_depths([-1, 0, 1, 0, 3, -1]).tolist() == [0, 1, 2, 1, 2, 0]
+
+
+def test_model_pairs_point_to_plane_distances(tube):
+    """With to_plane="model" a model pair's distance is |n · (x_v − y)| along the capture normal, the
+    capture pairs' stay 3-D; Q^data is the Charbonnier mean of those distances."""
+    model, truth = tube
+    posed = hybrid_skin(model, truth)[0]
+    rng = np.random.default_rng(4)
+    capture = ff.Capture.from_mesh(posed + rng.normal(scale=0.005, size=posed.shape), model.faces)
+    point = ff._refresh(model, AnchorGroups(model), truth, capture, ff.FrameFitOptions(to_plane="none"))
+    plane = _pairs_at(model, truth, capture)
+    m = ~plane.from_capture
+    along = np.abs(np.sum(plane.target_normals[m] * (posed[plane.vertex_ids[m, 0]] - plane.targets[m]), axis=1))
+    assert np.allclose(plane.distances[m], along) and np.array_equal(plane.distances[~m], point.distances[~m])
+    assert (plane.distances[m] <= point.distances[m] + 1e-15).all()
+    assert np.isclose(plane.energy, np.mean(np.sqrt(plane.distances ** 2 + 1e-6)))
 
 
 def test_update_gradient_with_prior_and_bounds_matches_its_energy(tube):
@@ -104,7 +129,8 @@ def test_exact_capture_recovers_the_pose(tube):
     print(f"exact capture: RMS {rms * 1e3:.3f} mm after {out.iterations} updates")
     assert rms < 1e-3
     assert out.stats["median_mm"] < 0.1 and 0.2 < out.stats["removed_capture"] < 0.8
-    assert len(out.log["Q"]) == out.iterations + 1 and out.log["Q"].min() < 0.3 * out.log["Q"][0]
+    stages = len(ff.FrameFitOptions().depth_stages) + 1
+    assert len(out.log["Q"]) == out.iterations + stages and out.log["Q"].min() < 0.3 * out.log["Q"][0]
 
 
 def test_a_dof_pushed_beyond_its_bound_ends_on_the_bound(tube):
@@ -139,8 +165,9 @@ def makehuman_walk():
 
 def test_exact_model_on_its_noisy_scan_from_the_previous_pose(makehuman_walk):
     """The subject's exact model on its own noisy 4-view scan (sample_scenes.unregistered) of walk frame 1,
-    starting from frame 0's true pose: the error must fall well below the start's.  The issue's target is
-    3 mm mean vertex error; where this plain ICP stands is in docs/track.md "Per-frame fit"."""
+    starting from frame 0's true pose: the error must fall well below the start's (7.6 mm of 21.3 mm with
+    the default coarse-to-fine stages).  The issue's target is 3 mm mean vertex error; where the fit
+    stands is in docs/track.md "Per-frame fit"."""
     model, poses, frames = makehuman_walk
     points, tris, _, _, cams = unregistered.scan_frame(frames[1], model.faces, np.random.default_rng([0, 1]))
     out = ff.fit_frame(model, ff.Capture.from_mesh(points, tris, cams), _one(poses, 0))
@@ -148,7 +175,7 @@ def test_exact_model_on_its_noisy_scan_from_the_previous_pose(makehuman_walk):
     error = np.linalg.norm(hybrid_skin(model, out.pose)[0] - frames[1], axis=1).mean()
     print(f"MakeHuman walk frame 1: mean vertex error {error * 1e3:.2f} mm (start {start * 1e3:.2f} mm), "
           f"median scan-to-model {out.stats['median_mm']:.2f} mm, {out.iterations} updates")
-    assert error < 0.7 * start and error < 0.015
+    assert error < 0.5 * start and error < 0.010
     assert out.stats["median_mm"] < 5.0
 
 
