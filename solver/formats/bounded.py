@@ -80,3 +80,13 @@ def complete_lines(head: bytes, whole: bool) -> list[bytes]:
     is the entire file)."""
     lines = head.splitlines()
     return lines if whole or head.endswith(b"\n") else lines[:-1]
+
+
+def all_numbers(tokens) -> bool:
+    """Whether every token (bytes or str) of a text line parses as a number: the check the text readers
+    use on a file's first lines to tell their format from anything else."""
+    try:
+        [float(t) for t in tokens]
+        return True
+    except ValueError:
+        return False

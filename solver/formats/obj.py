@@ -5,7 +5,7 @@ import re
 import numpy as np
 
 from ..errors import ArticulaInputError
-from .bounded import HEAD_BYTES, check_size, complete_lines, read_bytes, read_head
+from .bounded import HEAD_BYTES, all_numbers, check_size, complete_lines, read_bytes, read_head
 from .polymesh import PolyMesh, fast_numbers, finish_mesh
 
 #: Statements of the OBJ specification (and ``#`` comments); a file whose first lines start with
@@ -44,7 +44,7 @@ def read_obj(path: str) -> PolyMesh:
         try:
             vertices = np.array(rows, dtype=bytes).astype(np.float64)
         except ValueError:
-            bad = next((i for i, r in enumerate(rows) if not _numbers(r)), 0)
+            bad = next((i for i, r in enumerate(rows) if not all_numbers(r)), 0)
             raise ArticulaInputError(f"{path}, line {_line_of(data, v_re, bad)}: bad vertex coordinate in "
                                      f"{b' '.join(rows[bad]).decode(errors='replace')!r}") from None
     vertices = vertices.reshape(-1, 3)
@@ -84,13 +84,6 @@ def check_obj(path: str) -> None:
         continued = line.rstrip().endswith(b"\\")
     check_size(path, size)
 
-
-def _numbers(tokens) -> bool:
-    try:
-        [float(t) for t in tokens]
-        return True
-    except ValueError:
-        return False
 
 
 def _line_of(data: bytes, regex, k: int) -> int:

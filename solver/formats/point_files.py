@@ -32,7 +32,7 @@ import warnings
 import numpy as np
 
 from ..errors import ArticulaInputError
-from .bounded import check_size, complete_lines, read_bytes, read_head
+from .bounded import all_numbers, check_size, complete_lines, read_bytes, read_head
 from .ply import check_ply, read_ply
 
 FORMAT = "articula-points/1"
@@ -143,7 +143,7 @@ def _read_xyz(path: str) -> np.ndarray:
     except (OSError, ValueError) as exc:
         lines = _data_lines(read_bytes(path, what="a single point-cloud frame", hint="downsample or split it"))
         width = len(lines[0][1]) if lines else 0
-        n = next((n for n, t in lines if len(t) != width or not _all_numbers(t)), None)
+        n = next((n for n, t in lines if len(t) != width or not all_numbers(t)), None)
         if n is None:
             raise ArticulaInputError(f"{path}: cannot read point cloud ({exc})") from None
         raise ArticulaInputError(f"{path}, line {n}: cannot read point cloud (expected {width} numbers per "
@@ -154,19 +154,12 @@ def _check_xyz(path: str) -> None:
     """The first number line of an XYZ file holds 3 or 6 numbers; the file is within the size limit."""
     head, size = read_head(path)
     first = _data_lines(b"\n".join(complete_lines(head, size is not None and size <= len(head))))[:1]
-    if b"\0" in head or (first and (len(first[0][1]) not in (3, 6) or not _all_numbers(first[0][1]))):
+    if b"\0" in head or (first and (len(first[0][1]) not in (3, 6) or not all_numbers(first[0][1]))):
         n = first[0][0] if first else 1
         raise ArticulaInputError(f"{path}, line {n}: not a point-cloud text file (expected 3 or 6 numbers "
                                  "per line: x y z [r g b])")
     check_size(path, size, what="a single point-cloud frame", hint="downsample or split it")
 
-
-def _all_numbers(tokens) -> bool:
-    try:
-        [float(t) for t in tokens]
-        return True
-    except ValueError:
-        return False
 
 
 # -------------------------------------------------------------------------------- sequence cache
