@@ -43,6 +43,9 @@ def clean(points, triangles=None):
     if triangles is None:
         return points[good], None, dropped
     tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    if len(tris) and (tris.min() < 0 or tris.max() >= len(points)):
+        raise ArticulaInputError(f"capture: a triangle uses vertex {int(tris.max())} (or a negative index) but "
+                                 f"the capture has {len(points)} points")
     tris = tris[good[tris].all(axis=1)]
     tris = tris[(tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])]
     used = np.zeros(len(points), dtype=bool)

@@ -173,11 +173,13 @@ def hypotheses(model, capture, bodies: Poses, groups=None):
 
 
 def initialise(model, capture, prior=None, training_poses: Poses = None, options: FrameFitOptions = FrameFitOptions(),
-               groups=None, count: int = 8, keep: int = 6, extra: list = ()) -> Initialisation:
+               groups=None, count: int = 8, keep: int = 6, extra: list = (), check: bool = True) -> Initialisation:
     """The first frame's pose of ``model`` on ``capture`` (module docstring).  ``count`` body poses,
     ``keep`` hypotheses refined by a root-only ICP, two by the full fit; ``extra`` poses (e.g. the
-    previous frame's when a frame is lost) join the full fits."""
-    check_units(model, capture.points)
+    previous frame's when a frame is lost) join the full fits; check: refuse a capture of another size
+    (:func:`check_units`; off for re-initialising a frame of a recording already accepted)."""
+    if check:
+        check_units(model, capture.points)
     scored = hypotheses(model, capture, body_poses(model.skeleton.num_bones, training_poses, count), groups)
     root = _root_only(options)
     coarse = []

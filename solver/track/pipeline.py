@@ -30,11 +30,13 @@ from ..geometry.rotations import quat_canonical, quat_mul, quat_conj, quat_norma
 from ..parallel import single_blas_thread
 from ..rig.model import Model, Poses
 from ..rig.skinning import AnchorGroups
-from . import metrics
+from . import metrics, robust
 from .frame_fit import fit_frame
 from .initialise import check_units, initialise
 from .options import ADAPT_MIN_FRAMES, MODEL_PRIOR_MIN_POSES, TrackOptions, frame_range
 from .pose_prior import PosePrior, generic_prior
+from .temporal import temporal_weight
+from .windows import fit_windows
 
 MIN_POINTS = 100         # a frame with fewer points (after cleaning) is skipped
 RUNNING = 10             # frames in the running median that lost-frame detection compares with
@@ -119,6 +121,8 @@ class _Tracker:
         self.groups = AnchorGroups(model)
         self.frames = [None] * self.n
         self.captures = {}
+        self.q_data = {}         # pass 1's Q^data per tracked frame (m), for the w_temp heuristic
+        self.w_temp = 0.0
         self.adapt = options.adapt == "on" or (options.adapt == "auto" and self.n >= ADAPT_MIN_FRAMES)
 
     def capture(self, i):
@@ -166,7 +170,7 @@ class _Tracker:
         """Frames in order, each from the last good pose; returns ``(n, ...)`` Poses with NaN-free
         placeholders (the last good pose) for skipped frames."""
         rot, trans, scale = [], [], []
-        pose, history = None, []
+        pose, before, history = None, None, []
         for i in range(self.n):
             t0 = time.perf_counter()
             capture = self.capture(i)
@@ -177,7 +181,7 @@ class _Tracker:
                 pose = self._first(i, capture, start_pose)
                 history.append(self.frames[i]["median_mm"])
             else:
-                pose = self._next(i, capture, pose, history)
+                pose, before = self._next(i, capture, pose, before, history), pose
             self.frames[i]["seconds"] = round(time.perf_counter() - t0, 3)
             self.clock.add("pass 1", t0)
             if pose is not None:
@@ -223,17 +227,20 @@ class _Tracker:
             fit = fit_frame(self.model, capture, pose, self.prior, self.options.frame, self.groups)
             pose = fit.pose
         self.frames[i]["median_mm"] = fit.stats["median_mm"]
+        self.q_data[i] = float(fit.log["data"].min())
         return pose
 
-    def _next(self, i, capture, pose, history):
-        """Frame i from ``pose``; re-initialised when its median jumps (lost-frame detection)."""
-        fit = fit_frame(self.model, capture, pose, self.prior, self.options.frame, self.groups)
+    def _next(self, i, capture, pose, before, history):
+        """Frame i from the constant-velocity prediction of the last good poses ``before`` and ``pose``;
+        re-initialised when its median jumps (lost-frame detection)."""
+        start = pose if before is None else extrapolate(before, pose)
+        fit = fit_frame(self.model, capture, start, self.prior, self.options.frame, self.groups)
         median = fit.stats["median_mm"]
         limit = max(self.options.lost_factor * float(np.median(history[-RUNNING:])), self.options.lost_mm)
         if median > limit:
             t0 = time.perf_counter()
             again = initialise(self.model, capture, self.prior, self.training, self.options.frame, self.groups,
-                               count=self.options.hypotheses, extra=[pose])
+                               count=self.options.hypotheses, extra=[pose], check=False)
             self.clock.add("re-initialisation", t0)
             self.frames[i]["reinitialised"] = True
             if again.fit.stats["median_mm"] < median:
@@ -244,6 +251,7 @@ class _Tracker:
                 self.frames[i]["median_mm"] = median
                 return pose
         self.frames[i]["median_mm"] = median
+        self.q_data[i] = float(fit.log["data"].min())
         history.append(median)
         return fit.pose
 
@@ -277,12 +285,13 @@ class _Tracker:
         t0 = time.perf_counter()
         usable = self.usable()
         if self.options.temporal:
-            from .windows import fit_windows
-            caps = _Subset(self, usable)
+            start = _take(poses, usable)
+            self.w_temp = self.options.w_temp or temporal_weight(
+                [self.q_data[i] for i in usable if i in self.q_data] or [robust.EPS_M], start.rotations)
             report = lambda f, text: _say(self.progress, 0.65 + 0.3 * f, f"temporal pass: {text}")
-            sub = fit_windows(self.model, caps, _take(poses, usable), self.prior, self.options.w_temp,
-                              self.options.frame, window=self.options.window, step=self.options.step,
-                              groups=self.groups, progress=report)
+            sub, _ = fit_windows(self.model, _Subset(self, usable), start, self.prior, self.w_temp,
+                                 self.options.frame, progress=report, size=self.options.window,
+                                 step=self.options.step)
             poses = _put(poses, usable, sub)
         else:
             for k, i in enumerate(usable):
@@ -335,6 +344,14 @@ def _put(poses, index, part) -> Poses:
     out.translations[list(index)] = part.translations
     out.scales[list(index)] = part.scales
     return out
+
+
+def extrapolate(a: Poses, b: Poses) -> Poses:
+    """The next pose at constant velocity after ``a`` then ``b`` (one frame each): per bone
+    ``q_b (q_a⁻¹ q_b)`` in bone-local axes, translation and scale linearly."""
+    step = quat_mul(quat_conj(a.rotations), b.rotations)
+    rot = quat_canonical(quat_normalize(quat_mul(b.rotations, step)))
+    return Poses(rot, 2.0 * b.translations - a.translations, np.maximum(2.0 * b.scales - a.scales, 1e-3))
 
 
 def interpolate_gaps(poses, usable) -> Poses:

@@ -1,0 +1,239 @@
+"""The tracking pipeline (solver.track.pipeline, initialise, captures, options): capture cleaning and
+thinning, the automatic first frame, gap interpolation and extrapolation in closed form, and whole runs on
+the small tube body with empty, NaN and all-outlier frames, wrong units and cancel."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from articula.sample_scenes import synthetic
+from articula.solver.errors import ArticulaInputError, Cancelled
+from articula.solver.geometry.rotations import quat_mul, quat_to_rotvec, rotvec_to_quat
+from articula.solver.rig.model import Poses
+from articula.solver.rig.skinning import hybrid_skin
+from articula.solver.track import captures as cp
+from articula.solver.track import initialise as ini
+from articula.solver.track import pipeline
+from articula.solver.track.frame_fit import FrameFitOptions
+from articula.solver.track.metrics import point_to_mesh
+from articula.solver.track.options import TrackOptions, frame_range
+
+FAST = FrameFitOptions(max_iterations=12, depth_stages=(0,), coarse_iterations=4)
+
+
+@pytest.fixture(scope="module")
+def body():
+    return synthetic.tube_body()
+
+
+def _motion(model, n, seed=0, step=0.04):
+    """A smooth motion: every bone turning at a constant rate, the root walking along X."""
+    B = model.skeleton.num_bones
+    rate = np.random.default_rng(seed).normal(0.0, step, (B, 3))
+    rv = rate[None] * np.arange(n)[:, None, None]
+    return Poses(rotvec_to_quat(rv), np.stack([0.02 * np.arange(n), np.zeros(n), np.zeros(n)], 1), np.ones(n))
+
+
+def _source(model, poses, noise=0.001, seed=0):
+    posed = hybrid_skin(model, poses)
+    rng = np.random.default_rng(seed)
+    return posed, [p + rng.normal(0.0, noise, p.shape) for p in posed]
+
+
+# captures ------------------------------------------------------------------------------------------
+
+def test_clean_drops_nan_rows_their_triangles_and_unused_vertices():
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [np.nan, 0, 0], [5, 5, 5]], float)
+    tris = np.array([[0, 1, 2], [1, 3, 2]])
+    p, t, dropped = cp.clean(pts, tris)
+    assert dropped == 1
+    assert len(p) == 3 and t.tolist() == [[0, 1, 2]]
+    with pytest.raises(ArticulaInputError, match="uses vertex 7"):
+        cp.clean(pts, np.array([[0, 1, 7]]))
+
+
+def test_thin_mesh_keeps_the_surface_and_valid_triangles(body):
+    v, f = body.rest_vertices, body.faces
+    thin, tris = cp.thin_mesh(v, f, len(v) // 4)
+    assert len(thin) <= len(v) // 4
+    assert tris.min() >= 0 and tris.max() < len(thin)
+    assert (np.sort(tris, axis=1)[:, :-1] != np.sort(tris, axis=1)[:, 1:]).all()
+    # every cluster mean lies near the original surface; every original vertex near the thinned one
+    assert np.max(point_to_mesh(thin, v, f)) < 0.03
+    assert np.median(point_to_mesh(v, thin, tris)) < 0.01
+
+
+def test_capture_source_from_files_reads_meshes_and_refuses_missing_and_unknown(tmp_path, body):
+    from articula.sample_scenes.mesh_files import SequenceWriter
+    path = tmp_path / "scan_0001.ply"
+    SequenceWriter(body.faces, "ply").write(str(path), body.rest_vertices)
+    src = cp.CaptureSource.from_files([path])
+    cap = src[0]
+    assert len(cap.points) == len(body.rest_vertices) and cap.triangles.shape == body.faces.shape
+    assert src.names == ["scan_0001.ply"]
+    with pytest.raises(ArticulaInputError, match="not found"):
+        cp.CaptureSource.from_files([tmp_path / "missing.ply"])
+    (tmp_path / "x.abc").write_text("x")
+    with pytest.raises(ArticulaInputError, match="not a mesh"):
+        cp.CaptureSource.from_files([tmp_path / "x.abc"])
+
+
+def test_cloud_normals_point_outwards_on_a_sphere():
+    rng = np.random.default_rng(1)
+    p = rng.normal(size=(2000, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    n = cp.cloud_normals(p)
+    assert np.einsum("ij,ij->i", n, p).min() > 0.9
+
+
+# options -------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("bad, match", [(dict(adapt="maybe"), "adapt"), (dict(prior="x"), "prior"),
+                                        (dict(window=2), "window"), (dict(step=11), "step"),
+                                        (dict(max_points=10), "max_points"), (dict(frames=(5, 2)), "frames"),
+                                        (dict(w_temp=float("nan")), "w_temp")])
+def test_options_refuse_absurd_settings(bad, match):
+    with pytest.raises(ArticulaInputError, match=match):
+        TrackOptions(**bad).validate()
+
+
+def test_frame_range_clips_and_refuses_a_start_after_the_end():
+    assert frame_range((2, 100), 10) == range(2, 10)
+    with pytest.raises(ArticulaInputError, match="starts after"):
+        frame_range((10, 12), 10)
+
+
+# initialisation ------------------------------------------------------------------------------------
+
+def test_placed_is_the_rigid_motion_of_the_posed_model(body):
+    pose = _motion(body, 3)
+    pose = Poses(pose.rotations[2:], pose.translations[2:], pose.scales[2:])
+    G = ini.rotation_to(np.array([0.0, 0.0, 1.0]), np.array([1.0, 2.0, 2.0]) / 3.0)
+    assert np.allclose(G @ G.T, np.eye(3)) and np.allclose(G @ [0, 0, 1], np.array([1, 2, 2]) / 3.0)
+    moved = ini.placed(body, pose, G, np.array([0.3, -1.0, 2.0]))
+    assert np.allclose(hybrid_skin(body, moved)[0], hybrid_skin(body, pose)[0] @ G.T + [0.3, -1.0, 2.0], atol=1e-12)
+
+
+def test_rotation_to_handles_opposite_vectors():
+    a = np.array([0.0, 0.0, 1.0])
+    G = ini.rotation_to(a, -a)
+    assert np.allclose(G @ a, -a) and np.isclose(np.linalg.det(G), 1.0)
+
+
+def test_units_check_names_millimetres(body):
+    with pytest.raises(ArticulaInputError, match="millimetres"):
+        ini.check_units(body, body.rest_vertices * 1000.0)
+    ini.check_units(body, body.rest_vertices * 1.1)
+
+
+def test_initialise_finds_a_turned_and_moved_body_without_help(body):
+    """The body turned 135 deg about the up axis and 3 m away: the hypotheses find it (no start pose)."""
+    pose = Poses.identity(1, body.skeleton.num_bones)
+    a = np.radians(135.0)
+    G = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    truth = ini.placed(body, pose, G, np.array([3.0, -2.0, 0.1]))
+    posed = hybrid_skin(body, truth)[0]
+    capture, _ = cp.make_capture(posed, body.faces)
+    out = ini.initialise(body, capture, None, None, FAST, count=1)
+    err = np.linalg.norm(hybrid_skin(body, out.pose)[0] - posed, axis=1)
+    assert err.mean() < 0.01, err.mean()
+    assert out.tried == ini.FACINGS
+
+
+# closed forms ----------------------------------------------------------------------------------------
+
+def test_extrapolate_continues_a_constant_rotation_and_translation(body):
+    poses = _motion(body, 3)
+    one = [Poses(poses.rotations[k:k + 1], poses.translations[k:k + 1], poses.scales[k:k + 1]) for k in range(3)]
+    nxt = pipeline.extrapolate(one[0], one[1])
+    assert np.allclose(np.abs(np.sum(nxt.rotations * one[2].rotations, axis=-1)), 1.0, atol=1e-12)
+    assert np.allclose(nxt.translations, one[2].translations)
+
+
+def test_interpolate_gaps_is_the_geodesic_midpoint(body):
+    poses = _motion(body, 5)
+    poses.rotations[2] = (1, 0, 0, 0)
+    out = pipeline.interpolate_gaps(poses, [0, 1, 3, 4])
+    rel = quat_to_rotvec(quat_mul(poses.rotations[1] * [1, -1, -1, -1], poses.rotations[3]))
+    mid = quat_mul(poses.rotations[1], rotvec_to_quat(0.5 * rel))
+    assert np.allclose(np.abs(np.sum(out.rotations[2] * mid, axis=-1)), 1.0, atol=1e-12)
+    assert np.allclose(out.translations[2], 0.5 * (poses.translations[1] + poses.translations[3]))
+    held = pipeline.interpolate_gaps(poses, [1, 3])
+    assert np.allclose(held.rotations[0], poses.rotations[1]) and np.allclose(held.rotations[4], poses.rotations[3])
+
+
+# whole runs ----------------------------------------------------------------------------------------------
+
+def _options(**kw):
+    return TrackOptions(adapt="off", temporal=False, prior="none", frame=FAST, **kw)
+
+
+def test_track_recovers_a_smooth_motion_and_reports_every_frame(body):
+    poses = _motion(body, 5)
+    posed, pts = _source(body, poses)
+    src = cp.CaptureSource.from_arrays(pts, [body.faces] * 5)
+    res = pipeline.track_sequence(body, src, _options(), start_pose=Poses(poses.rotations[:1], poses.translations[:1],
+                                                                          poses.scales[:1]))
+    assert len(res.poses) == 5 and not res.lost and not res.skipped
+    surface = [f["median_mm"] for f in res.frames]
+    assert max(surface) < 3.0, surface
+    report = res.report()
+    assert report["format"] == "articula-track-report/1" and len(report["frames"]) == 5
+    assert set(report["timings_s"]) >= {"pass 1", "report"}
+
+
+def test_empty_nan_and_outlier_frames_are_skipped_or_lost_and_interpolated(body):
+    poses = _motion(body, 6)
+    posed, pts = _source(body, poses)
+    tris = [body.faces] * 6
+    pts[2], tris[2] = np.full((50, 3), np.nan), None               # all NaN
+    pts[3], tris[3] = np.zeros((0, 3)), None                       # empty
+    rng = np.random.default_rng(3)
+    pts[4], tris[4] = rng.uniform(-3.0, 3.0, (3000, 3)) + [0, 0, 6.0], None   # outliers only, far off
+    src = cp.CaptureSource.from_arrays(pts, tris)
+    start = Poses(poses.rotations[:1], poses.translations[:1], poses.scales[:1])
+    res = pipeline.track_sequence(body, src, _options(hypotheses=1), start_pose=start)
+    assert len(res.poses) == 6
+    assert res.skipped == [2, 3]
+    assert res.lost == [4], [f["reason"] for f in res.frames]
+    assert "NaN" in res.frames[2]["reason"] or "points" in res.frames[2]["reason"]
+    gaps = pipeline.interpolate_gaps(res.poses, [0, 1, 5])
+    assert np.allclose(res.poses.rotations[2:5], gaps.rotations[2:5])
+
+
+def test_wrong_units_are_refused_before_any_fit(body):
+    poses = _motion(body, 2)
+    _, pts = _source(body, poses)
+    src = cp.CaptureSource.from_arrays([p * 1000.0 for p in pts], [body.faces] * 2)
+    with pytest.raises(ArticulaInputError, match="millimetres"):
+        pipeline.track_sequence(body, src, _options())
+
+
+def test_no_usable_frame_is_an_error(body):
+    src = cp.CaptureSource.from_arrays([np.zeros((0, 3))] * 2)
+    with pytest.raises(ArticulaInputError, match="no frame"):
+        pipeline.track_sequence(body, src, _options())
+
+
+def test_cancel_from_progress_stops_the_run(body):
+    poses = _motion(body, 3)
+    _, pts = _source(body, poses)
+    src = cp.CaptureSource.from_arrays(pts, [body.faces] * 3)
+
+    def progress(fraction, text):
+        if "frame 2" in text:
+            raise Cancelled()
+
+    with pytest.raises(Cancelled):
+        pipeline.track_sequence(body, src, _options(), progress=progress,
+                                start_pose=Poses(poses.rotations[:1], poses.translations[:1], poses.scales[:1]))
+
+
+def test_frames_option_tracks_a_chunk(body):
+    poses = _motion(body, 6)
+    _, pts = _source(body, poses)
+    src = cp.CaptureSource.from_arrays(pts, [body.faces] * 6)
+    res = pipeline.track_sequence(body, src, dataclasses.replace(_options(), frames=(3, 5)),
+                                  start_pose=Poses(poses.rotations[3:4], poses.translations[3:4], poses.scales[3:4]))
+    assert len(res.poses) == 2 and res.first_frame == 3
+    assert [f["frame"] for f in res.frames] == [3, 4]
