@@ -15,18 +15,21 @@ Also here: :func:`check_units`, the early refusal of a model and captures in dif
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import numpy as np
 
 from ..errors import ArticulaInputError
-from ..geometry.rotations import matrix_to_quat, quat_mul, quat_normalize
+from ..geometry.rotations import matrix_to_quat, quat_mul, quat_normalize, quat_to_matrix
 from ..rig.model import Poses
 from ..rig.skinning import hybrid_skin
 from . import robust
 from .correspondences import nearest_compatible
 from .frame_fit import FrameFitOptions, fit_frame
+from .pose_prior import bone_key
 from .visibility import vertex_normals
 
+GENERIC_POSES_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "generic_body_poses.npz")
 UP = np.array([0.0, 0.0, 1.0])     # the model's up axis (Blender world Z)
 FACINGS = 8                        # facings tried about the up axis (45 deg apart)
 SCORE_POINTS = 3000                # capture points scoring a hypothesis
@@ -46,16 +49,42 @@ class Initialisation:
     scores: list
 
 
-def body_poses(num_bones: int, training_poses: Poses = None, count: int = 8) -> Poses:
-    """Up to ``count`` body poses: the rest pose and training poses spread over the set (every k-th),
-    with the root rotation, translation and scale reset (the facing and position are searched)."""
-    rest = Poses.identity(1, num_bones)
-    if training_poses is None or not len(training_poses) or count <= 1:
-        return rest
-    pick = np.unique(np.linspace(0, len(training_poses) - 1, count - 1).round().astype(int))
-    rot = np.concatenate([rest.rotations, training_poses.rotations[pick]])
+def body_poses(skeleton, training_poses: Poses = None, count: int = 24, generic: bool = True) -> Poses:
+    """Up to ``count`` body poses: the rest pose, the generic body poses (:func:`generic_body_poses`, walk
+    frames: arms down, legs apart, which range-of-motion training poses rarely are) and the training
+    poses, each set spread evenly (every k-th) over at most half of the rest; root rotation, translation
+    and scale reset (the facing and position are searched)."""
+    sets = [Poses.identity(1, skeleton.num_bones).rotations]
+    extra = generic_body_poses(skeleton) if generic else None
+    for source in (extra, training_poses):
+        if source is not None and len(source) and count > 1:
+            pick = np.unique(np.linspace(0, len(source) - 1, min(len(source), max(1, (count - 1) // 2)))
+                             .round().astype(int))
+            sets.append(source.rotations[pick])
+    rot = np.concatenate(sets)
     rot[:, 0] = (1.0, 0.0, 0.0, 0.0)
     return Poses(rot, np.zeros((len(rot), 3)), np.ones(len(rot)))
+
+
+def generic_body_poses(skeleton, path: str = GENERIC_POSES_PATH) -> Poses:
+    """The shipped generic body poses (walk frames of the cmu_mb rig, ``tools/make_generic_poses.py``)
+    mapped onto ``skeleton`` by bone name (:func:`.pose_prior.bone_key`), each local rotation re-expressed
+    in the model's rest frame (``F'ᵀ F R Fᵀ F'``); bones that do not map stay at rest.  None when no bone
+    other than the root maps."""
+    with np.load(path, allow_pickle=False) as data:
+        names, frames, rotations = list(data["names"]), data["frames"], data["rotations"]
+    index = {bone_key(str(n)): i for i, n in enumerate(names)}
+    out = Poses.identity(len(rotations), skeleton.num_bones)
+    mapped = 0
+    for b, name in enumerate(skeleton.names[1:], start=1):
+        s = index.get(bone_key(name))
+        if s is None or s == 0:
+            continue
+        C = skeleton.frames[b].T @ frames[s]
+        R = C @ quat_to_matrix(rotations[:, s]) @ C.T
+        out.rotations[:, b] = matrix_to_quat(R)
+        mapped += 1
+    return out if mapped else None
 
 
 def check_units(model, points) -> None:
@@ -173,14 +202,14 @@ def hypotheses(model, capture, bodies: Poses, groups=None):
 
 
 def initialise(model, capture, prior=None, training_poses: Poses = None, options: FrameFitOptions = FrameFitOptions(),
-               groups=None, count: int = 8, keep: int = 6, extra: list = (), check: bool = True) -> Initialisation:
+               groups=None, count: int = 24, keep: int = 6, extra: list = (), check: bool = True) -> Initialisation:
     """The first frame's pose of ``model`` on ``capture`` (module docstring).  ``count`` body poses,
     ``keep`` hypotheses refined by a root-only ICP, two by the full fit; ``extra`` poses (e.g. the
     previous frame's when a frame is lost) join the full fits; check: refuse a capture of another size
     (:func:`check_units`; off for re-initialising a frame of a recording already accepted)."""
     if check:
         check_units(model, capture.points)
-    scored = hypotheses(model, capture, body_poses(model.skeleton.num_bones, training_poses, count), groups)
+    scored = hypotheses(model, capture, body_poses(model.skeleton, training_poses, count), groups)
     root = _root_only(options)
     coarse = []
     for score, pose in scored[:keep]:

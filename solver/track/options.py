@@ -36,7 +36,7 @@ class TrackOptions:
     fit_scale: bool = False
     frames: tuple = None
     max_points: int = 20_000
-    hypotheses: int = 8
+    hypotheses: int = 24
     lost_factor: float = 3.0
     lost_mm: float = 15.0
     poor_fit_mm: float = 10.0

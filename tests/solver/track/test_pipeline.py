@@ -237,3 +237,21 @@ def test_frames_option_tracks_a_chunk(body):
                                   start_pose=Poses(poses.rotations[3:4], poses.translations[3:4], poses.scales[3:4]))
     assert len(res.poses) == 2 and res.first_frame == 3
     assert [f["frame"] for f in res.frames] == [3, 4]
+
+
+def test_generic_body_poses_keep_world_rotations_on_a_rig_with_other_rest_frames():
+    """Mapped onto a copy of their rig whose rest frames are turned, the generic poses keep every bone's
+    world rotation ``F R Fᵀ``; on a rig with no matching names there are none."""
+    from articula.sample_scenes.subjects import make_subject
+    from articula.solver.geometry.rotations import quat_to_matrix
+    from articula.solver.rig.model import Skeleton
+    sk = make_subject("cmu_mb").skeleton
+    same = ini.generic_body_poses(sk)
+    turn = quat_to_matrix(rotvec_to_quat(np.random.default_rng(0).normal(0, 1, (sk.num_bones, 3))))
+    other = Skeleton(sk.names, sk.parents, sk.heads, sk.tails, np.einsum("bij,bjk->bik", sk.frames, turn))
+    mapped = ini.generic_body_poses(other)
+    world = lambda s, p: np.einsum("bij,nbjk,blk->nbil", s.frames, quat_to_matrix(p.rotations), s.frames)
+    assert len(same) >= 8 and np.allclose(world(sk, same), world(other, mapped), atol=1e-9)
+    assert not np.allclose(same.rotations[:, 1:], 0.0)
+    renamed = Skeleton([f"bone{i}" for i in range(sk.num_bones)], sk.parents, sk.heads, sk.tails, sk.frames)
+    assert ini.generic_body_poses(renamed) is None
