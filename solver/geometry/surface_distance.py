@@ -63,10 +63,11 @@ def closest_points_on_triangles(p, a, b, c):
     den = va + vb + vc
     v, w = ratio(vb, den), ratio(vc, den)
     out = a + ab * v + ac * w
+    ab2, ac2, bc2 = dot(ab, ab), dot(ac, ac), dot(c - b, c - b)    # a zero-length edge has no region
     regions = [
-        ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), b + ratio(d4 - d3, (d4 - d3) + (d5 - d6)) * (c - b)),  # BC
-        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), a + ratio(d2, d2 - d6) * ac),                                 # AC
-        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), a + ratio(d1, d1 - d3) * ab),                                 # AB
+        ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0) & (bc2 > 0), b + ratio(d4 - d3, (d4 - d3) + (d5 - d6)) * (c - b)),  # BC
+        ((vb <= 0) & (d2 >= 0) & (d6 <= 0) & (ac2 > 0), a + ratio(d2, d2 - d6) * ac),                                 # AC
+        ((vc <= 0) & (d1 >= 0) & (d3 <= 0) & (ab2 > 0), a + ratio(d1, d1 - d3) * ab),                                 # AB
         ((d6 >= 0) & (d5 <= d6), c),                                                                      # C
         ((d3 >= 0) & (d4 <= d3), b),                                                                      # B
         ((d1 <= 0) & (d2 <= 0), a),                                                                       # A

@@ -278,6 +278,7 @@ class _Update:
     def accept(self, which):
         if which[0]:
             self.pose = self.trial
+            self.r0 = quat_to_rotvec(self.pose.rotations[0])     # bounded bones step from the new pose
 
     def slope(self, idx, steps):
         return 2.0 * steps @ self.g
