@@ -100,4 +100,14 @@ class ARTICULA_PT_animate(_ArticulaPanel, bpy.types.Panel):
         _button(col, "articula.read_action", "Read Action to Poses…", 'FILE_TICK')
 
 
-classes = (ARTICULA_PT_main, ARTICULA_PT_import, ARTICULA_PT_rig, ARTICULA_PT_animate)
+class ARTICULA_PT_track(_ArticulaPanel, bpy.types.Panel):
+    bl_label = "Track"
+    bl_parent_id = "ARTICULA_PT_main"
+
+    def draw(self, context):
+        col = self.layout.column(align=True)
+        col.label(text="Select a rig and a scan or point sequence")
+        _button(col, "articula.track", "Track Captures…", 'CON_ARMATURE')
+
+
+classes = (ARTICULA_PT_main, ARTICULA_PT_import, ARTICULA_PT_rig, ARTICULA_PT_animate, ARTICULA_PT_track)

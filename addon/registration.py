@@ -9,9 +9,11 @@ from .. import operators
 from ..solver import parallel
 from . import panels, preferences, properties
 from .sequences import points, scans
+from .track import error_colors
 
-# Order matters: property groups before what uses them, operators before the panels that draw their buttons.
-MODULES = (preferences, properties, scans, points, operators, panels)
+# Order matters: property groups before what uses them, operators before the panels that draw their buttons,
+# the players (scans, points) before the error colours drawn over what they show.
+MODULES = (preferences, properties, scans, points, error_colors, operators, panels)
 
 
 def register():

@@ -12,9 +12,9 @@ import bpy
 
 from ...sample_scenes import cli as samples
 from ...solver.errors import ArticulaInputError, Cancelled
-from . import bench, demo, depth, lbs, learn, rig, scans
+from . import bench, demo, depth, lbs, learn, rig, scans, track
 
-COMMAND_MODULES = (bench, samples, rig, lbs, scans, depth, learn, demo)
+COMMAND_MODULES = (bench, samples, rig, lbs, scans, depth, learn, track, demo)
 
 
 def build_parser() -> argparse.ArgumentParser:

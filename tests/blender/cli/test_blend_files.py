@@ -104,6 +104,7 @@ FAILURES = {
     "import-depth": ["--depth", "MISSING"],
     "build-rig": ["--bundle", "MISSING.npz"],
     "learn-rig": ["--scans", "MISSING", "--out", "OUT/m.npz"],
+    "track": ["--model", "MISSING.npz", "--scans", "MISSING", "--out", "OUT/t.npz"],
 }
 
 

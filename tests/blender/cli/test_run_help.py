@@ -15,7 +15,7 @@ def test_run_help_lists_every_command(pkg):
     parser = pkg("addon.cli.main").build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     batch = set(sub.choices)
-    assert {"bench", "demo", "samples", "build-rig", "bake", "export-bundle", "learn-rig"} <= batch
+    assert {"bench", "demo", "samples", "build-rig", "bake", "export-bundle", "learn-rig", "track", "merge-tracks"} <= batch
     missing = ({"test", "package", "setup", "help"} | batch) - listed
     assert not missing, f"./run help does not list {sorted(missing)}:\n{res.stdout}"
     # every case of the run script's own dispatch is listed too

@@ -1,0 +1,230 @@
+"""Joining tracked chunks: a long recording tracked in pieces (``track --frames A:B``, with a few frames of
+overlap between consecutive pieces) becomes one tracked bundle with one pose per frame.
+
+A tracked bundle ("articula-model/1", written by ``track``) carries in its provenance what a merge checks
+(:func:`track_provenance`): ``source`` "track", ``model_sha256`` (:func:`model_digest` of the model the
+run started from), ``input`` (name and frame count of the capture input), ``first_frame`` (index of the
+first tracked frame in the input, 0-based), ``frame_names`` (one per tracked frame), ``options`` (the
+tracking options, without the frame range), ``adapted`` and, optionally, ``report``.
+
+Chunks belong together when they share the model digest, bone names, vertex count, input and options.
+Each frame covered by several chunks is taken from the chunk where it lies furthest from a cut (a chunk
+boundary inside the merged range): near a cut a chunk has tracked only a few frames on that side (its first
+frame starts without a predecessor), further in it has the same temporal context as one run would.  Ties
+go to the earlier chunk.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import ArticulaInputError
+from ..formats.bundle import load_bundle
+from ..rig.model import Model, Poses
+
+SOURCE = "track"
+REQUIRED = ("model_sha256", "input", "first_frame", "frame_names", "options", "adapted")
+
+
+def model_digest(model: Model) -> str:
+    """SHA-256 (hex) of the model's arrays as a bundle stores them (rest vertices and frames float64,
+    weights float32, bone names): the same model saved twice has the same digest."""
+    sk = model.skeleton
+    h = hashlib.sha256()
+    for a in (np.asarray(model.rest_vertices, np.float64), np.asarray(model.faces, np.int32),
+              np.asarray(sk.parents, np.int32), np.asarray(sk.heads, np.float64), np.asarray(sk.tails, np.float64),
+              np.asarray(sk.frames, np.float64), np.asarray(model.anchor, np.int32),
+              np.asarray(model.twist_weights, np.float32), np.asarray(model.swing_weights, np.float32)):
+        h.update(str(a.shape).encode())
+        h.update(np.ascontiguousarray(a).tobytes())
+    h.update("\0".join(sk.names).encode())
+    return h.hexdigest()
+
+
+def track_provenance(model_sha256: str, source: str, input_frames: int, first_frame: int, frame_names,
+                     options: dict, adapted: bool, report: dict = None) -> dict:
+    """The provenance of a tracked bundle (module docstring); ``options`` must be JSON-serialisable."""
+    prov = {"source": SOURCE, "model_sha256": str(model_sha256),
+            "input": {"source": str(source), "frames": int(input_frames)},
+            "first_frame": int(first_frame), "frame_names": [str(n) for n in frame_names],
+            "options": {k: v for k, v in dict(options).items() if k != "frames"}, "adapted": bool(adapted)}
+    if report is not None:
+        prov["report"] = report
+    return prov
+
+
+@dataclass
+class TrackChunk:
+    """One tracked bundle: its ``name`` (file name, for messages), model, poses (one per tracked frame)
+    and tracking provenance."""
+    name: str
+    model: Model
+    poses: Poses
+    provenance: dict
+
+    @property
+    def start(self) -> int:
+        return int(self.provenance["first_frame"])
+
+    @property
+    def end(self) -> int:
+        """One past the last tracked frame (input index)."""
+        return self.start + len(self.poses)
+
+
+def chunk_from_bundle(bundle, name: str) -> TrackChunk:
+    """A :class:`TrackChunk` of a loaded bundle; raises unless it is a tracked bundle with one pose per
+    tracked frame."""
+    prov = bundle.provenance or {}
+    missing = [k for k in REQUIRED if k not in prov]
+    if prov.get("source") != SOURCE or missing:
+        raise ArticulaInputError(f"{name}: not a tracked bundle (its provenance has no tracking record"
+                                 f"{', e.g. ' + repr(missing[0]) if missing else ''}); make chunks with "
+                                 f"`track --frames A:B`")
+    if bundle.poses is None or len(bundle.poses) == 0:
+        raise ArticulaInputError(f"{name}: the tracked bundle holds no poses")
+    if len(prov["frame_names"]) != len(bundle.poses):
+        raise ArticulaInputError(f"{name}: {len(bundle.poses)} poses but {len(prov['frame_names'])} frame names")
+    first, total = prov["first_frame"], prov["input"].get("frames")
+    if not isinstance(first, int) or not isinstance(total, int) or first < 0 or first + len(bundle.poses) > total:
+        raise ArticulaInputError(f"{name}: frames {first}..{first}+{len(bundle.poses)} do not fit an input of "
+                                 f"{total} frames")
+    return TrackChunk(name, bundle.model, bundle.poses, prov)
+
+
+def load_chunks(paths) -> list:
+    """The tracked bundles at ``paths`` as :class:`TrackChunk` (named by their file names)."""
+    return [chunk_from_bundle(load_bundle(p), os.path.basename(p)) for p in paths]
+
+
+@dataclass
+class MergedTrack:
+    """Result of :func:`merge_chunks`: the model (of the chunk giving most frames when the chunks were
+    adapted separately), one pose per frame of the merged range, its provenance and the merge report."""
+    model: Model
+    poses: Poses
+    provenance: dict
+    report: dict = field(default_factory=dict)
+
+
+def choose_frames(ranges, lo: int, hi: int) -> np.ndarray:
+    """Chunk index per frame ``lo..hi-1`` for chunks covering ``ranges`` [(start, end)]: the covering
+    chunk whose nearest cut (a boundary strictly inside ``lo..hi``) is furthest; ties: the earlier
+    chunk."""
+    f = np.arange(lo, hi)
+    best, score = np.full(len(f), -1), np.full(len(f), -np.inf)
+    for i, (a, b) in enumerate(ranges):
+        inside = (f >= a) & (f < b)
+        d = np.full(len(f), np.inf)
+        if a > lo:
+            d = np.minimum(d, f - a)
+        if b < hi:
+            d = np.minimum(d, b - 1 - f)
+        better = inside & (d > score)
+        best[better], score[better] = i, d[better]
+    return best
+
+
+def _check_compatible(chunks) -> None:
+    """Raise unless every chunk was tracked from the same model, input and options as the first."""
+    ref = chunks[0]
+    for c in chunks[1:]:
+        pair = f"{ref.name} and {c.name}"
+        if c.provenance["model_sha256"] != ref.provenance["model_sha256"]:
+            raise ArticulaInputError(f"{pair} were tracked with different models (model hashes "
+                                     f"{ref.provenance['model_sha256'][:12]} and {c.provenance['model_sha256'][:12]})")
+        if list(c.model.skeleton.names) != list(ref.model.skeleton.names):
+            raise ArticulaInputError(f"{pair} have different bones")
+        if c.model.num_vertices != ref.model.num_vertices:
+            raise ArticulaInputError(f"{pair} have different vertex counts ({ref.model.num_vertices} and "
+                                     f"{c.model.num_vertices})")
+        if c.provenance["input"] != ref.provenance["input"]:
+            raise ArticulaInputError(f"{pair} come from different inputs ({ref.provenance['input']} and "
+                                     f"{c.provenance['input']})")
+        if c.provenance["options"] != ref.provenance["options"]:
+            diff = sorted(k for k in set(c.provenance["options"]) | set(ref.provenance["options"])
+                          if c.provenance["options"].get(k) != ref.provenance["options"].get(k))
+            raise ArticulaInputError(f"{pair} were tracked with different options ({', '.join(diff)})")
+        if c.provenance["adapted"] != ref.provenance["adapted"]:
+            raise ArticulaInputError(f"{pair}: one was tracked with model adaptation and one without")
+
+
+def _check_coverage(chunks) -> None:
+    """Raise unless the chunks (sorted by start) overlap pairwise in order, none inside another, and
+    agree on the names of the frames they share."""
+    for prev, c in zip(chunks, chunks[1:]):
+        pair = f"{prev.name} (frames {prev.start}:{prev.end}) and {c.name} (frames {c.start}:{c.end})"
+        if c.start <= prev.start or c.end <= prev.end:
+            raise ArticulaInputError(f"{pair}: one chunk lies inside the other; give chunks that each add frames")
+        if c.start > prev.end:
+            raise ArticulaInputError(f"{pair}: frames {prev.end}:{c.start} are missing between them")
+        if c.start == prev.end:
+            raise ArticulaInputError(f"{pair} do not overlap; track chunks with a few frames in common (e.g. "
+                                     f"--frames {max(c.start - 5, 0)}:{c.end}) so the joined poses agree")
+        ours = prev.provenance["frame_names"][c.start - prev.start:]
+        theirs = c.provenance["frame_names"][:prev.end - c.start]
+        bad = next((k for k, (x, y) in enumerate(zip(ours, theirs)) if x != y), None)
+        if bad is not None:
+            raise ArticulaInputError(f"{pair}: input frame {c.start + bad} is {ours[bad]!r} in one and "
+                                     f"{theirs[bad]!r} in the other")
+
+
+def _overlap_differences(prev: TrackChunk, c: TrackChunk) -> dict:
+    """Largest pose differences of two chunks on their shared frames: bone rotation (degrees) and
+    root translation (mm)."""
+    a, b = slice(c.start - prev.start, None), slice(0, prev.end - c.start)
+    dot = np.abs(np.einsum("fbi,fbi->fb", prev.poses.rotations[a], c.poses.rotations[b]))
+    angle = np.degrees(2 * np.arccos(np.clip(dot, 0.0, 1.0)))
+    move = 1000 * np.linalg.norm(prev.poses.translations[a] - c.poses.translations[b], axis=1)
+    return {"chunks": [prev.name, c.name], "frames": [c.start, prev.end],
+            "max_rotation_deg": float(angle.max()), "max_translation_mm": float(move.max())}
+
+
+def _merged_frame_rows(chunks, chosen, lo) -> list:
+    """The per-frame rows of the chunks' reports (``report["frames"]``) for the frames they give, or []
+    when a chunk has no such rows."""
+    rows = []
+    for k, i in enumerate(chosen):
+        own = (chunks[i].provenance.get("report") or {}).get("frames")
+        if not isinstance(own, list) or len(own) != len(chunks[i].poses):
+            return []
+        rows.append(own[lo + k - chunks[i].start])
+    return rows
+
+
+def merge_chunks(chunks) -> MergedTrack:
+    """Join tracked chunks (any order) into one track over the union of their frames (module docstring).
+    Raises :class:`ArticulaInputError` naming the chunks when they do not belong together, leave a gap,
+    do not overlap or disagree on a shared frame's name."""
+    if len(chunks) < 2:
+        raise ArticulaInputError(f"{len(chunks)} chunk given; merging needs at least two tracked chunks")
+    chunks = sorted(chunks, key=lambda c: (c.start, c.end))
+    _check_compatible(chunks)
+    _check_coverage(chunks)
+    lo, hi = chunks[0].start, chunks[-1].end
+    chosen = choose_frames([(c.start, c.end) for c in chunks], lo, hi)
+    idx = [lo + k - chunks[i].start for k, i in enumerate(chosen)]
+    poses = Poses(np.stack([chunks[i].poses.rotations[j] for i, j in zip(chosen, idx)]),
+                  np.stack([chunks[i].poses.translations[j] for i, j in zip(chosen, idx)]),
+                  np.array([chunks[i].poses.scales[j] for i, j in zip(chosen, idx)]))
+    counts = np.bincount(chosen, minlength=len(chunks))
+    keep = int(np.argmax(counts))
+    spread = max(float(np.abs(c.model.rest_vertices - chunks[keep].model.rest_vertices).max()) for c in chunks)
+    names = [chunks[i].provenance["frame_names"][j] for i, j in zip(chosen, idx)]
+    rows = _merged_frame_rows(chunks, chosen, lo)
+    report = {"chunks": [{"name": c.name, "frames": [c.start, c.end], "used": int(counts[i])}
+                         for i, c in enumerate(chunks)],
+              "frame_chunk": [int(i) for i in chosen], "first_frame": lo, "frames": hi - lo,
+              "overlaps": [_overlap_differences(p, c) for p, c in zip(chunks, chunks[1:])],
+              "model_from": chunks[keep].name, "model_spread_mm": 1000 * spread}
+    if rows:
+        report["frame_rows"] = rows
+        report["lost"] = [lo + k for k, r in enumerate(rows) if r.get("lost")]
+        report["skipped"] = [lo + k for k, r in enumerate(rows) if r.get("skipped")]
+    ref = chunks[0].provenance
+    prov = track_provenance(ref["model_sha256"], ref["input"]["source"], ref["input"]["frames"], lo, names,
+                            ref["options"], ref["adapted"], {"merge": report})
+    return MergedTrack(chunks[keep].model, poses, prov, report)

@@ -1,0 +1,166 @@
+"""Joining tracked chunks (solver.track.merge): the frame choice against a brute-force reference, the
+merged poses and report on synthetic chunks, bundle files round trip, and every refusal."""
+import itertools
+
+import numpy as np
+import pytest
+
+from articula.sample_scenes import synthetic
+from articula.solver.errors import ArticulaInputError
+from articula.solver.formats.bundle import load_bundle, save_bundle
+from articula.solver.rig.model import Poses
+from articula.solver.track import merge
+
+N = 20
+
+
+@pytest.fixture(scope="module")
+def model():
+    return synthetic.tube_body(rings=4, segments=6)
+
+
+def truth_poses(model, n=N, seed=0):
+    return synthetic.random_poses(n, model.skeleton.num_bones, seed=seed, max_angle=0.5)
+
+
+def chunk(model, poses, a, b, name, noise=0.0, seed=1, options=None, digest=None, names=None):
+    """Frames a..b-1 of ``poses`` as a tracked chunk, rotations perturbed by ``noise`` radians (renormalised)."""
+    rng = np.random.default_rng(seed)
+    rot = poses.rotations[a:b].copy()
+    if noise:
+        rot += noise * rng.normal(size=rot.shape)
+        rot /= np.linalg.norm(rot, axis=-1, keepdims=True)
+    part = Poses(rot, poses.translations[a:b].copy(), poses.scales[a:b].copy())
+    names = names or [f"scan_{k:04d}.ply" for k in range(len(poses))]
+    prov = merge.track_provenance(digest or merge.model_digest(model), "scans", len(poses), a, names[a:b],
+                                  options or {"adapt": "off", "window": 11}, False,
+                                  {"frames": [{"name": names[k], "lost": k == 13, "skipped": False}
+                                              for k in range(a, b)]})
+    return merge.TrackChunk(name, model, part, prov)
+
+
+def brute_force_choice(ranges, lo, hi):
+    out = []
+    for f in range(lo, hi):
+        best, score = None, None
+        for i, (a, b) in enumerate(ranges):
+            if not a <= f < b:
+                continue
+            cuts = [f - a] * (a > lo) + [b - 1 - f] * (b < hi)
+            d = min(cuts) if cuts else float("inf")
+            if score is None or d > score:
+                best, score = i, d
+        out.append(best)
+    return out
+
+
+def test_frame_choice_matches_brute_force():
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        cuts = np.sort(rng.choice(np.arange(2, 40), size=rng.integers(1, 4), replace=False))
+        starts = [0] + [int(c - rng.integers(1, 4)) for c in cuts]
+        ends = [int(c) for c in cuts] + [45]
+        ranges = list(zip(starts, ends))
+        got = merge.choose_frames(ranges, 0, 45)
+        assert got.tolist() == brute_force_choice(ranges, 0, 45), ranges
+
+
+def test_overlap_frames_come_from_the_chunk_further_from_the_cut(model):
+    """Chunks 0:12 and 8:20: frames 8, 9 are 3 and 2 frames from A's end but 0 and 1 from B's start, so
+    they come from A; frames 10, 11 from B.  Every merged pose is the chosen chunk's pose exactly."""
+    gt = truth_poses(model)
+    a, b = chunk(model, gt, 0, 12, "a.npz", 0.01, 1), chunk(model, gt, 8, 20, "b.npz", 0.01, 2)
+    got = merge.merge_chunks([b, a])                                  # any order
+    assert got.report["frame_chunk"] == [0] * 10 + [1] * 10
+    np.testing.assert_array_equal(got.poses.rotations[:10], a.poses.rotations[:10])
+    np.testing.assert_array_equal(got.poses.rotations[10:], b.poses.rotations[2:])
+    np.testing.assert_array_equal(got.poses.translations, gt.translations)
+    assert len(got.poses) == N and got.provenance["first_frame"] == 0
+    assert got.provenance["frame_names"] == [f"scan_{k:04d}.ply" for k in range(N)]
+    assert [c["used"] for c in got.report["chunks"]] == [10, 10]
+    (overlap,) = got.report["overlaps"]
+    assert overlap["frames"] == [8, 12] and overlap["max_rotation_deg"] > 0
+    assert got.report["lost"] == [13]                                 # from the chunks' per-frame rows
+    assert [r["name"] for r in got.report["frame_rows"]] == got.provenance["frame_names"]
+
+
+def test_three_chunks_inside_a_longer_input(model):
+    """Chunks 4:11, 9:16, 14:20 of a 20-frame input: the merged range starts at 4, and identical chunk
+    poses give the truth back."""
+    gt = truth_poses(model)
+    parts = [chunk(model, gt, a, b, f"c{a}.npz") for a, b in ((4, 11), (9, 16), (14, 20))]
+    got = merge.merge_chunks(parts)
+    assert got.provenance["first_frame"] == 4 and len(got.poses) == 16
+    np.testing.assert_allclose(got.poses.rotations, gt.rotations[4:], atol=1e-12)
+    assert got.report["frame_chunk"] == brute_force_choice([(4, 11), (9, 16), (14, 20)], 4, 20)
+    assert got.report["overlaps"][0]["max_rotation_deg"] < 1e-4
+
+
+def test_bundle_files_round_trip(model, tmp_path):
+    gt = truth_poses(model)
+    paths = []
+    for c in (chunk(model, gt, 0, 12, "a"), chunk(model, gt, 9, 20, "b")):
+        paths.append(str(tmp_path / f"{c.name}.npz"))
+        save_bundle(paths[-1], c.model, c.poses, c.provenance)
+    got = merge.merge_chunks(merge.load_chunks(paths))
+    out = str(tmp_path / "merged.npz")
+    save_bundle(out, got.model, got.poses, got.provenance)
+    again = merge.chunk_from_bundle(load_bundle(out), "merged.npz")
+    assert (again.start, again.end) == (0, N)
+    np.testing.assert_allclose(again.poses.rotations, gt.rotations, atol=1e-12)
+    assert again.provenance["model_sha256"] == merge.model_digest(model)
+
+
+def test_model_digest_changes_with_any_array(model):
+    d = merge.model_digest(model)
+    assert d == merge.model_digest(synthetic.tube_body(rings=4, segments=6))
+    moved = synthetic.tube_body(rings=4, segments=6)
+    moved.rest_vertices[3, 1] += 1e-9
+    assert merge.model_digest(moved) != d
+
+
+@pytest.mark.parametrize("case, message", [
+    ("one", "1 chunk given; merging needs at least two"),
+    ("model", "were tracked with different models"),
+    ("options", r"different options \(window\)"),
+    ("gap", "frames 10:12 are missing between them"),
+    ("touching", "do not overlap; track chunks with a few frames in common"),
+    ("inside", "one chunk lies inside the other"),
+    ("names", "input frame 8 is 'scan_0008.ply' in one and 'other.ply' in the other"),
+    ("not_tracked", "not a tracked bundle"),
+])
+def test_refusals(model, case, message):
+    gt = truth_poses(model)
+    a = chunk(model, gt, 0, 10 if case in ("gap", "touching") else 12, "a.npz")
+    b = chunk(model, gt, 8, 20, "b.npz")
+    if case == "one":
+        chunks = [a]
+    elif case == "model":
+        chunks = [a, chunk(model, gt, 8, 20, "b.npz", digest="0" * 64)]
+    elif case == "options":
+        chunks = [a, chunk(model, gt, 8, 20, "b.npz", options={"adapt": "off", "window": 9})]
+    elif case == "gap":
+        chunks = [a, chunk(model, gt, 12, 20, "b.npz")]
+    elif case == "touching":
+        chunks = [a, chunk(model, gt, 10, 20, "b.npz")]
+    elif case == "inside":
+        chunks = [a, chunk(model, gt, 2, 9, "b.npz")]
+    elif case == "names":
+        names = [f"scan_{k:04d}.ply" for k in range(N)]
+        names[8] = "other.ply"
+        chunks = [a, chunk(model, gt, 8, 20, "b.npz", names=names)]
+    else:
+        bundle = type("B", (), {"provenance": {"source": "learn_rig"}, "poses": b.poses, "model": model})
+        with pytest.raises(ArticulaInputError, match=message):
+            merge.chunk_from_bundle(bundle, "b.npz")
+        return
+    with pytest.raises(ArticulaInputError, match=message):
+        merge.merge_chunks(chunks)
+
+
+def test_every_split_of_identical_chunks_gives_the_whole(model):
+    """Any two overlapping chunks cut from the same poses merge back to exactly those poses."""
+    gt = truth_poses(model, 12)
+    for cut, overlap in itertools.product(range(2, 10), range(1, 3)):
+        got = merge.merge_chunks([chunk(model, gt, 0, cut + overlap, "a"), chunk(model, gt, cut, 12, "b")])
+        np.testing.assert_array_equal(got.poses.rotations, gt.rotations)
