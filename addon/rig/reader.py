@@ -71,7 +71,7 @@ def read_skeleton(arm) -> Skeleton:
     heads = np.array([b.head_local for b in bones], dtype=np.float64)
     tails = np.array([b.tail_local for b in bones], dtype=np.float64)
     frames = _nearest_rotations(np.array([np.array(b.matrix_local)[:3, :3] for b in bones], dtype=np.float64))
-    return Skeleton(names, np.array(parents, dtype=np.int32), heads, tails, frames)
+    return Skeleton(names, np.array(parents, dtype=np.int32), heads, tails, _along_bones(frames, heads, tails))
 
 
 def _nearest_rotations(F):
@@ -79,6 +79,21 @@ def _nearest_rotations(F):
     and for bones pointing close to −Y its roll computation leaves them orthonormal only to ~3e-6."""
     U, _, Vt = np.linalg.svd(F)
     return U @ Vt
+
+
+def _along_bones(F, heads, tails):
+    """``F (B,3,3)`` turned by the smallest rotation that puts each Y axis exactly on its bone's
+    direction ``tail − head``: the float32 heads, tails and matrices Blender keeps agree only to a few
+    1e-6 (measured 3.3e-6 on a learned rig), more than the model's frame tolerance."""
+    y = tails - heads
+    y /= np.linalg.norm(y, axis=1, keepdims=True)
+    a = F[:, :, 1]
+    v, c = np.cross(a, y), np.einsum("bi,bi->b", a, y)
+    K = np.zeros_like(F)
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    K -= np.swapaxes(K, 1, 2)
+    R = np.eye(3) + K + K @ K / (1.0 + c)[:, None, None]
+    return R @ F
 
 
 def read_model(arm) -> Model:
