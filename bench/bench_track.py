@@ -73,12 +73,16 @@ def _say_run(name, res, seconds, cpu, n, err=None):
     if err is not None:
         _common.report(f"{name}: mean vertex error", float(err.mean()), "mm",
                        f"max frame {err.max():.2f} mm; " + note)
+        print("    per frame (mm):", " ".join(f"{e:.1f}" for e in err))
     else:
         _common.report(f"{name}: median scan-to-model", float(np.median(med)), "mm", note)
 
 
-def exact(frames, options):
-    for rig, shape, motion in (("cmu_mb", "female", "walk"), ("game_engine", "male", "rom")):
+RECORDINGS = (("cmu_mb", "female", "walk"), ("game_engine", "male", "rom"))
+
+
+def exact(frames, options, recordings=len(RECORDINGS)):
+    for rig, shape, motion in RECORDINGS[:recordings]:
         posed, gt, source = _recording(rig, shape, motion, frames)
         model, _ = _model(gt)
         res, seconds, cpu = _track(model, source, options, _training_poses(rig, shape))

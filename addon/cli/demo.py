@@ -10,7 +10,12 @@
    swing/twist weights and rest mesh, one baked pose per scan, the per-vertex error as a heat map) and
    prints its error statistics (``--no-learn`` skips this; ``--parts`` and ``--learn-iterations`` set
    the learner's part count and outer rounds);
-4. lays the results out side by side (depth recording, ground-truth rig, scans, learned rig), saves
+4. tracks a short unregistered recording of the same subject (noisy 4-view scans of a walk, imported
+   by ``articula.import_scans`` as an unregistered sequence) with the learned rig (``articula.track``
+   on the rig saved as a bundle, so the tracked rig is built beside the learned one; no adaptation on
+   so short a recording), ``--track-frames`` frames (0 skips this);
+5. lays the results out side by side (depth recording, ground-truth rig, scans, learned rig, tracked
+   rig over its captures), saves
    ``<out>/demo.blend`` and renders ``<out>/demo.png`` (Workbench, headless; the learned rig in its
    heat-map colours, blue 0 mm to red at the largest error).
 """
@@ -25,6 +30,7 @@ import numpy as np
 
 from ...sample_scenes.depth_recording import generate_depth
 from ...sample_scenes.registered import generate_registered, posed_sequence
+from ...sample_scenes.unregistered import generate_unregistered
 from ...solver.errors import ArticulaInputError
 from ...solver.learn.options import MIN_SCANS
 from ..learn import heat_map
@@ -37,7 +43,10 @@ SPACING = 1.1  # metres between the demo's exhibits along X
 LEARNED_NAME = "Learned rig"
 DEFAULT_PARTS = 0          # learn_rig's part count in the demo (0: chosen from the motion)
 DEFAULT_ITERATIONS = 3     # learn_rig's outer rounds in the demo (the operator's default is 10)
-TITLES = {"depth": "Depth recording", "rig": "Articula rig (baked poses)", "scans": "Registered scans"}
+TRACKED_NAME = "Tracked rig"
+DEFAULT_TRACK_FRAMES = 4   # frames of the unregistered recording the demo tracks
+TITLES = {"depth": "Depth recording", "rig": "Articula rig (baked poses)", "scans": "Registered scans",
+          "tracked": "Tracked rig over unregistered scans"}
 
 
 def learned_title(scale_mm: float) -> str:
@@ -51,16 +60,22 @@ def _stage(name: str, t0: float) -> float:
     return now
 
 
-def make_data(data_dir: str, n_scans: int, n_depth: int, seed: int = 0) -> dict:
+def make_data(data_dir: str, n_scans: int, n_depth: int, seed: int = 0, n_track: int = 0) -> dict:
     """Write the demo's sample data below ``data_dir``; return the paths."""
     scans = os.path.join(data_dir, "scans")
     depth = os.path.join(data_dir, "depth")
+    unreg = os.path.join(data_dir, "unregistered")
+    if n_track:
+        walk, faces, gt = posed_sequence(rig="cmu_mb", shape="female", n_poses=n_track, motion="walk",
+                                         skin="hybrid", seed=seed)
+        generate_unregistered(unreg, walk, faces, gt, seed=seed, fmt="ply")
     generate_registered(scans, rig="cmu_mb", shape="female", n_poses=n_scans, motion="rom",
                         skin="hybrid", fmt="obj", seed=seed)
     frames, faces, gt = posed_sequence(rig="cmu_mb", shape="male", n_poses=n_depth, motion="walk",
                                        skin="hybrid", seed=seed)
     generate_depth(depth, frames, faces, gt, resolution=(320, 240), seed=seed)
-    return {"scans": scans, "depth": depth, "bundle": os.path.join(scans, "ground_truth_model.npz")}
+    return {"scans": scans, "depth": depth, "unregistered": unreg if n_track else None,
+            "bundle": os.path.join(scans, "ground_truth_model.npz")}
 
 
 def _new_objects(before: set) -> list:
@@ -125,6 +140,32 @@ def learn_scene(scans: list, parts: int = 0, iterations: int = 2, seed: int = 0)
     return objects, json.loads(arms[0][learn_report.REPORT_PROPERTY])
 
 
+def track_scene(learned: list, unregistered: str, bundle_path: str) -> tuple:
+    """Import the unregistered scans three spacings on (beside the learned rig), save the learned rig as a bundle and track the scans
+    with it (``articula.track``); return ``(objects, report)`` (the tracker's report on the new rig)."""
+    arms = [ob for ob in learned if ob.type == 'ARMATURE']
+    _call(bpy.ops.articula.export_bundle, filepath=bundle_path, armature=arms[0].name)
+    captures = _call(bpy.ops.articula.import_scans, directory=unregistered)
+    _shift(captures, 3 * SPACING)
+    seqs = [ob for ob in captures if scan_sequence.is_scan_sequence(ob)]
+    if not seqs:
+        raise ArticulaInputError("demo: the unregistered scans made no scan-sequence object to track")
+    tracked = _call(bpy.ops.articula.track, bundle=bundle_path, captures=seqs[0].name, adapt='OFF',
+                    name=TRACKED_NAME)
+    rigs = [ob for ob in tracked if ob.type == 'ARMATURE' and "articula_track_report" in ob]
+    if len(rigs) != 1:
+        raise ArticulaInputError(f"demo: articula.track made {len(rigs)} armatures with a report, expected 1")
+    return captures + tracked, json.loads(rigs[0]["articula_track_report"])
+
+
+def tracked_summary(report: dict) -> str:
+    """One line about a tracking run: frames, median scan-to-model distance, lost and skipped frames."""
+    med = report.get("median_mm")
+    return (f"{len(report.get('frames', []))} frames, median scan-to-model "
+            f"{'n/a' if med is None else f'{med:.2f} mm'}, lost {report.get('lost_frames')}, "
+            f"skipped {report.get('skipped_frames')}, prior {report.get('prior')}")
+
+
 def _heat_scale(objects) -> float:
     """The error (mm) the top (red) colour of the learned mesh's heat map stands for."""
     return max(float(ob.data.get(heat_map.SCALE_PROPERTY, 0.0)) for ob in objects if ob.type == 'MESH')
@@ -157,8 +198,12 @@ def run(args) -> int:
                                      f"(or --no-learn)")
         if args.parts < 0 or args.learn_iterations < 0:
             raise ArticulaInputError("--parts and --learn-iterations must be 0 or more")
+    if args.track_frames < 0 or (args.track_frames and args.no_learn):
+        raise ArticulaInputError("--track-frames must be 0 or more, and tracking needs the learned rig "
+                                 "(not with --no-learn)")
     t0 = time.perf_counter()
-    paths = make_data(os.path.join(out, "demo_data"), args.scans, args.depth_frames, args.seed)
+    paths = make_data(os.path.join(out, "demo_data"), args.scans, args.depth_frames, args.seed,
+                      args.track_frames)
     t = _stage("sample data written", t0)
     blend = os.path.join(out, "demo.blend")
     built = build_scene(paths)
@@ -171,12 +216,17 @@ def run(args) -> int:
         built["learned"], report = learn_scene(built["scans"], args.parts, args.learn_iterations, args.seed)
         titles["learned"] = learned_title(_heat_scale(built["learned"]))
         t = _stage(f"learned rig {LEARNED_NAME!r}: {learned_summary(report)}", t)
+        if args.track_frames:
+            print(f"demo: tracking {args.track_frames} unregistered scans with the learned rig", flush=True)
+            built["tracked"], track_report = track_scene(built["learned"], paths["unregistered"],
+                                                         os.path.join(out, "demo_data", "learned.npz"))
+            t = _stage(f"tracked rig {TRACKED_NAME!r}: {tracked_summary(track_report)}", t)
     scene = bpy.context.scene
-    cover_sequences(scene, built["scans"] + built["depth"])
+    cover_sequences(scene, built["scans"] + built["depth"] + built.get("tracked", []))
     scene.frame_set(max(1, args.scans // 2))
     png = os.path.join(out, "demo.png")
-    render.render_overview(scene, png, {titles[k]: v for k, v in built.items()},
-                           [titles["learned"]] if "learned" in built else [], width, height)
+    coloured = [titles[k] for k in ("learned", "tracked") if k in built]     # heat map, capture error colours
+    render.render_overview(scene, png, {titles[k]: v for k, v in built.items()}, coloured, width, height)
     t = _stage(f"rendered {png}", t)
     save_blend(blend)
     _stage(f"saved {blend}", t)
@@ -207,5 +257,8 @@ def add_commands(sub) -> None:
                         f"takes longer (default {DEFAULT_PARTS})")
     p.add_argument("--learn-iterations", type=int, default=DEFAULT_ITERATIONS,
                    help=f"at most this many outer rounds of the learner (default {DEFAULT_ITERATIONS})")
+    p.add_argument("--track-frames", type=int, default=DEFAULT_TRACK_FRAMES,
+                   help=f"frames of the unregistered recording tracked with the learned rig; 0 skips tracking "
+                        f"(default {DEFAULT_TRACK_FRAMES})")
     p.add_argument("--resolution", default="1280x720", help="picture size WIDTHxHEIGHT (default 1280x720)")
     p.set_defaults(func=run)

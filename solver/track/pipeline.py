@@ -275,7 +275,8 @@ class _Tracker:
         t0 = time.perf_counter()
         caps = [self.capture(i) for i in keys]
         report = lambda f, text: _say(self.progress, lo + span * f, f"{what}: {text}")
-        out = adapt_model(self.model, caps, key_poses, self.prior, groups=self.groups, progress=report)
+        out = adapt_model(self.model, caps, key_poses, self.prior, groups=self.groups, progress=report,
+                          training_poses=self.training)
         self.model, self.groups = out.model, AnchorGroups(out.model)
         self.clock.add("adaptation", t0)
         return out.poses

@@ -17,6 +17,7 @@ from ..rig_helpers import key_frames
 
 SCANS = 4
 DEPTH_FRAMES = 6     # more than the scans: the frame range must cover the longer exhibit
+TRACK = 2            # unregistered frames tracked with the learned rig
 
 
 def _demo(tmp, *args):
@@ -30,7 +31,7 @@ def demo_run(tmp_path_factory):
     """(stdout, output folder) of one small demo run, shared by the tests of this module."""
     tmp = tmp_path_factory.mktemp("demo")
     res = _demo(tmp, "--scans", str(SCANS), "--depth-frames", str(DEPTH_FRAMES), "--parts", "6", "--learn-iterations", "1",
-                "--resolution", "480x270")
+                "--track-frames", str(TRACK), "--resolution", "480x270")
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-3000:]
     return res.stdout, tmp / "out"
 
@@ -56,7 +57,8 @@ def test_demo_learns_a_rig_beside_the_scans(pkg, demo_run):
     assert report["parts"] == 6 and report["input"]["scans"] == SCANS
     assert f"mean {err['mean']:.2f}" in line
 
-    scans = next(ob for ob in bpy.data.objects if ob.type == 'MESH' and ob.articula.kind == 'SCAN_SEQUENCE')
+    scans = next(ob for ob in bpy.data.objects if ob.type == 'MESH' and ob.articula.kind == 'SCAN_SEQUENCE'
+                 and ob.articula.frame_count == SCANS)
     frames, _ = pkg("addon.sequences.scans").scan_frames(scans)
     # What a rig that does not move would score: the mean vertex distance of the scans to the best single
     # scan (about 200 mm for these 4 range-of-motion poses).  6 parts after one round of the learner
@@ -85,6 +87,29 @@ def test_demo_learns_a_rig_beside_the_scans(pkg, demo_run):
     assert demo.learned_title(me[heat_map.SCALE_PROPERTY]) in labels          # the heat map's scale in its title
 
 
+def test_demo_tracks_the_unregistered_scans_with_the_learned_rig(pkg, demo_run):
+    """A rig built from the learned rig's bundle plays the tracked walk over the unregistered captures:
+    one key per captured frame, the report's median scan-to-model distance small (6 parts, one round of
+    learning: a coarse model), the rig's mesh where the captures are."""
+    stdout, out = demo_run
+    demo = pkg("addon.cli.demo")
+    line = next((ln for ln in stdout.splitlines() if ln.startswith("demo: tracked rig")), "")
+    assert f"{TRACK} frames" in line, stdout[-2000:]
+    bpy.ops.wm.open_mainfile(filepath=str(out / "demo.blend"))
+    arm = bpy.data.objects[demo.TRACKED_NAME]
+    report = json.loads(arm["articula_track_report"])
+    assert len(report["frames"]) == TRACK and report["skipped_frames"] == [] and report["lost_frames"] == []
+    assert report["median_mm"] < 25.0, report["median_mm"]
+    caps = next(ob for ob in bpy.data.objects if ob.type == 'MESH' and ob.articula.kind == 'SCAN_SEQUENCE'
+                and ob.articula.frame_count == TRACK)
+    start = caps.articula.frame_start
+    assert key_frames(pkg, arm) == {tuple(range(start, start + TRACK))}
+    bpy.context.scene.frame_set(start)
+    mesh = next(ob for ob in bpy.data.objects if ob.type == 'MESH' and ob.parent == arm)
+    assert abs(_centre_x(mesh) - _centre_x(caps)) < 0.15
+    assert demo.TITLES["tracked"] in {ob.data.body for ob in bpy.data.objects if ob.type == 'FONT'}
+
+
 def test_demo_frame_range_covers_every_exhibit(pkg, demo_run):
     """The scene's range covers the depth recording (6 frames) as well as the scans and rigs (4 poses)."""
     _stdout, out = demo_run
@@ -92,12 +117,12 @@ def test_demo_frame_range_covers_every_exhibit(pkg, demo_run):
     scene = bpy.context.scene
     ends = {ob.name: (ob.articula.frame_start, ob.articula.frame_start + ob.articula.frame_count - 1)
             for ob in bpy.data.objects if ob.articula.frame_count}
-    assert sorted(e - s + 1 for s, e in ends.values()) == [SCANS, DEPTH_FRAMES], ends
+    assert sorted(e - s + 1 for s, e in ends.values()) == [TRACK, SCANS, DEPTH_FRAMES], ends
     assert scene.frame_start == min(s for s, _e in ends.values())
     assert scene.frame_end == max(e for _s, e in ends.values()) == DEPTH_FRAMES
     rigs = [ob for ob in bpy.data.objects if ob.type == 'ARMATURE' and ob.animation_data
             and ob.animation_data.action]
-    assert len(rigs) == 2                                         # the built rig and the learned rig
+    assert len(rigs) == 3                                 # the built rig, the learned rig, the tracked rig
     for arm in rigs:
         assert max(max(keys) for keys in key_frames(pkg, arm)) <= scene.frame_end
 
@@ -125,7 +150,8 @@ def test_demo_no_learn_keeps_the_three_exhibits(pkg, tmp_path):
     bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "out" / "demo.blend"))
     learn_report, demo = pkg("addon.learn.report"), pkg("addon.cli.demo")
     assert not [ob for ob in bpy.data.objects if learn_report.REPORT_PROPERTY in ob]
-    assert {ob.data.body for ob in bpy.data.objects if ob.type == 'FONT'} == set(demo.TITLES.values())
+    assert {ob.data.body for ob in bpy.data.objects if ob.type == 'FONT'} == {
+        title for key, title in demo.TITLES.items() if key != "tracked"}
     assert bpy.context.scene.display.shading.color_type == 'OBJECT'     # palette colours only
 
 
