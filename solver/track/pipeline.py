@@ -31,6 +31,7 @@ from ..parallel import single_blas_thread
 from ..rig.model import Model, Poses
 from ..rig.skinning import AnchorGroups
 from . import metrics, robust
+from .adapt import adapt_model, mirror_pairs
 from .frame_fit import fit_frame
 from .initialise import check_units, initialise
 from .options import ADAPT_MIN_FRAMES, MODEL_PRIOR_MIN_POSES, TrackOptions, frame_range
@@ -123,6 +124,7 @@ class _Tracker:
         self.captures = {}
         self.q_data = {}         # pass 1's Q^data per tracked frame (m), for the w_temp heuristic
         self.w_temp = 0.0
+        self.sym_pairs = mirror_pairs(model.skeleton)    # of the input model: adapted tails leave their children
         self.adapt = options.adapt == "on" or (options.adapt == "auto" and self.n >= ADAPT_MIN_FRAMES)
 
     def capture(self, i):
@@ -170,7 +172,7 @@ class _Tracker:
         """Frames in order, each from the last good pose; returns ``(n, ...)`` Poses with NaN-free
         placeholders (the last good pose) for skipped frames."""
         rot, trans, scale = [], [], []
-        pose, before, history = None, None, []
+        pose, history = None, []
         for i in range(self.n):
             t0 = time.perf_counter()
             capture = self.capture(i)
@@ -181,7 +183,7 @@ class _Tracker:
                 pose = self._first(i, capture, start_pose)
                 history.append(self.frames[i]["median_mm"])
             else:
-                pose, before = self._next(i, capture, pose, before, history), pose
+                pose = self._next(i, capture, pose, history)
             self.frames[i]["seconds"] = round(time.perf_counter() - t0, 3)
             self.clock.add("pass 1", t0)
             if pose is not None:
@@ -230,11 +232,10 @@ class _Tracker:
         self.q_data[i] = float(fit.log["data"].min())
         return pose
 
-    def _next(self, i, capture, pose, before, history):
-        """Frame i from the constant-velocity prediction of the last good poses ``before`` and ``pose``;
-        re-initialised when its median jumps (lost-frame detection)."""
-        start = pose if before is None else extrapolate(before, pose)
-        fit = fit_frame(self.model, capture, start, self.prior, self.options.frame, self.groups)
+    def _next(self, i, capture, pose, history):
+        """Frame i from the last good ``pose`` (a constant-velocity prediction measured no better:
+        docs/track.md); re-initialised when its median jumps (lost-frame detection)."""
+        fit = fit_frame(self.model, capture, pose, self.prior, self.options.frame, self.groups)
         median = fit.stats["median_mm"]
         limit = max(self.options.lost_factor * float(np.median(history[-RUNNING:])), self.options.lost_mm)
         if median > limit:
@@ -271,12 +272,11 @@ class _Tracker:
 
     def _adapt(self, keys, key_poses, what, lo=0.0, span=0.0):
         """Adapt the model to the tracked frames ``keys`` at ``key_poses``; returns their refined poses."""
-        from .adapt import adapt_model
         t0 = time.perf_counter()
         caps = [self.capture(i) for i in keys]
         report = lambda f, text: _say(self.progress, lo + span * f, f"{what}: {text}")
         out = adapt_model(self.model, caps, key_poses, self.prior, groups=self.groups, progress=report,
-                          training_poses=self.training)
+                          training_poses=self.training, sym_pairs=self.sym_pairs)
         self.model, self.groups = out.model, AnchorGroups(out.model)
         self.clock.add("adaptation", t0)
         return out.poses
@@ -345,14 +345,6 @@ def _put(poses, index, part) -> Poses:
     out.translations[list(index)] = part.translations
     out.scales[list(index)] = part.scales
     return out
-
-
-def extrapolate(a: Poses, b: Poses) -> Poses:
-    """The next pose at constant velocity after ``a`` then ``b`` (one frame each): per bone
-    ``q_b (q_a⁻¹ q_b)`` in bone-local axes, translation and scale linearly."""
-    step = quat_mul(quat_conj(a.rotations), b.rotations)
-    rot = quat_canonical(quat_normalize(quat_mul(b.rotations, step)))
-    return Poses(rot, 2.0 * b.translations - a.translations, np.maximum(2.0 * b.scales - a.scales, 1e-3))
 
 
 def interpolate_gaps(poses, usable) -> Poses:

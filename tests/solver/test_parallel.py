@@ -167,22 +167,24 @@ def test_fork_map_keeps_the_order_and_computes_the_second_half_in_a_child():
     assert parallel.fork_map(lambda x: os.getpid(), range(3)) == [os.getpid()] * 3    # one worker: here
 
 
-def test_single_blas_thread_restores_the_thread_count():
+@linux_only
+def test_single_blas_thread_restores_the_thread_count_of_numpys_and_scipys_openblas():
+    """Both wheels bundle their own OpenBLAS here (scipy's is the one SuperLU uses): both go to one
+    thread inside the block and back afterwards."""
     threads = parallel._openblas_threads()
-    if threads is None:
-        pytest.skip("numpy's BLAS is not a bundled OpenBLAS")
-    get, _ = threads
-    before = get()
+    assert len(threads) == 2, threads
+    for _, put in threads:
+        put(2)
     with parallel.single_blas_thread():
-        assert get() == 1
+        assert [get() for get, _ in threads] == [1, 1]
         with parallel.single_blas_thread():
-            assert get() == 1
-        assert get() == 1
-    assert get() == before
+            assert [get() for get, _ in threads] == [1, 1]
+        assert [get() for get, _ in threads] == [1, 1]
+    assert [get() for get, _ in threads] == [2, 2]
     with pytest.raises(ValueError):
         with parallel.single_blas_thread():
             raise ValueError
-    assert get() == before
+    assert [get() for get, _ in threads] == [2, 2]
 
 
 def test_map_in_order_uses_its_own_thread_count_and_reports_in_order():

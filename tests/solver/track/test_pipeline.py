@@ -142,14 +142,6 @@ def test_initialise_finds_a_turned_and_moved_body_without_help(body):
 
 # closed forms ----------------------------------------------------------------------------------------
 
-def test_extrapolate_continues_a_constant_rotation_and_translation(body):
-    poses = _motion(body, 3)
-    one = [Poses(poses.rotations[k:k + 1], poses.translations[k:k + 1], poses.scales[k:k + 1]) for k in range(3)]
-    nxt = pipeline.extrapolate(one[0], one[1])
-    assert np.allclose(np.abs(np.sum(nxt.rotations * one[2].rotations, axis=-1)), 1.0, atol=1e-12)
-    assert np.allclose(nxt.translations, one[2].translations)
-
-
 def test_interpolate_gaps_is_the_geodesic_midpoint(body):
     poses = _motion(body, 5)
     poses.rotations[2] = (1, 0, 0, 0)
