@@ -177,7 +177,40 @@ def pose_columns(num_bones, fit_scale):
     return {"t": 0, **({"s": 3} if fit_scale else {}), **{("rot", b): 4 + 3 * b for b in range(num_bones)}}
 
 
-class _Update:
+def active_set_solve(H, g, mu, z, violations):
+    """Box limits as an active set (model-adaptive mocap dissertation §4.1.4): from the damped step ``z``
+    of ``H z = −g``, entries that ``violations(z) -> (bad (n,) bool, value (n,))`` flags are clamped to
+    ``value`` and leave the system (their value moves to the right-hand side), which is solved again until
+    nothing else is violated.  Returns the step ``(n,)``."""
+    active = np.zeros(len(z), dtype=bool)
+    for _ in range(len(z)):
+        bad, value = violations(z)
+        bad &= ~active
+        if not bad.any():
+            break
+        active |= bad
+        z[active] = value[active]
+        f = ~active
+        rhs = g[f] + H[f][:, active] @ z[active]
+        z[f] = solve_damped(H[f][:, f][None], rhs[None], mu, DAMP_FLOOR)[0]
+    return z
+
+
+class QuadraticSteps:
+    """The LM core's step model for a problem of size 1 holding its damped system as ``H (P, P)`` and
+    ``g (P,)`` (half the gradient): slope, predicted decrease and step norm of steps ``(k, P)``."""
+
+    def slope(self, idx, steps):
+        return 2.0 * steps @ self.g
+
+    def predicted_decrease(self, idx, steps):
+        return -2.0 * steps @ self.g - np.einsum("ki,ij,kj->k", steps, self.H, steps)
+
+    def step_norm(self, steps):
+        return np.linalg.norm(steps, axis=1)
+
+
+class _Update(QuadraticSteps):
     """One update of one frame as a problem of the LM core (size 1): the pairs, IRLS weights and the
     bounded bones' reparametrisation fixed at the starting pose.  Steps ``z (1, P_free)``: translation,
     [scale], δ_b for free bones and Δr_b for bounded ones."""
@@ -235,19 +268,8 @@ class _Update:
         z = solve_damped(self.H[None], self.g[None], mu, DAMP_FLOOR)[0]
         if not self.bounded.any():
             return z[None]
-        active = np.zeros(len(z), dtype=bool)
         rows = np.flatnonzero(self.free)                                          # z index -> layout column
-        for _ in range(len(z)):
-            bad, value = self._violations(z, rows)
-            bad &= ~active
-            if not bad.any():
-                break
-            active |= bad
-            z[active] = value[active]
-            f = ~active
-            rhs = self.g[f] + self.H[f][:, active] @ z[active]
-            z[f] = solve_damped(self.H[f][:, f][None], rhs[None], mu, DAMP_FLOOR)[0]
-        return z[None]
+        return active_set_solve(self.H, self.g, mu, z, lambda x: self._violations(x, rows))[None]
 
     def _violations(self, z, rows):
         """Per entry of ``z``: whether it takes a bounded DoF outside its interval, and the step onto it."""
@@ -279,15 +301,6 @@ class _Update:
         if which[0]:
             self.pose = self.trial
             self.r0 = quat_to_rotvec(self.pose.rotations[0])     # bounded bones step from the new pose
-
-    def slope(self, idx, steps):
-        return 2.0 * steps @ self.g
-
-    def predicted_decrease(self, idx, steps):
-        return -2.0 * steps @ self.g - np.einsum("ki,ij,kj->k", steps, self.H, steps)
-
-    def step_norm(self, steps):
-        return np.linalg.norm(steps, axis=1)
 
 
 def _refresh(model, groups, pose, capture, options):

@@ -93,29 +93,6 @@ def closest_points(points, vertices, faces):
         first = order[np.r_[0, np.cumsum(counts)[:-1]]]
         feet[rows], which[rows] = q[first], t[first]
     return d, feet, which
-    tri = vertices[faces]                                                  # (F, 3, 3)
-    centre = tri.mean(axis=1)
-    rmax = float(np.sqrt(((tri - centre[:, None]) ** 2).sum(axis=2).max()))
-    tol = FOOT_TOL * (np.abs(tri).max() + np.abs(points).max(axis=1) + rmax)           # (N,): rounding
-    tree = cKDTree(centre)
-    k = min(FOOT_CANDIDATES, len(faces))
-    cand = tree.query(points, k)[1].reshape(N, k)
-    best = np.full(N, np.inf)
-    rows = np.arange(N)
-    for j in range(k):                                  # only the points not yet resolved
-        t = cand[rows, j]
-        q = closest_points_on_triangles(points[rows], tri[t, 0], tri[t, 1], tri[t, 2])
-        dist = np.linalg.norm(q - points[rows], axis=1)
-        better = dist < best[rows]
-        r = rows[better]
-        best[r], feet[r], which[r] = dist[better], q[better], t[better]
-        rows = rows[best[rows] > d[rows] + tol[rows]]
-    for i in rows:
-        t = np.asarray(tree.query_ball_point(points[i], d[i] + rmax + tol), dtype=np.int64)
-        q = closest_points_on_triangles(np.repeat(points[i:i + 1], len(t), 0), tri[t, 0], tri[t, 1], tri[t, 2])
-        j = int(np.argmin(np.linalg.norm(q - points[i], axis=1)))
-        feet[i], which[i] = q[j], t[j]
-    return d, feet, which
 
 
 def robust_stats(d) -> dict:

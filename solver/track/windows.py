@@ -79,7 +79,7 @@ def _no_pairs(num_vertices) -> Correspondences:
                            {"removed_capture": 0.0, "removed_model": 0.0})
 
 
-class _Window:
+class _Window(ff.QuadraticSteps):
     """One update of the free frames of a window as a problem of the LM core (size 1): a
     :class:`.frame_fit._Update` per free frame (its pairs, IRLS weights, bounds and steps) and the
     temporal rows over all frames of the window.  Steps ``z (1, Σ P_free)``: the frames' steps in order."""
@@ -128,18 +128,7 @@ class _Window:
         z = solve_damped(self.H[None], self.g[None], mu, ff.DAMP_FLOOR)[0]
         if not any(u.bounded.any() for u in self.updates):
             return z[None]
-        active = np.zeros(len(z), dtype=bool)
-        for _ in range(len(z)):
-            bad, value = self._violations(z)
-            bad &= ~active
-            if not bad.any():
-                break
-            active |= bad
-            z[active] = value[active]
-            f = ~active
-            rhs = self.g[f] + self.H[f][:, active] @ z[active]
-            z[f] = solve_damped(self.H[f][:, f][None], rhs[None], mu, ff.DAMP_FLOOR)[0]
-        return z[None]
+        return ff.active_set_solve(self.H, self.g, mu, z, self._violations)[None]
 
     def try_steps(self, idx, steps):
         self.trial = list(self.frames)
@@ -152,15 +141,6 @@ class _Window:
             self.frames = self.trial
             for u, n in zip(self.updates, self.free):   # the next step starts here (bounded bones too)
                 u.pose, u.r0 = self.frames[n], quat_to_rotvec(self.frames[n].rotations[0])
-
-    def slope(self, idx, steps):
-        return 2.0 * steps @ self.g
-
-    def predicted_decrease(self, idx, steps):
-        return -2.0 * steps @ self.g - np.einsum("ki,ij,kj->k", steps, self.H, steps)
-
-    def step_norm(self, steps):
-        return np.linalg.norm(steps, axis=1)
 
 
 def _frame(poses, n, normalise=True) -> Poses:
