@@ -247,3 +247,20 @@ def test_generic_body_poses_keep_world_rotations_on_a_rig_with_other_rest_frames
     assert not np.allclose(same.rotations[:, 1:], 0.0)
     renamed = Skeleton([f"bone{i}" for i in range(sk.num_bones)], sk.parents, sk.heads, sk.tails, sk.frames)
     assert ini.generic_body_poses(renamed) is None
+
+
+def test_a_capture_of_another_body_is_reported_as_a_poor_fit(body):
+    """Captures of a body whose surface lies 2.5 cm off the model's everywhere (another person to this
+    model): tracked, but the
+    report's notes say the fit is poor; the same body's captures get no such note."""
+    from articula.solver.track.visibility import vertex_normals
+    poses = _motion(body, 2)
+    posed, pts = _source(body, poses)
+    start = Poses(poses.rotations[:1], poses.translations[:1], poses.scales[:1])
+    fat = [p + 0.025 * vertex_normals(p, body.faces) for p in posed]
+    res = pipeline.track_sequence(body, cp.CaptureSource.from_arrays(fat, [body.faces] * 2), _options(),
+                                  start_pose=start)
+    assert any(n.startswith("poor fit: 2 frame(s)") for n in res.notes), res.notes
+    same = pipeline.track_sequence(body, cp.CaptureSource.from_arrays(pts, [body.faces] * 2), _options(),
+                                   start_pose=start)
+    assert not any(n.startswith("poor fit") for n in same.notes), same.notes
