@@ -251,8 +251,8 @@ def test_generic_body_poses_keep_world_rotations_on_a_rig_with_other_rest_frames
 
 def test_a_capture_of_another_body_is_reported_as_a_poor_fit(body):
     """Captures of a body whose surface lies 2.5 cm off the model's everywhere (another person to this
-    model): tracked, but the
-    report's notes say the fit is poor; the same body's captures get no such note."""
+    model): tracked, but the report's notes say the fit is poor; the same body's captures get no such
+    note."""
     from articula.solver.track.visibility import vertex_normals
     poses = _motion(body, 2)
     posed, pts = _source(body, poses)
