@@ -16,7 +16,8 @@ MODEL_PRIOR_MIN_POSES = 3    # "auto" learns the prior from the model's own pose
 @dataclasses.dataclass(frozen=True)
 class TrackOptions:
     """adapt: refine the rest mesh and joints from the recording ("auto": when the range has at least
-    ``ADAPT_MIN_FRAMES`` frames); adapt_every: the model is refined on every this many-th tracked frame
+    ``ADAPT_MIN_FRAMES`` frames; the default is "off" until adaptation inside the tracker is measured to
+    help: on a planted subject it still moves the surface more than it recovers, docs/track.md); adapt_every: the model is refined on every this many-th tracked frame
     (dissertation §4.2: every 25th); temporal: the sliding-window pass with the temporal prior
     (``window`` frames, ``step``, weight ``w_temp``; 0 = Eq. 4.16's heuristic); prior: which pose prior
     ("auto": the model's own poses when it has ``MODEL_PRIOR_MIN_POSES``, else the generic human
@@ -26,7 +27,7 @@ class TrackOptions:
     frame is lost when its median scan-to-model distance exceeds both ``lost_factor`` times the running
     median of the frames before and ``lost_mm``; poor_fit_mm: a median above it is reported as a poor
     fit (another person, wrong model); frame: the per-frame fit's settings."""
-    adapt: str = "auto"
+    adapt: str = "off"
     adapt_every: int = 25
     temporal: bool = True
     window: int = 11
