@@ -198,6 +198,8 @@ def run(args) -> int:
                                      f"(or --no-learn)")
         if args.parts < 0 or args.learn_iterations < 0:
             raise ArticulaInputError("--parts and --learn-iterations must be 0 or more")
+    if args.track_frames is None:
+        args.track_frames = 0 if args.no_learn else DEFAULT_TRACK_FRAMES
     if args.track_frames < 0 or (args.track_frames and args.no_learn):
         raise ArticulaInputError("--track-frames must be 0 or more, and tracking needs the learned rig "
                                  "(not with --no-learn)")
@@ -257,8 +259,8 @@ def add_commands(sub) -> None:
                         f"takes longer (default {DEFAULT_PARTS})")
     p.add_argument("--learn-iterations", type=int, default=DEFAULT_ITERATIONS,
                    help=f"at most this many outer rounds of the learner (default {DEFAULT_ITERATIONS})")
-    p.add_argument("--track-frames", type=int, default=DEFAULT_TRACK_FRAMES,
+    p.add_argument("--track-frames", type=int, default=None,
                    help=f"frames of the unregistered recording tracked with the learned rig; 0 skips tracking "
-                        f"(default {DEFAULT_TRACK_FRAMES})")
+                        f"(default {DEFAULT_TRACK_FRAMES}, 0 with --no-learn)")
     p.add_argument("--resolution", default="1280x720", help="picture size WIDTHxHEIGHT (default 1280x720)")
     p.set_defaults(func=run)

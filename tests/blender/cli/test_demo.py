@@ -130,8 +130,8 @@ def test_demo_frame_range_covers_every_exhibit(pkg, demo_run):
 
 
 def test_demo_picture_shows_the_heat_map(pkg, demo_run):
-    """Saturated colours (the heat map's blue/cyan/green/yellow/red) in the learned rig's part of the
-    picture only: the palette colours of the other exhibits are pastel."""
+    """Saturated colours (the heat map's blue/cyan/green/yellow/red) in the learned rig's and the tracked
+    captures' part of the picture only: the palette colours of the other exhibits are pastel."""
     _, out = demo_run
     img = bpy.data.images.load(str(out / "demo.png"))
     w, h = img.size
@@ -141,8 +141,9 @@ def test_demo_picture_shows_the_heat_map(pkg, demo_run):
     saturated = (rgb.max(axis=2) - rgb.min(axis=2)) > 0.45
     cols = np.nonzero(saturated.any(axis=0))[0]
     assert saturated.sum() > 0.002 * w * h, saturated.sum()
-    # the learned rig is the rightmost exhibit: its saturated pixels sit in the right part of the picture
-    assert np.percentile(cols, 5) > 0.55 * w, (cols.min(), cols.max(), w)
+    # the learned rig and the tracked captures (error colours) are the two rightmost of the five exhibits:
+    # the saturated pixels sit in the right part of the picture
+    assert np.percentile(cols, 5) > 0.45 * w, (cols.min(), cols.max(), w)
 
 
 def test_demo_no_learn_keeps_the_three_exhibits(pkg, tmp_path):
