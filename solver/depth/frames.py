@@ -293,14 +293,16 @@ def grid_normals(grid: np.ndarray, rows=None, cols=None, jump: float = 0.01, mas
     return n.reshape(h, w, 3) if full else n
 
 
-def pca_normals(points: np.ndarray, k: int = 12, viewpoint=(0.0, 0.0, 0.0)) -> np.ndarray:
+def pca_normals(points: np.ndarray, k: int = 12, viewpoint=(0.0, 0.0, 0.0), away_from=None) -> np.ndarray:
     """Normals of an unorganised (N, 3) cloud: smallest principal axis of the k nearest neighbours
-    (scipy cKDTree), oriented towards ``viewpoint`` (the sensor origin).  Returns (N, 3) float32."""
+    (scipy cKDTree), oriented towards ``viewpoint`` (the sensor origin), or away from the point
+    ``away_from`` when it is given (a cloud whose sensor is unknown, e.g. away from its centroid).
+    Returns (N, 3) float32."""
     from scipy.spatial import cKDTree
 
     p = np.asarray(points, dtype=np.float64)
     if len(p) < 3:
-        out = np.asarray(viewpoint, float) - p
+        out = np.asarray(viewpoint, float) - p if away_from is None else p - np.asarray(away_from, float)
         return (out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-12)).astype(np.float32)
     k = min(k, len(p))
     _, idx = cKDTree(p).query(p, k=k)
@@ -308,24 +310,19 @@ def pca_normals(points: np.ndarray, k: int = 12, viewpoint=(0.0, 0.0, 0.0)) -> n
     cov = np.einsum("nki,nkj->nij", nb, nb)
     _, vecs = np.linalg.eigh(cov)
     n = vecs[:, :, 0]
-    flip = np.einsum("ij,ij->i", n, np.asarray(viewpoint, float) - p) < 0
+    towards = np.asarray(viewpoint, float) - p if away_from is None else p - np.asarray(away_from, float)
+    flip = np.einsum("ij,ij->i", n, towards) < 0
     n[flip] *= -1
     return n.astype(np.float32)
 
 
 # ---------------------------------------------------------------------------------- downsampling
 
-def voxel_downsample(points: np.ndarray, voxel: float, *attributes):
-    """Average points (and per-point attributes) per cubic voxel of edge ``voxel``.
-
-    points (N, 3); each attribute (N, C).  Voxels are integer keys ``floor(p / voxel)`` packed into one
-    int64, grouped with one sort; the sums are ``np.bincount`` with weights.  Returns ``(points, *attributes)`` with one row per occupied voxel,
-    ordered by key (deterministic).  Attributes named normals should be re-normalised by the caller.
-    """
-    p = np.asarray(points)
-    if voxel <= 0 or len(p) == 0:
-        return (p, *attributes)
-    q = np.floor(p / voxel).astype(np.int64)
+def voxel_groups(points: np.ndarray, voxel: float):
+    """``(group (N,) intp, m)``: the index of every point's cubic voxel of edge ``voxel`` among the ``m``
+    occupied ones, voxels ordered by their key.  Keys are ``floor(p / voxel)`` packed into one int64,
+    grouped with one sort.  points (N, 3), N > 0."""
+    q = np.floor(np.asarray(points) / voxel).astype(np.int64)
     q -= q.min(axis=0)
     dims = q.max(axis=0) + 1
     if float(dims[0]) * float(dims[1]) * float(dims[2]) >= 2.0 ** 62:
@@ -338,7 +335,20 @@ def voxel_downsample(points: np.ndarray, voxel: float, *attributes):
     np.not_equal(ks[1:], ks[:-1], out=first[1:])
     group = np.empty(len(ks), np.intp)
     group[order] = np.cumsum(first) - 1          # voxel index of every point, in key order
-    m = int(group.max()) + 1
+    return group, int(group.max()) + 1
+
+
+def voxel_downsample(points: np.ndarray, voxel: float, *attributes):
+    """Average points (and per-point attributes) per cubic voxel of edge ``voxel``.
+
+    points (N, 3); each attribute (N, C).  Voxels of :func:`voxel_groups`; the sums are ``np.bincount``
+    with weights.  Returns ``(points, *attributes)`` with one row per occupied voxel,
+    ordered by key (deterministic).  Attributes named normals should be re-normalised by the caller.
+    """
+    p = np.asarray(points)
+    if voxel <= 0 or len(p) == 0:
+        return (p, *attributes)
+    group, m = voxel_groups(p, voxel)
     counts = np.bincount(group, minlength=m).astype(np.float64)
 
     def mean(a):

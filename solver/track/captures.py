@@ -16,6 +16,7 @@ import os
 
 import numpy as np
 
+from ..depth.frames import pca_normals, voxel_groups
 from ..errors import ArticulaInputError
 from ..formats.mesh_files import MESH_EXTENSIONS, read_mesh
 from ..formats.point_files import read_point_file
@@ -47,7 +48,7 @@ def clean(points, triangles=None):
         raise ArticulaInputError(f"capture: a triangle uses vertex {int(tris.max())} (or a negative index) but "
                                  f"the capture has {len(points)} points")
     tris = tris[good[tris].all(axis=1)]
-    tris = tris[(tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])]
+    tris = tris[_nondegenerate(tris)]
     used = np.zeros(len(points), dtype=bool)
     used[tris.ravel()] = True
     remap = np.cumsum(used) - 1
@@ -56,29 +57,35 @@ def clean(points, triangles=None):
 
 def thin_mesh(points, triangles, max_points: int):
     """Vertex clustering of a triangle mesh to at most about ``max_points`` vertices: vertices in one
-    cubic cell become their mean, triangles are remapped, collapsed and repeated ones removed.  The
-    cell size is found by bisection on the occupied-cell count (metres; 12 halvings)."""
+    cubic cell (:func:`..depth.frames.voxel_groups`, cells anchored at the mesh's lowest corner) become
+    their mean, triangles are remapped, collapsed and repeated ones removed.  The cell size is found by
+    bisection on the occupied-cell count (metres; 12 halvings)."""
     if len(points) <= max_points:
         return points, triangles
+    shifted = points - points.min(axis=0)
     lo, hi = 0.0, float(np.ptp(points, axis=0).max()) or 1.0
     for _ in range(12):
         size = 0.5 * (lo + hi)
-        if len(np.unique(_cells(points, size))) > max_points:
+        if voxel_groups(shifted, size)[1] > max_points:
             lo = size
         else:
             hi = size
-    _, inverse, counts = np.unique(_cells(points, hi), return_inverse=True, return_counts=True)
-    inverse = inverse.ravel()
-    merged = np.stack([np.bincount(inverse, points[:, k]) for k in range(3)], axis=1) / counts[:, None]
-    tris = inverse[triangles]
-    tris = tris[np.sort(_keep_first(tris))]
-    return merged, tris
+    group, m = voxel_groups(shifted, hi)
+    counts = np.bincount(group, None, m)
+    merged = np.stack([np.bincount(group, points[:, k], m) for k in range(3)], axis=1) / counts[:, None]
+    tris = group[triangles]
+    return merged, tris[np.sort(_keep_first(tris))]
+
+
+def _nondegenerate(tris):
+    """``(F,)`` bool: the triangles of ``tris (F, 3)`` whose three vertices differ."""
+    return (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2])
 
 
 def _keep_first(tris):
     """Indices of the non-degenerate triangles of ``tris (F, 3)``, each vertex set once (first kept),
     with the original winding."""
-    ok = np.flatnonzero((tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & (tris[:, 0] != tris[:, 2]))
+    ok = np.flatnonzero(_nondegenerate(tris))
     _, first = np.unique(np.sort(tris[ok], axis=1), axis=0, return_index=True)
     return ok[first]
 
@@ -91,29 +98,14 @@ def thin_cloud(points, max_points: int, seed: int = 0):
     return points[keep]
 
 
-def _cells(points, size):
-    """One int64 key per point: its cubic cell of edge ``size`` (metres)."""
-    ijk = np.floor((points - points.min(axis=0)) / size).astype(np.int64)
-    n = ijk.max(axis=0) + 1
-    return (ijk[:, 0] * n[1] + ijk[:, 1]) * n[2] + ijk[:, 2]
-
-
 def cloud_normals(points, centre=None, neighbours: int = CLOUD_NEIGHBOURS):
-    """Unit normals ``(N, 3)`` of a point cloud: the smallest principal axis of each point's
-    ``neighbours`` nearest points, oriented away from ``centre`` (default: the cloud's centroid;
-    a capture seen by cameras would orient towards them, which a plain cloud file does not record)."""
-    from scipy.spatial import cKDTree
+    """Unit normals ``(N, 3)`` of a point cloud (:func:`..depth.frames.pca_normals`), oriented away from
+    ``centre`` (default: the cloud's centroid; a capture seen by cameras would orient towards them, which
+    a plain cloud file does not record)."""
     if len(points) < 3:
         return np.zeros_like(points)
-    k = min(neighbours, len(points))
-    _, idx = cKDTree(points).query(points, k=k)
-    nb = points[idx] - points[idx].mean(axis=1, keepdims=True)
-    _, vecs = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb))
-    n = vecs[:, :, 0]
-    centre = points.mean(axis=0) if centre is None else np.asarray(centre, dtype=np.float64)
-    flip = np.einsum("ni,ni->n", n, points - centre) < 0
-    n[flip] *= -1.0
-    return n
+    centre = points.mean(axis=0) if centre is None else centre
+    return pca_normals(points, neighbours, away_from=centre).astype(np.float64)
 
 
 def make_capture(points, triangles=None, cameras=None, max_points: int = 0):
