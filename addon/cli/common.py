@@ -13,6 +13,7 @@ line says so (:data:`NOT_SAVED`).
 """
 import contextlib
 import io
+import json
 import os
 import sys
 
@@ -23,6 +24,14 @@ from .. import console
 from ..sequences import playback
 
 NOT_SAVED = "not saved: give --blend FILE to keep it"
+
+
+def write_json(path: str, doc: dict) -> None:
+    """Write ``doc`` as indented JSON to ``path`` through a temporary file (no half-written report)."""
+    tmp = path + ".tmp"
+    with open(tmp, "w", encoding="utf-8") as fh:
+        json.dump(doc, fh, indent=1)
+    os.replace(tmp, path)
 
 
 def _without_report(printed: str, report: str) -> str:

@@ -13,7 +13,6 @@ coordinates.  ``--forward``/``--up`` (as for ``import-scans``) only place the sc
 1..N) and the learned rig with its poses on the same frames, added to the file when it exists (a
 ``.blend1`` keeps its previous version), else in an empty scene.
 """
-import json
 import os
 
 import bpy
@@ -24,7 +23,7 @@ from ...solver.learn.options import LearnOptions, name_setting
 from .. import jobs
 from ..learn import inputs, result, solve
 from ..learn.report import error_summary, jsonable, report_json, summary_text
-from .common import call_operator, check_blend_output, editing, save_blend
+from .common import call_operator, check_blend_output, editing, save_blend, write_json
 from .scans import add_axis_arguments, axis_props
 
 # LearnOptions field -> the flag that sets it (error messages name the flag the user typed)
@@ -55,13 +54,6 @@ def _scan_paths(items) -> list:
         if not os.path.isfile(p):
             raise ArticulaInputError(f"{p}: file or folder not found")
     return inputs.scan_paths(folders.pop(), [os.path.basename(p) for p in items])
-
-
-def _write_json(path: str, doc: dict) -> None:
-    tmp = path + ".tmp"
-    with open(tmp, "w", encoding="utf-8") as fh:
-        json.dump(doc, fh, indent=1)
-    os.replace(tmp, path)
 
 
 def _save_blend(blend: str, paths, outcome, axes: dict) -> None:
@@ -103,7 +95,7 @@ def run(args) -> int:
     print(f"wrote {args.out}: {outcome.model.num_vertices} vertices, {outcome.model.skeleton.num_bones} bones, "
           f"{len(outcome.poses)} poses; {summary_text(outcome)}")
     if args.report:
-        _write_json(args.report, report_document(outcome))
+        write_json(args.report, report_document(outcome))
         print(f"wrote {args.report}")
     if args.blend:
         _save_blend(os.path.abspath(args.blend), paths, outcome, axis_props(args))

@@ -13,7 +13,6 @@ coordinates; ``--frames A:B`` tracks input frames A..B-1 (0-based).  ``--forward
 scans and the rig in the .blend.  ``--blend`` saves the scans (a scan-sequence object, frames 1..N) and the
 tracked rig playing over them, added to the file when it exists, else in an empty scene.
 """
-import json
 import os
 from dataclasses import replace
 
@@ -30,18 +29,11 @@ from ...solver.track.options import ADAPT_CHOICES, PRIOR_CHOICES, TrackOptions
 from .. import jobs
 from ..track import inputs, result, solve
 from ..track.report import report_document, summary_text
-from .common import call_operator, check_blend_output, editing, finish
+from .common import call_operator, check_blend_output, editing, finish, write_json
 from .scans import add_axis_arguments, axis_props
 
 # TrackOptions field -> the flag that sets it (error messages name the flag the user typed)
 FLAGS = {"adapt": "--adapt", "prior": "--prior", "max_points": "--max-points", "frames": "--frames"}
-
-
-def write_json(path: str, doc: dict) -> None:
-    tmp = path + ".tmp"
-    with open(tmp, "w", encoding="utf-8") as fh:
-        json.dump(doc, fh, indent=1)
-    os.replace(tmp, path)
 
 
 def _options(args, count: int) -> TrackOptions:
