@@ -46,7 +46,7 @@ def point_errors(model, poses: Poses, captures: CaptureInput, first_frame: int, 
     out = []
     for j in range(len(poses)):
         pts, _ = captures.reader(first_frame + j)
-        one = Poses(poses.rotations[j:j + 1], poses.translations[j:j + 1], poses.scales[j:j + 1])
+        one = poses.take(j)
         posed = hybrid_skin(model, one)[0]
         d = np.full(len(pts), np.nan, np.float32)
         good = np.isfinite(pts).all(axis=1)

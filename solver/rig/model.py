@@ -191,6 +191,15 @@ class Poses:
     def __len__(self) -> int:
         return len(self.rotations)
 
+    def take(self, index) -> "Poses":
+        """The frames ``index`` (an int, a slice or a sequence of ints) as new Poses with copied arrays;
+        an int keeps the frame axis (one frame)."""
+        if isinstance(index, (int, np.integer)):
+            index = slice(int(index), int(index) + 1)
+        elif not isinstance(index, slice):
+            index = np.asarray(list(index), dtype=np.intp)
+        return Poses(self.rotations[index].copy(), self.translations[index].copy(), self.scales[index].copy())
+
     def normalise_near_unit(self) -> str:
         """Normalise, in place, the rotations whose norm is off 1 by more than ``QUAT_TOL`` but at most
         ``QUAT_RENORM_TOL`` (rounding of float32 or text round trips); others are left for :meth:`validate`

@@ -299,7 +299,7 @@ def _system(ctx, state, pairs):
     H_xs, H_ss = np.zeros((3 * ctx.V, n_s)), np.zeros((n_s, n_s))
     g_x, g_s = np.zeros(3 * ctx.V), np.zeros(n_s)
     for n, p in enumerate(pairs):
-        one = Poses(state.poses.rotations[n:n + 1], state.poses.translations[n:n + 1], state.poses.scales[n:n + 1])
+        one = state.poses.take(n)
         posed, J = dense_jacobian(model, one, cols, nh + P, groups, heads=bool(nh))
         scale = p.irls_weights / (2.0 * len(p.irls_weights) * N)
         H_p, b_p, used, _ = data_terms(p, posed[0], plane_mask(p, opts.to_plane), scale)
@@ -478,9 +478,7 @@ def _icp(ctx, state, progress):
     best, stale, converged, updates = None, 0, False, 0
     while True:
         model, groups = ctx.at(state)
-        pairs = [_refresh(model, groups, Poses(state.poses.rotations[n:n + 1], state.poses.translations[n:n + 1],
-                                               state.poses.scales[n:n + 1]), c, ctx.refresh)
-                 for n, c in enumerate(ctx.captures)]
+        pairs = [_refresh(model, groups, state.poses.take(n), c, ctx.refresh) for n, c in enumerate(ctx.captures)]
         empty = [n for n, p in enumerate(pairs) if not len(p.distances)]
         if empty:
             raise ArticulaInputError(f"adapt: key frame {empty[0]} has no correspondences with the model "

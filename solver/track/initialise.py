@@ -191,7 +191,7 @@ def hypotheses(model, capture, bodies: Poses, groups=None):
     posed = hybrid_skin(model, bodies, groups)
     out = []
     for k in range(len(bodies)):
-        body = Poses(bodies.rotations[k:k + 1], bodies.translations[k:k + 1], bodies.scales[k:k + 1])
+        body = bodies.take(k)
         for up in up_candidates(capture.points):
             for G in facing_rotations(up):
                 v = posed[k] @ G.T

@@ -268,7 +268,7 @@ class _Tracker:
         keys = usable[::self.options.adapt_every]
         if len(keys) < 3:
             keys = [usable[k] for k in np.unique(np.linspace(0, len(usable) - 1, min(3, len(usable))).astype(int))]
-        return _put(poses, keys, self._adapt(keys, _take(poses, keys), "adapting the model", 0.5, 0.15))
+        return _put(poses, keys, self._adapt(keys, poses.take(keys), "adapting the model", 0.5, 0.15))
 
     def _adapt(self, keys, key_poses, what, lo=0.0, span=0.0):
         """Adapt the model to the tracked frames ``keys`` at ``key_poses``; returns their refined poses."""
@@ -286,7 +286,7 @@ class _Tracker:
         t0 = time.perf_counter()
         usable = self.usable()
         if self.options.temporal:
-            start = _take(poses, usable)
+            start = poses.take(usable)
             self.w_temp = self.options.w_temp or temporal_weight(
                 [self.q_data[i] for i in usable if i in self.q_data] or [robust.EPS_M], start.rotations)
             report = lambda f, text: _say(self.progress, 0.65 + 0.3 * f, f"temporal pass: {text}")
@@ -296,7 +296,7 @@ class _Tracker:
             poses = _put(poses, usable, sub)
         else:
             for k, i in enumerate(usable):
-                fit = fit_frame(self.model, self.capture(i), _take(poses, [i]), self.prior, self.options.frame,
+                fit = fit_frame(self.model, self.capture(i), poses.take(i), self.prior, self.options.frame,
                                 self.groups)
                 poses = _put(poses, [i], fit.pose)
                 _say(self.progress, 0.65 + 0.3 * (k + 1) / len(usable), self._text("refitting", i))
@@ -313,7 +313,7 @@ class _Tracker:
         from ..rig.skinning import hybrid_skin
         t0 = time.perf_counter()
         for i in self.usable():
-            posed = hybrid_skin(self.model, _take(poses, [i]), self.groups)[0]
+            posed = hybrid_skin(self.model, poses.take(i), self.groups)[0]
             d = metrics.point_to_mesh(self.capture(i).points, posed, self.model.faces) * 1e3
             stats = metrics.robust_stats(d)
             self.frames[i].update(mean_mm=stats["mean"], median_mm=stats["median"], mad_mm=stats["mad"],
@@ -334,13 +334,8 @@ class _Subset:
         return self.tracker.capture(self.index[k])
 
 
-def _take(poses, index) -> Poses:
-    index = list(index)
-    return Poses(poses.rotations[index].copy(), poses.translations[index].copy(), poses.scales[index].copy())
-
-
 def _put(poses, index, part) -> Poses:
-    out = _take(poses, range(len(poses)))
+    out = poses.take(slice(None))
     out.rotations[list(index)] = part.rotations
     out.translations[list(index)] = part.translations
     out.scales[list(index)] = part.scales
@@ -351,7 +346,7 @@ def interpolate_gaps(poses, usable) -> Poses:
     """``poses`` with every frame not in ``usable`` replaced by the interpolation between the nearest
     usable frames before and after (rotations: per bone along the geodesic; translation, scale:
     linear); held at the ends."""
-    out = _take(poses, range(len(poses)))
+    out = poses.take(slice(None))
     usable = sorted(usable)
     if not usable:
         return out

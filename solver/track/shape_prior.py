@@ -136,7 +136,7 @@ class ShapePrior:
         H_xh, H_hh, g_h = np.zeros((3 * V, num_heads)), np.zeros((num_heads, num_heads)), np.zeros(num_heads)
         cols = {("head", b): 3 * (b - 1) for b in range(1, model.skeleton.num_bones)}
         for m in range(M):
-            one = Poses(self.poses.rotations[m:m + 1], self.poses.translations[m:m + 1], self.poses.scales[m:m + 1])
+            one = self.poses.take(m)
             if num_heads:
                 posed, J = dense_jacobian(model, one, cols, num_heads, groups, heads=True)
                 posed, J = posed[0], J[0]

@@ -144,9 +144,10 @@ class _Window(ff.QuadraticSteps):
 
 
 def _frame(poses, n, normalise=True) -> Poses:
-    r = poses.rotations[n:n + 1]
-    return Poses(quat_normalize(r) if normalise else r.copy(), poses.translations[n:n + 1].copy(),
-                 poses.scales[n:n + 1].copy())
+    one = poses.take(n)
+    if normalise:
+        one.rotations = quat_normalize(one.rotations)
+    return one
 
 
 def _pairs(model, groups, frame, capture, options):

@@ -61,3 +61,12 @@ def test_quaternions_off_by_more_than_the_renormalising_tolerance_are_refused():
     assert p.normalise_near_unit() == ""
     with pytest.raises(ArticulaInputError, match=r"frame 1, bone 0: quaternion norm 1\.0003"):
         p.validate(2)
+
+
+def test_poses_take_copies_the_frames_asked_for():
+    p = Poses(np.tile([1.0, 0.0, 0.0, 0.0], (4, 2, 1)), np.arange(12.0).reshape(4, 3), np.arange(1.0, 5.0))
+    one, some, part = p.take(2), p.take([3, 0]), p.take(slice(1, 3))
+    assert len(one) == 1 and one.translations.tolist() == [[6.0, 7.0, 8.0]]
+    assert some.scales.tolist() == [4.0, 1.0] and part.scales.tolist() == [2.0, 3.0]
+    one.translations[0, 0] = -1.0
+    assert p.translations[2, 0] == 6.0                     # a copy: the source is untouched
