@@ -216,8 +216,9 @@ class _Update(QuadraticSteps):
     [scale], δ_b for free bones and Δr_b for bounded ones."""
     size = 1
 
-    def __init__(self, model, groups, pose, pairs, prior, options, max_depth=None):
+    def __init__(self, model, groups, pose, pairs, prior, options, max_depth=None, motion=None):
         self.model, self.groups, self.pose, self.pairs, self.prior = model, groups, pose, pairs, prior
+        self.motion = motion
         B = model.skeleton.num_bones
         self.w_pose = options.w_pose if prior.num_pairs else 0.0
         self.scale = pairs.irls_weights / (2.0 * max(len(pairs.irls_weights), 1))
@@ -237,6 +238,8 @@ class _Update(QuadraticSteps):
         E = float(np.einsum("c,cj,cj->", self.scale, e, e))
         if self.w_pose:
             E += self.w_pose / self.prior.num_pairs * float(np.sum(self.prior.residuals(pose.rotations) ** 2))
+        if self.motion is not None:
+            E += self.motion.value(pose.rotations[0])
         return E
 
     def energy(self, idx):
@@ -249,6 +252,9 @@ class _Update(QuadraticSteps):
             w = self.w_pose / self.prior.num_pairs
             Jp, ep = self.prior.jacobian(self.pose.rotations)[0], self.prior.residuals(self.pose.rotations)[0]
             H, g, E = H + w * Jp.T @ Jp, g + w * Jp.T @ ep, E + w * float(ep @ ep)
+        if self.motion is not None:
+            Hm, gm, Em = self.motion.system(self.pose.rotations[0], len(self.free))
+            H, g, E = H + Hm, g + gm, E + Em
         M = self._reparametrisation()
         H, g = M.T @ H @ M, M.T @ g
         self.H, self.g = H[self.free][:, self.free], g[self.free]
@@ -345,24 +351,36 @@ def _start_pose(model, init):
     return Poses(quat_normalize(init.rotations), init.translations.copy(), init.scales.copy())
 
 
+def into_box(pose: Poses, prior: PosePrior) -> Poses:
+    """``pose`` with every bounded joint's rotation vector clamped into the prior's box, so that updates
+    start feasible (a DoF outside its box would be pulled onto it by every step, whatever its length,
+    and the line search could never accept one)."""
+    r = quat_to_rotvec(pose.rotations)
+    bad, clamped = prior.box_violations(r)
+    if not bad.any():
+        return pose
+    return Poses(rotvec_to_quat(clamped), pose.translations, pose.scales)
+
+
 def fit_frame(model, capture: Capture, init: Poses, prior: PosePrior = None,
-              options: FrameFitOptions = FrameFitOptions(), groups: AnchorGroups = None) -> FrameFit:
+              options: FrameFitOptions = FrameFitOptions(), groups: AnchorGroups = None,
+              motion=None) -> FrameFit:
     """Fit the pose of ``model`` (fixed; metres) to one unregistered ``capture`` starting from ``init``
     (one frame, e.g. the previous frame's pose).  prior: a :class:`PosePrior` (None or
     ``PosePrior.none(skeleton)``: no prior term and no bounds); groups: the model's :class:`AnchorGroups`
     to reuse across frames.  Returns :class:`FrameFit` (module docstring).  Runs numpy's BLAS on one
     thread (:func:`solver.parallel.single_blas_thread`: its small products lose to thread start-up)."""
     with single_blas_thread():
-        return _fit_frame(model, capture, init, prior, options, groups)
+        return _fit_frame(model, capture, init, prior, options, groups, motion)
 
 
-def _fit_frame(model, capture, init, prior, options, groups):
+def _fit_frame(model, capture, init, prior, options, groups, motion=None):
     """The body of :func:`fit_frame`: the ICP stages of ``options.depth_stages``, each from the previous
     stage's best pose, then all bones (coarse-to-fine: extremities are not caught by neighbouring parts
     while the trunk is still far off)."""
     groups = AnchorGroups(model) if groups is None else groups
     prior = PosePrior.none(model.skeleton) if prior is None else prior
-    pose = _start_pose(model, init)
+    pose = into_box(_start_pose(model, init), prior)
     log = {key: [] for key in ("Q", "data", "pose", "pairs", "trials")}
     coarse = dataclasses.replace(options, rel_tol=options.coarse_rel_tol, lm_steps=options.coarse_lm_steps,
                                  max_iterations=options.coarse_iterations)
@@ -370,13 +388,14 @@ def _fit_frame(model, capture, init, prior, options, groups):
     updates = 0
     for stage, depth in stages:
         pose, pairs, done, converged = _icp(model, groups, capture, pose, prior, stage, log,
-                                            min(stage.max_iterations, options.max_iterations - updates), depth)
+                                            min(stage.max_iterations, options.max_iterations - updates), depth,
+                                            motion)
         updates += done
     pose = Poses(quat_canonical(quat_normalize(pose.rotations)), pose.translations, pose.scales)
     return FrameFit(pose, pair_stats(pairs), updates, converged, {k: np.array(v) for k, v in log.items()})
 
 
-def _icp(model, groups, capture, pose, prior, options, log, budget, max_depth=None):
+def _icp(model, groups, capture, pose, prior, options, log, budget, max_depth=None, motion=None):
     """Refresh-and-update rounds from ``pose`` until the stopping rule (module docstring) or ``budget``
     updates; appends to ``log``.  Returns ``(best pose, its pairs, updates made, converged)``."""
     damping = FixedRatioDamping([MU0], decrease=10.0, increase=10.0, mu_min=MU_MIN)
@@ -388,7 +407,7 @@ def _icp(model, groups, capture, pose, prior, options, log, budget, max_depth=No
             raise ArticulaInputError("capture: no correspondences between the model and the capture "
                                      "(empty, or too far from the starting pose)")
         q_pose = float(prior.value(pose.rotations)[0]) if prior.num_pairs else 0.0
-        Q = pairs.energy + options.w_pose * q_pose
+        Q = pairs.energy + options.w_pose * q_pose + (motion.value(pose.rotations[0]) if motion else 0.0)
         for key, value in (("Q", Q), ("data", pairs.energy), ("pose", q_pose), ("pairs", len(pairs.distances))):
             log[key].append(value)
         if best is not None and abs(log["Q"][-2] - Q) <= options.rel_tol * log["Q"][-2]:
@@ -399,7 +418,7 @@ def _icp(model, groups, capture, pose, prior, options, log, budget, max_depth=No
             stale += 1
         if converged or stale >= options.patience or updates >= budget:
             break
-        update = _Update(model, groups, pose, pairs, prior, options, max_depth)
+        update = _Update(model, groups, pose, pairs, prior, options, max_depth, motion)
         out = levenberg_marquardt(update, damping, Limits(steps=options.lm_steps, rejections=REJECTIONS),
                                   line_search=search)
         log["trials"].append(int(out.trials[0]))

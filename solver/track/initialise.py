@@ -26,6 +26,7 @@ from ..rig.skinning import hybrid_skin
 from . import robust
 from .correspondences import nearest_compatible
 from .frame_fit import FrameFitOptions, fit_frame
+from .limb_search import place_limbs
 from .pose_prior import bone_key
 from .visibility import vertex_normals
 
@@ -202,7 +203,7 @@ def hypotheses(model, capture, bodies: Poses, groups=None):
 
 
 def initialise(model, capture, prior=None, training_poses: Poses = None, options: FrameFitOptions = FrameFitOptions(),
-               groups=None, count: int = 24, keep: int = 6, extra: list = (), check: bool = True) -> Initialisation:
+               groups=None, count: int = 24, keep: int = 6, extra: list = (), check: bool = True, limbs: bool = True) -> Initialisation:
     """The first frame's pose of ``model`` on ``capture`` (module docstring).  ``count`` body poses,
     ``keep`` hypotheses refined by a root-only ICP, two by the full fit; ``extra`` poses (e.g. the
     previous frame's when a frame is lost) join the full fits; check: refuse a capture of another size
@@ -215,6 +216,10 @@ def initialise(model, capture, prior=None, training_poses: Poses = None, options
     for score, pose in scored[:keep]:
         fit = fit_frame(model, capture, pose, None, root, groups)
         coarse.append((float(fit.log["Q"].min()), fit.pose))
+        if limbs:
+            placed_ = place_limbs(model, fit.pose, capture.points, groups)
+            fit = fit_frame(model, capture, placed_, None, root, groups)
+            coarse.append((float(fit.log["Q"].min()), fit.pose))
     coarse.sort(key=lambda item: item[0])
     best = None
     for _, pose in coarse[:2] + [(None, p) for p in extra]:

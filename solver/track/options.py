@@ -18,7 +18,9 @@ class TrackOptions:
     """adapt: refine the rest mesh and joints from the recording ("auto": when the range has at least
     ``ADAPT_MIN_FRAMES`` frames; the default is "off" until adaptation inside the tracker is measured to
     help: on a planted subject it still moves the surface more than it recovers, docs/track.md); adapt_every: the model is refined on every this many-th tracked frame
-    (dissertation §4.2: every 25th); temporal: the sliding-window pass with the temporal prior
+    (dissertation §4.2: every 25th); w_motion: the share of the data term that pass 1's pull towards the
+    previous frame's joint rotations costs at their latest motion (:func:`.temporal.motion_weight`; 0: none,
+    as in the dissertation); temporal: the sliding-window pass with the temporal prior
     (``window`` frames, ``step``, weight ``w_temp``; 0 = Eq. 4.16's heuristic); prior: which pose prior
     ("auto": the model's own poses when it has ``MODEL_PRIOR_MIN_POSES``, else the generic human
     prior); fit_scale: also fit one uniform scale; frames: ``(a, b)`` tracks input frames a..b−1 only
@@ -33,6 +35,7 @@ class TrackOptions:
     window: int = 11
     step: int = 5
     w_temp: float = 0.0
+    w_motion: float = 0.05
     prior: str = "auto"
     fit_scale: bool = False
     frames: tuple = None
@@ -59,7 +62,7 @@ class TrackOptions:
         if 0 < self.max_points < 500:
             raise ArticulaInputError(f"max_points: {self.max_points} is too few to track a body (at least 500, "
                                      f"or 0 to keep every point)")
-        for name in ("w_temp", "lost_factor", "lost_mm", "poor_fit_mm"):
+        for name in ("w_temp", "w_motion", "lost_factor", "lost_mm", "poor_fit_mm"):
             value = getattr(self, name)
             if not (value == value and 0 <= value < 1e12):
                 raise ArticulaInputError(f"{name}: expected a finite value >= 0, got {value}")

@@ -35,11 +35,12 @@ from .adapt import adapt_model, mirror_pairs
 from .frame_fit import fit_frame
 from .initialise import check_units, initialise
 from .options import ADAPT_MIN_FRAMES, MODEL_PRIOR_MIN_POSES, TrackOptions, frame_range
-from .pose_prior import PosePrior, generic_prior
-from .temporal import temporal_weight
+from .pose_prior import PosePrior, generic_prior, widened
+from .temporal import MotionPrior, motion_weight, temporal_weight
 from .windows import fit_windows
 
 MIN_POINTS = 100         # a frame with fewer points (after cleaning) is skipped
+BOX_PAD = 0.1           # rad added to each side of the box limits (docs/track.md "Box limits")
 RUNNING = 10             # frames in the running median that lost-frame detection compares with
 
 
@@ -89,8 +90,9 @@ def choose_prior(model, training_poses, which: str):
         if have < MODEL_PRIOR_MIN_POSES:
             raise ArticulaInputError(f"prior 'model': the model has {have} pose(s), at least "
                                      f"{MODEL_PRIOR_MIN_POSES} are needed (use the generic prior)")
-        return PosePrior.from_poses(model.skeleton, training_poses, k_max=4), "model"
-    return generic_prior(model.skeleton), "generic"
+        own = PosePrior.from_poses(model.skeleton, training_poses, k_max=4)
+        return widened(own, generic_prior(model.skeleton), BOX_PAD), "model"
+    return widened(generic_prior(model.skeleton), None, BOX_PAD), "generic"
 
 
 def _say(progress, fraction, text):
@@ -123,6 +125,7 @@ class _Tracker:
         self.frames = [None] * self.n
         self.captures = {}
         self.q_data = {}         # pass 1's Q^data per tracked frame (m), for the w_temp heuristic
+        self.poses_1 = {}        # pass 1's pose per tracked frame, for the motion prior
         self.w_temp = 0.0
         self.sym_pairs = mirror_pairs(model.skeleton)    # of the input model: adapted tails leave their children
         self.adapt = options.adapt == "on" or (options.adapt == "auto" and self.n >= ADAPT_MIN_FRAMES)
@@ -230,12 +233,14 @@ class _Tracker:
             pose = fit.pose
         self.frames[i]["median_mm"] = fit.stats["median_mm"]
         self.q_data[i] = float(fit.log["data"].min())
+        self.poses_1[i] = pose
         return pose
 
     def _next(self, i, capture, pose, history):
-        """Frame i from the last good ``pose`` (a constant-velocity prediction measured no better:
-        docs/track.md); re-initialised when its median jumps (lost-frame detection)."""
-        fit = fit_frame(self.model, capture, pose, self.prior, self.options.frame, self.groups)
+        """Frame i from the last good ``pose``, held near it by the motion prior (a constant-velocity
+        prediction measured no better: docs/track.md); re-initialised when its median jumps (lost-frame detection)."""
+        motion = self._motion_prior(i)
+        fit = fit_frame(self.model, capture, pose, self.prior, self.options.frame, self.groups, motion)
         median = fit.stats["median_mm"]
         limit = max(self.options.lost_factor * float(np.median(history[-RUNNING:])), self.options.lost_mm)
         if median > limit:
@@ -253,8 +258,18 @@ class _Tracker:
                 return pose
         self.frames[i]["median_mm"] = median
         self.q_data[i] = float(fit.log["data"].min())
+        self.poses_1[i] = fit.pose
         history.append(median)
         return fit.pose
+
+    def _motion_prior(self, i):
+        """Pass 1's :class:`.temporal.MotionPrior` for frame i: towards frame i−1's pose, weighted by
+        :func:`.temporal.motion_weight` from frames i−2 and i−1 (None unless both were tracked)."""
+        share = self.options.w_motion
+        if not share or i < 2 or not {i - 1, i - 2} <= set(self.q_data):
+            return None
+        previous = np.stack([self.poses_1[i - 2].rotations[0], self.poses_1[i - 1].rotations[0]])
+        return MotionPrior(previous[1:], motion_weight(share, self.q_data[i - 1], previous))
 
     # adaptation and pass 2 ------------------------------------------------------------------------
 

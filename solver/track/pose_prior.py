@@ -20,7 +20,7 @@ another skeleton by bone names (:func:`generic_prior`).
 """
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -306,6 +306,24 @@ def generic_prior(skeleton, path: str = GENERIC_PATH) -> PosePrior:
     info = dict(src.info)
     info["mapped_pairs"] = f"{len(pairs)} of {len(joint_pairs(skeleton.parents))}"
     return PosePrior.from_mixtures(skeleton, pairs, mixtures, lower, upper, scores, info)
+
+
+def widened(prior: PosePrior, other: PosePrior = None, pad: float = 0.0) -> PosePrior:
+    """``prior`` with its box limits replaced by the hull of its box and ``other``'s finite bounds (e.g.
+    the generic human prior's on the same skeleton), widened by ``pad`` radians on each side.  Why: the
+    dissertation's box is the min/max over many training poses; over a model's few (30 range-of-motion
+    poses) it excludes ordinary motion (docs/track.md "Box limits")."""
+    if pad < 0 or not np.isfinite(pad):
+        raise ArticulaInputError(f"pose prior: pad must be finite and >= 0, got {pad}")
+    lower, upper = prior.lower.copy(), prior.upper.copy()
+    if other is not None:
+        if other.lower.shape != lower.shape:
+            raise ArticulaInputError(f"pose prior: box of shape {other.lower.shape}, expected {lower.shape}")
+        lower = np.where(np.isfinite(other.lower), np.minimum(lower, other.lower), lower)
+        upper = np.where(np.isfinite(other.upper), np.maximum(upper, other.upper), upper)
+    info = dict(prior.info, box=f"hull with {other.info.get('source', 'another prior') if other else 'nothing'}, "
+                                f"pad {pad:g} rad")
+    return replace(prior, lower=lower - pad, upper=upper + pad, info=info)
 
 
 def _mapped_box(src, to_src, R, B):

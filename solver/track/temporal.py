@@ -24,6 +24,7 @@ from ..geometry.rotations import quat_to_rotvec
 from .pose_prior import rotvec_increment_jacobian
 
 MIN_TEMP = (np.pi / 180.0 * 0.1) ** 2   # floor of Q^temp in temporal_weight (rad²): 0.1° of acceleration
+MIN_MOTION = (np.pi / 180.0) ** 2       # floor of the joints' mean squared motion in motion_weight: 1°/frame
 
 
 def _rotations(rotations) -> np.ndarray:
@@ -101,3 +102,54 @@ def temporal_weight(q_data, rotations, min_temp: float = MIN_TEMP) -> float:
     if len(q) < 3:
         raise ArticulaInputError(f"temporal weight: needs at least 3 frames, got {len(q)}")
     return float(q_data.mean() / max(value(q), min_temp))
+
+
+class MotionPrior:
+    """The temporal prior of one frame whose predecessors are fixed (pass 1 of tracking): the second
+    difference of Eq. 4.10 taken one-sided, ``Q = (w / J) Σ_j ‖r_j − r̂_j‖²`` with the prediction
+    ``r̂ = 2 r^{n−1} − r^{n−2}`` (constant angular velocity; ``r^{n−1}`` alone when only one frame is
+    known), joints 1..B−1 as in Eq. 4.10.  ``previous (k, B, 4)``: the last k (1 or 2) poses' rotations,
+    oldest first; ``weight`` (m / rad², the unit of w_temp)."""
+
+    def __init__(self, previous, weight: float):
+        q = _rotations(previous)
+        r = quat_to_rotvec(q[-2:, 1:])
+        self.target = 2.0 * r[-1] - r[0] if len(r) == 2 else r[-1]              # (J, 3)
+        self.weight = float(weight)
+        self.J = q.shape[1] - 1
+
+    def _residuals(self, rotations):
+        r = quat_to_rotvec(np.asarray(rotations, dtype=np.float64)[1:])
+        return np.sqrt(self.weight / max(self.J, 1)) * (r - self.target), r
+
+    def value(self, rotations) -> float:
+        """Q of one frame's rotations ``(B, 4)``."""
+        e = self._residuals(rotations)[0]
+        return float(np.einsum("ji,ji->", e, e))
+
+    def system(self, rotations, size):
+        """Normal equations ``(H (size, size), g (size,), Q)`` in the pose-layout columns (bone b at
+        ``4 + 3b``), ``d r / d δ`` from :func:`.pose_prior.rotvec_increment_jacobian`."""
+        e, r = self._residuals(rotations)
+        Jr = np.sqrt(self.weight / max(self.J, 1)) * rotvec_increment_jacobian(r)          # (J, 3, 3)
+        H, g = np.zeros((size, size)), np.zeros(size)
+        for j in range(self.J):
+            s = slice(4 + 3 * (j + 1), 7 + 3 * (j + 1))
+            H[s, s] = Jr[j].T @ Jr[j]
+            g[s] = Jr[j].T @ e[j]
+        return H, g, float(np.einsum("ji,ji->", e, e))
+
+
+def motion_weight(share: float, q_data: float, previous, min_motion: float = MIN_MOTION) -> float:
+    """Weight of :class:`MotionPrior` after Eq. 4.16's heuristic: the prior, at the joints' latest motion,
+    costs ``share`` of the data term: ``w = share Q^data / max(m, min_motion)`` with ``m`` the mean over
+    joints of ``‖r^{n−1} − r^{n−2}‖²`` (rad²) of ``previous (2, B, 4)`` and ``q_data`` the last frame's
+    Q^data (m).  Fast motion or clean data -> a weak pull; slow motion or noisy data -> a strong one."""
+    q = _rotations(previous)
+    if len(q) != 2:
+        raise ArticulaInputError(f"motion weight: expected the rotations of 2 frames, got {len(q)}")
+    if not (np.isfinite(q_data) and q_data > 0 and np.isfinite(share) and share >= 0):
+        raise ArticulaInputError("motion weight: Q^data must be finite and positive, share finite and >= 0")
+    r = quat_to_rotvec(q[:, 1:])
+    m = float(np.mean(np.sum((r[1] - r[0]) ** 2, axis=-1))) if q.shape[1] > 1 else 0.0
+    return float(share * q_data / max(m, min_motion))

@@ -199,3 +199,24 @@ def test_sequence_pass_one_tracks_frame_after_frame(tube):
     rms = np.sqrt(np.mean(np.sum((fitted - np.array(frames)) ** 2, axis=2), axis=1))
     assert len(out.poses) == 3 and np.all(rms < 1e-3) and calls == [1 / 3, 2 / 3, 1.0]
     assert out.iterations.shape == (3,) and len(out.stats) == 3
+
+
+def test_a_start_outside_the_box_is_moved_into_it_and_the_fit_proceeds(tube):
+    """The capture and the start bend a joint past its bound (ordinary motion that few training poses did
+    not cover); the start is clamped into the box first and the root, 2 cm off, is recovered.  Without
+    the clamp every step pulls the joint back onto its bound whatever the step length, the line search
+    finds no decrease and the fit ends where it started."""
+    model, truth = tube
+    sk = model.skeleton
+    prior = PosePrior.from_poses(sk, synthetic.random_poses(8, sk.num_bones, seed=4, max_angle=0.3), k_max=1,
+                                 sparsify=False)
+    r = np.clip(quat_to_rotvec(truth.rotations[0]), prior.lower, prior.upper)
+    r[7, 0] = prior.upper[7, 0] + 0.3
+    bent = Poses(rotvec_to_quat(r)[None], truth.translations, truth.scales)
+    posed = hybrid_skin(model, bent)[0]
+    capture = ff.Capture(posed, vertex_normals(posed, model.faces))
+    start = Poses(bent.rotations, truth.translations + [0.02, 0.0, 0.0], truth.scales)
+    out = ff.fit_frame(model, capture, start, prior, ff.FrameFitOptions(w_pose=1e-6))
+    fitted = quat_to_rotvec(out.pose.rotations[0])
+    assert np.all(fitted >= prior.lower - 1e-9) and np.all(fitted <= prior.upper + 1e-9)
+    assert np.linalg.norm(out.pose.translations - truth.translations) < 5e-3

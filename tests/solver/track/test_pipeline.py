@@ -91,7 +91,7 @@ def test_cloud_normals_point_outwards_on_a_sphere():
 @pytest.mark.parametrize("bad, match", [(dict(adapt="maybe"), "adapt"), (dict(prior="x"), "prior"),
                                         (dict(window=2), "window"), (dict(step=11), "step"),
                                         (dict(max_points=10), "max_points"), (dict(frames=(5, 2)), "frames"),
-                                        (dict(w_temp=float("nan")), "w_temp")])
+                                        (dict(w_temp=float("nan")), "w_temp"), (dict(w_motion=-0.1), "w_motion")])
 def test_options_refuse_absurd_settings(bad, match):
     with pytest.raises(ArticulaInputError, match=match):
         TrackOptions(**bad).validate()
@@ -172,6 +172,22 @@ def test_track_recovers_a_smooth_motion_and_reports_every_frame(body):
     report = res.report()
     assert report["format"] == "articula-track-report/1" and len(report["frames"]) == 5
     assert set(report["timings_s"]) >= {"pass 1", "report"}
+
+
+def test_motion_prior_holds_pass_one_joints_in_proportion_to_its_share(body):
+    """Pass 1 pulls each frame's joints towards the previous frame's from the third frame on: with an
+    overwhelming share the joints of frames 2.. stay at frame 1's while the root still follows; with none
+    they follow the capture."""
+    poses = _motion(body, 5)
+    posed, pts = _source(body, poses)
+    src = cp.CaptureSource.from_arrays(pts, [body.faces] * 5)
+    start = poses.take([0])
+    held = pipeline.track_sequence(body, src, _options(w_motion=1e6), start_pose=start).poses
+    free = pipeline.track_sequence(body, src, _options(w_motion=0.0), start_pose=start).poses
+    joint_moves = lambda p: np.abs(quat_to_rotvec(p.rotations[2:, 1:]) - quat_to_rotvec(p.rotations[1:2, 1:])).max()
+    truth_moves = joint_moves(poses)
+    assert joint_moves(held) < 0.05 * truth_moves < joint_moves(free)
+    assert held.translations[-1, 0] - held.translations[0, 0] > 0.06           # the root walks on (0.08 m)
 
 
 def test_empty_nan_and_outlier_frames_are_skipped_or_lost_and_interpolated(body):

@@ -196,3 +196,20 @@ def test_generic_prior_maps_mpfb_names_and_skips_unknown_bones(cmu_subject):
     legs = [i for i, n in enumerate(odd.names) if n.startswith("shin_")]
     assert c.num_pairs == a.num_pairs - 4 and not np.isin(c.pairs, legs).any()
     assert np.all(np.isinf(c.lower[legs]))
+
+
+def test_widened_box_is_the_hull_padded(prior):
+    """``widened``: the hull of the prior's box and another's finite bounds, then ``pad`` on each side;
+    the mixtures are untouched; a negative or infinite pad is refused."""
+    from articula.solver.track.pose_prior import widened
+    other = PosePrior.from_poses(_skeleton(), _poses(seed=3), k_max=1, sparsify=False)
+    other.lower[4], other.upper[4] = -np.inf, np.inf                 # a bone the other prior does not bound
+    out = widened(prior, other, pad=0.05)
+    np.testing.assert_array_equal(out.lower[1:4], np.minimum(prior.lower, other.lower)[1:4] - 0.05)
+    np.testing.assert_array_equal(out.upper[5], np.maximum(prior.upper, other.upper)[5] + 0.05)
+    np.testing.assert_array_equal(out.lower[4], prior.lower[4] - 0.05)
+    assert np.all(np.isinf(out.lower[0])) and out.means is prior.means and "pad 0.05" in out.info["box"]
+    np.testing.assert_array_equal(widened(prior).lower, prior.lower)
+    for bad in (-0.1, np.inf):
+        with pytest.raises(ArticulaInputError, match="pad"):
+            widened(prior, pad=bad)

@@ -93,3 +93,57 @@ def test_residuals_are_the_bone_local_log_of_the_quaternions():
     r = quat_to_rotvec(q[:, 1:])
     want = (r[1:-1] - 0.5 * (r[:-2] + r[2:])) / np.sqrt((N - 2) * (B - 1))
     assert np.allclose(temporal.residuals(q), want, atol=1e-15)
+
+
+def test_motion_prior_targets_the_previous_frame_or_the_constant_velocity_prediction():
+    """Pass 1's one-frame term: zero at the previous pose (one frame known) and at 2 r^{n−1} − r^{n−2}
+    (two known), the closed form (w / J)|d|² for a joint moved by d, the root left out."""
+    rng = np.random.default_rng(4)
+    q, r = _linear(rng, n=3)
+    w = 0.3
+    assert temporal.MotionPrior(q[1:2], w).value(q[1]) == 0.0
+    assert temporal.MotionPrior(q[:2], w).value(q[2]) < 1e-28
+    moved = r[1].copy()
+    d = np.array([0.01, -0.02, 0.015])
+    moved[2] += d
+    moved[0] += 0.5                                                   # the root: no part
+    assert temporal.MotionPrior(q[1:2], w).value(rotvec_to_quat(moved)) == pytest.approx(w * d @ d / (B - 1),
+                                                                                         rel=1e-9)
+
+
+def test_motion_prior_normal_equations_match_central_differences():
+    """``system`` returns the Gauss-Newton H = JᵀJ and g = Jᵀe of Q in the pose-layout columns: g against
+    central differences of Q / 2 under q ← q exp(δ), H against JᵀJ of the residuals' differences."""
+    rng = np.random.default_rng(5)
+    prev = rotvec_to_quat(rng.uniform(-1.0, 1.0, (2, B, 3)))
+    cur = Poses(rotvec_to_quat(rng.uniform(-1.0, 1.0, (1, B, 3))), np.zeros((1, 3)), np.ones(1))
+    prior = temporal.MotionPrior(prev, 0.7)
+    P = 4 + 3 * B
+    H, g, Q = prior.system(cur.rotations[0], P)
+    assert Q == pytest.approx(prior.value(cur.rotations[0]), rel=1e-12)
+    h = 1e-6
+    J = np.zeros((3 * (B - 1), P))
+    for k in range(P):
+        d = np.zeros((1, P))
+        d[0, k] = h
+        up, down = apply_pose_increment(cur, d).rotations[0], apply_pose_increment(cur, -d).rotations[0]
+        assert (prior.value(up) - prior.value(down)) / (4 * h) == pytest.approx(g[k], abs=1e-7)
+        J[:, k] = (prior._residuals(up)[0] - prior._residuals(down)[0]).ravel() / (2 * h)
+    assert np.allclose(H, J.T @ J, atol=1e-6)
+    assert not H[:7].any() and not g[:7].any()                       # translation, scale and root: free
+
+
+def test_motion_weight_follows_the_data_term_and_the_latest_motion():
+    """w = share Q^data / mean_j |r^{n−1} − r^{n−2}|²: the closed form for a known motion, the 1°/frame
+    floor for a still body, the root left out; bad inputs refused."""
+    rng = np.random.default_rng(6)
+    q, r = _linear(rng, n=2)
+    m = np.mean(np.sum((r[1, 1:] - r[0, 1:]) ** 2, axis=-1))
+    assert temporal.motion_weight(0.1, 0.004, q) == pytest.approx(0.1 * 0.004 / m, rel=1e-9)
+    still = np.stack([q[0], q[0]])
+    still[1, 0] = q[1, 0]                                              # only the root moved
+    assert temporal.motion_weight(0.1, 0.004, still) == pytest.approx(0.1 * 0.004 / temporal.MIN_MOTION)
+    assert temporal.motion_weight(0.0, 0.004, q) == 0.0
+    for args in ((0.1, 0.0, q), (0.1, np.nan, q), (-1.0, 0.004, q), (0.1, 0.004, q[:1])):
+        with pytest.raises(ArticulaInputError, match="motion weight"):
+            temporal.motion_weight(*args)
