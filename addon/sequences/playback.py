@@ -24,7 +24,8 @@ module decides which objects to update, which frame they show, and keeps their c
   else ~/.cache/articula) under ``scan_cache/`` or ``point_clouds/``, stored absolute.  Their names
   ``<name>-<8 hex digits><suffix>`` (:data:`CACHE_NAME`) are unique, which is how Articula's own files
   are told from anything else.
-* Saving (like Blender's external data): ``save_pre`` moves the caches of an unsaved file into the new
+* Saving (like Blender's external data; also the files of other modules' :class:`Reference`, e.g. the
+  tracking error colours): ``save_pre`` moves the caches of an unsaved file into the new
   ``<blend name>_articula/`` folder and copies those of another .blend's folder there (Save As: the
   original file keeps its own); caches elsewhere (a path the user chose) stay and are stored relative
   when inside the .blend's folder tree, else absolute.  ``save_post`` removes the caches in the saved
@@ -71,7 +72,25 @@ class Player:
     source: str = "source"   # what is imported again to rebuild a cache, e.g. "scans"
 
 
+@dataclass(frozen=True)
+class Reference:
+    """Another file that travels with the .blend like a cache: its path is in the object ID property
+    ``prop``; it is Articula's when its name matches ``name``; an unsaved file's copy lives in the cache
+    folder's ``unsaved_folder``.  Saving carries it as :func:`carry_cache` does a cache; it is never
+    removed as unused (it is not a playback cache)."""
+    prop: str
+    name: re.Pattern
+    unsaved_folder: str
+
+
+def register_reference(ref: Reference) -> None:
+    """Let the save handlers carry the files of ``ref`` (idempotent)."""
+    if ref not in _references:
+        _references.append(ref)
+
+
 _players: dict = {}      # ob.articula.kind -> Player
+_references: list = []   # Reference of other files carried with the .blend
 _reported: set = set()   # names of objects whose playback failed (reported once until a file is loaded)
 _session_unsaved: set = set()   # caches this session made for an unsaved file (removed at save if unused)
 
@@ -248,16 +267,17 @@ def referenced_caches() -> set:
     return {path for _ob, path in _sequence_items()}
 
 
-def is_unsaved_cache(path: str) -> bool:
-    """A cache Articula wrote for an unsaved file (in the cache folder's scan_cache/ or point_clouds/)."""
+def is_unsaved_cache(path: str, name=CACHE_NAME, folders=UNSAVED_FOLDERS) -> bool:
+    """A cache Articula wrote for an unsaved file (in the cache folder's scan_cache/ or point_clouds/;
+    ``name`` and ``folders`` for the files of a :class:`Reference`)."""
     folder = os.path.dirname(os.path.normpath(path))
-    return CACHE_NAME.match(os.path.basename(path)) is not None and folder in {
-        os.path.normpath(os.path.join(preferences.cache_dir(), sub)) for sub in UNSAVED_FOLDERS}
+    return name.match(os.path.basename(path)) is not None and folder in {
+        os.path.normpath(os.path.join(preferences.cache_dir(), sub)) for sub in folders}
 
 
-def is_blend_cache(path: str) -> bool:
+def is_blend_cache(path: str, name=CACHE_NAME) -> bool:
     """A cache Articula wrote beside a saved .blend (``<blend name>_articula/<name>-<id>...``)."""
-    return (CACHE_NAME.match(os.path.basename(path)) is not None
+    return (name.match(os.path.basename(path)) is not None
             and os.path.basename(os.path.dirname(os.path.normpath(path))).endswith(FOLDER_SUFFIX))
 
 
@@ -270,15 +290,16 @@ def _copy(src: str, dst: str) -> None:
     os.replace(tmp, dst)
 
 
-def carry_cache(path: str, folder: str, state: dict) -> str:
+def carry_cache(path: str, folder: str, state: dict, name=CACHE_NAME, folders=UNSAVED_FOLDERS) -> str:
     """Where the cache ``path`` lives once the .blend is saved with the cache folder ``folder``: moved
     there when it belongs to an unsaved file, copied there when it belongs to another .blend, else (a
     missing cache, one already there, one the user placed) left where it is.  Records what it did in
-    ``state`` ("moved": [(old, new)], "created": [new]) so a failed save can undo it."""
+    ``state`` ("moved": [(old, new)], "created": [new]) so a failed save can undo it.  ``name``,
+    ``folders``: how the files of a :class:`Reference` are recognised."""
     if not os.path.exists(path) or os.path.dirname(path) == os.path.normpath(folder):
         return path
-    move = is_unsaved_cache(path)
-    if not move and not is_blend_cache(path):
+    move = is_unsaved_cache(path, name, folders)
+    if not move and not is_blend_cache(path, name):
         return path
     dst = os.path.join(folder, os.path.basename(path))
     if not os.path.exists(dst):          # (a name is unique: one already there is this cache)
@@ -367,6 +388,34 @@ def _on_save_pre(filepath="", *_args):
                 carried[path] = path
         state["paths"][ob.name] = ob.articula.cache_file
         ob.articula.cache_file = stored_path(carried[path], filepath)
+    _carry_references(filepath, folder, state)
+
+
+def _carry_references(filepath, folder, state) -> None:
+    """:func:`_on_save_pre` for the files of every registered :class:`Reference`."""
+    state["props"] = []
+    for ref in _references:
+        for ob in bpy.data.objects:
+            stored = ob.get(ref.prop) if ob.library is None else None
+            if not isinstance(stored, str) or not stored:
+                continue
+            path = _reference_abspath(stored, filepath)
+            try:
+                new = carry_cache(path, folder, state, ref.name, (ref.unsaved_folder,))
+            except OSError as exc:
+                print(f"Articula: {ob.name}: could not put {path} beside {filepath} ({exc})")
+                new = path
+            state["props"].append((ob.name, ref.prop, stored))
+            ob[ref.prop] = stored_path(new, filepath)
+
+
+def _reference_abspath(stored: str, filepath: str) -> str:
+    """Absolute path of a :class:`Reference`'s stored path while saving as ``filepath``: ``//`` is the open
+    file's folder, or, in an unsaved file, the folder of the file being saved (a batch job writes files
+    for the .blend it is about to save)."""
+    if stored.startswith("//") and not bpy.data.filepath:
+        return os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(filepath)), stored[2:]))
+    return os.path.normpath(bpy.path.abspath(stored))
 
 
 def _restore_paths(state) -> None:
@@ -374,6 +423,10 @@ def _restore_paths(state) -> None:
         ob = bpy.data.objects.get(name)
         if ob is not None and ob.library is None:
             ob.articula.cache_file = value
+    for name, prop, value in state.get("props", []):
+        ob = bpy.data.objects.get(name)
+        if ob is not None and ob.library is None:
+            ob[prop] = value
 
 
 @persistent

@@ -7,12 +7,14 @@ errors of all tracked frames live in a file, ``<name>-<id>.track_errors.npz`` (`
 concatenated, ``offsets`` (T + 1,), ``first_frame``: input index of tracked frame 0, ``scale`` mm), in
 the .blend's cache folder (``<blend name>_articula/``, stored relative) or, for an unsaved file, in the
 cache folder's ``track_cache/`` (stored absolute); the object's ID property ``articula_track_errors``
-holds its path.  Handlers after the players' (``frame_change_pre``, ``load_post``, ``undo_post``,
+holds its path; saving the .blend carries the file into its cache folder like a playback cache
+(:class:`.playback.Reference`: moved from ``track_cache/``, copied from another .blend's folder).  Handlers after the players' (``frame_change_pre``, ``load_post``, ``undo_post``,
 ``redo_post``) write the shown frame's errors into the mesh; frames outside the tracked range show none.
 """
 from __future__ import annotations
 
 import os
+import re
 import uuid
 
 import bpy
@@ -146,8 +148,14 @@ def _remove_handlers():
             handlers.remove(old)
 
 
+ERRORS_FILE = playback.Reference(ERRORS_PROPERTY, re.compile(r".+-[0-9a-f]{8}" + re.escape(SUFFIX) + "$"),
+                                 UNSAVED_FOLDER)
+
+
 def register_extra():
-    """Install the handlers (after the players', whose modules register first)."""
+    """Install the handlers (after the players', whose modules register first); saving carries the error
+    files with the .blend (:class:`.playback.Reference`)."""
+    playback.register_reference(ERRORS_FILE)
     _remove_handlers()
     for name in _HANDLERS:
         getattr(bpy.app.handlers, name).append(_on_change)

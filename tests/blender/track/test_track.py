@@ -231,6 +231,40 @@ def test_error_colours_follow_the_frame(pkg, tmp_path, truth, stub):
     assert ob.data["articula_error_scale_mm"] >= 1.0
 
 
+def test_error_colours_travel_with_the_saved_blend(pkg, tmp_path, truth, stub, cache_home):
+    """stub: tracked in an unsaved file, the error file lives in the cache folder's track_cache/; the first
+    save moves it into ``<blend>_articula/`` (stored relative), Save As elsewhere copies it beside the new
+    file (the first keeps its own), and a reopened copy shows the colours after its folder was moved."""
+    model, poses, captures = truth
+    stub()
+    ob = import_captures(tmp_path, captures, moved())
+    name = ob.name
+    path = str(tmp_path / "person.npz")
+    save_bundle(path, model, poses)
+    assert bpy.ops.articula.track(bundle=path, captures=ob.name, **FAST) == {'FINISHED'}
+    unsaved = bpy.path.abspath(ob["articula_track_errors"])
+    assert os.path.dirname(unsaved) == str(cache_home / "track_cache") and os.path.isfile(unsaved)
+    first = tmp_path / "a" / "take.blend"
+    first.parent.mkdir()
+    bpy.ops.wm.save_as_mainfile(filepath=str(first))
+    ob = bpy.data.objects[name]
+    assert ob["articula_track_errors"].startswith("//take_articula/") and not os.path.exists(unsaved)
+    in_first = bpy.path.abspath(ob["articula_track_errors"])
+    assert os.path.isfile(in_first)
+    second = tmp_path / "b" / "copy.blend"
+    second.parent.mkdir()
+    bpy.ops.wm.save_as_mainfile(filepath=str(second))
+    ob = bpy.data.objects[name]
+    assert ob["articula_track_errors"].startswith("//copy_articula/") and os.path.isfile(in_first)
+    moved_dir = tmp_path / "elsewhere"
+    os.rename(second.parent, moved_dir)
+    bpy.ops.wm.open_mainfile(filepath=str(moved_dir / "copy.blend"))
+    ob = bpy.data.objects[name]
+    bpy.context.scene.frame_set(FRAME_START + 2)
+    got = error_values(ob)
+    assert got is not None and len(got) == len(captures[2][0])
+
+
 def test_adapted_model_gets_a_new_rig_and_hides_the_old(pkg, tmp_path, truth, stub):
     """stub: adaptation ran: a rig of the adapted model (same bones, its rest mesh) at the old rig's matrix
     plays the motion; the old rig is hidden and keeps its action."""
