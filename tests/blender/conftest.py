@@ -33,3 +33,11 @@ def empty_scene(addon):
 def pkg(addon):
     """Import a submodule of the enabled extension: ``pkg('addon.rig.builder')``."""
     return lambda name: importlib.import_module(f"{MODULE}.{name}")
+
+
+@pytest.fixture
+def cache_home(tmp_path, monkeypatch):
+    """A fresh ``ARTICULA_HOME`` (the cache folder of unsaved files) under the test's tmp_path; modules
+    that write caches use it for every test with ``pytestmark = pytest.mark.usefixtures("cache_home")``."""
+    monkeypatch.setenv("ARTICULA_HOME", str(tmp_path / "home"))
+    return tmp_path / "home"

@@ -16,11 +16,7 @@ from ...solver.learn_data import hybrid_truth
 from ..rig_helpers import poses, subject
 from ..sequences.test_import_depth import make_recording
 
-
-@pytest.fixture(autouse=True)
-def cache_home(tmp_path, monkeypatch):
-    monkeypatch.setenv("ARTICULA_HOME", str(tmp_path / "home"))
-    return tmp_path / "home"
+pytestmark = pytest.mark.usefixtures("cache_home")   # a fresh ARTICULA_HOME per test
 
 
 def _digest(path) -> str:

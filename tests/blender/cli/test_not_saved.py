@@ -12,13 +12,9 @@ import pytest
 from ...conftest import REPO
 from .test_blend_files import _commands, _scans, _user_file
 
+pytestmark = pytest.mark.usefixtures("cache_home")   # a fresh ARTICULA_HOME per test
+
 NOT_SAVED = "not saved: give --blend FILE to keep it"
-
-
-@pytest.fixture(autouse=True)
-def cache_home(tmp_path, monkeypatch):
-    monkeypatch.setenv("ARTICULA_HOME", str(tmp_path / "home"))
-    return tmp_path / "home"
 
 
 def _files(folder) -> list:

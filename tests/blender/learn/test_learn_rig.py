@@ -19,14 +19,10 @@ import pytest
 from ...solver.learn_data import hybrid_truth
 from ..rig_helpers import key_frames
 
+pytestmark = pytest.mark.usefixtures("cache_home")   # a fresh ARTICULA_HOME per test
+
 M_SCANS = 6
 FRAME_START = 3
-
-
-@pytest.fixture(autouse=True)
-def cache_home(tmp_path, monkeypatch):
-    monkeypatch.setenv("ARTICULA_HOME", str(tmp_path / "home"))
-    return tmp_path / "home"
 
 
 @pytest.fixture(scope="module")

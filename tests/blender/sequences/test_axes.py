@@ -15,13 +15,10 @@ from bpy_extras.io_utils import axis_conversion
 
 from ...solver.learn_data import hybrid_truth
 
+pytestmark = pytest.mark.usefixtures("cache_home")   # a fresh ARTICULA_HOME per test
+
 SHORT = {"X": "X", "Y": "Y", "Z": "Z", "NEGATIVE_X": "-X", "NEGATIVE_Y": "-Y", "NEGATIVE_Z": "-Z"}
 BOX = (0.2, 0.3, 1.0)          # half sizes: a tall box, 2 m high in Blender's Z
-
-
-@pytest.fixture(autouse=True)
-def cache_home(tmp_path, monkeypatch):
-    monkeypatch.setenv("ARTICULA_HOME", str(tmp_path / "home"))
 
 
 def world_vertices(ob):

@@ -16,11 +16,7 @@ from ...conftest import REPO
 from .test_import_depth import make_recording
 from .test_import_scans import evaluated, make_frames, write_folder
 
-
-@pytest.fixture(autouse=True)
-def cache_home(tmp_path, monkeypatch):
-    monkeypatch.setenv("ARTICULA_HOME", str(tmp_path / "home"))
-    return tmp_path / "home"
+pytestmark = pytest.mark.usefixtures("cache_home")   # a fresh ARTICULA_HOME per test
 
 
 def _import_both(tmp_path):

@@ -9,10 +9,7 @@ import pytest
 from .test_import_depth import make_recording
 from .test_import_scans import make_frames, write_folder
 
-
-@pytest.fixture(autouse=True)
-def cache_home(tmp_path, monkeypatch):
-    monkeypatch.setenv("ARTICULA_HOME", str(tmp_path / "home"))
+pytestmark = pytest.mark.usefixtures("cache_home")   # a fresh ARTICULA_HOME per test
 
 
 def _user_scene(start=1, end=77):

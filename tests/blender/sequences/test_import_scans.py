@@ -10,6 +10,8 @@ from ...conftest import SHARED_DATA
 from ...solver.mesh_writers import (CUBE_FACES, CUBE_VERTS, triangles, write_mdd, write_obj, write_off, write_pc2,
                                    write_ply, write_stl)
 
+pytestmark = pytest.mark.usefixtures("cache_home")   # a fresh ARTICULA_HOME per test
+
 
 def make_frames(n, seed=0):
     rng = np.random.default_rng(seed)
@@ -44,12 +46,6 @@ def evaluated(ob):
 def counts():
     return (len(bpy.data.objects), len(bpy.data.meshes), len(bpy.data.collections), len(bpy.data.cache_files),
             len(bpy.data.materials), bpy.context.scene.frame_start, bpy.context.scene.frame_end)
-
-
-@pytest.fixture(autouse=True)
-def cache_home(tmp_path, monkeypatch):
-    monkeypatch.setenv("ARTICULA_HOME", str(tmp_path / "home"))
-    return tmp_path / "home"
 
 
 @pytest.mark.parametrize("fmt", ["obj", "ply", "off"])

@@ -23,15 +23,11 @@ from articula.solver.rig.model import Poses
 from articula.solver.rig.skinning import hybrid_skin
 from ..rig_helpers import key_frames
 
+pytestmark = pytest.mark.usefixtures("cache_home")   # a fresh ARTICULA_HOME per test
+
 N = 5
 FRAME_START = 3
 FAST = dict(adapt='OFF', prior='NONE', temporal=False)
-
-
-@pytest.fixture(autouse=True)
-def cache_home(tmp_path, monkeypatch):
-    monkeypatch.setenv("ARTICULA_HOME", str(tmp_path / "home"))
-    return tmp_path / "home"
 
 
 @pytest.fixture(scope="module")

@@ -19,13 +19,10 @@ from articula.solver.track.merge import model_digest
 from ...conftest import REPO
 from .test_track import make_truth, write_captures
 
+pytestmark = pytest.mark.usefixtures("cache_home")   # a fresh ARTICULA_HOME per test
+
 FAST = ["--adapt", "off", "--prior", "none", "--no-temporal"]
 N = 6
-
-
-@pytest.fixture(autouse=True)
-def cache_home(tmp_path, monkeypatch):
-    monkeypatch.setenv("ARTICULA_HOME", str(tmp_path / "home"))
 
 
 @pytest.fixture(scope="module")
