@@ -57,6 +57,10 @@ class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
     max_points: bpy.props.IntProperty(
         name="Max Points", default=_DEFAULT.max_points, min=0, soft_max=200_000,
         description="Thin every capture to about this many points before fitting (0: keep all)")
+    start_from_rig: bpy.props.BoolProperty(
+        name="Start From Rig's Pose", default=False, options={'SKIP_SAVE'},
+        description="Start the first tracked frame from the pose the rig holds now (pose it roughly over that "
+                    "capture) instead of searching for it; for rigs whose first frame is not found on its own")
     use_frame_range: bpy.props.BoolProperty(
         name="Frame Range", default=False, options={'SKIP_SAVE'},
         description="Track only the scene frames First..Last of the captures (else every frame)")
@@ -91,6 +95,9 @@ class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
         col.prop(self, "bundle")
         for prop in ("adapt", "prior", "temporal", "fit_scale", "max_points"):
             col.prop(self, prop)
+        sub = col.row()
+        sub.enabled = not self.bundle.strip()
+        sub.prop(self, "start_from_rig")
         col.prop(self, "use_frame_range")
         row = col.row(align=True)
         row.enabled = self.use_frame_range
@@ -106,9 +113,14 @@ class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
         out = bpy.path.abspath(self.output_bundle) if self.output_bundle else ""
         result.check_output_path(out)
         if self.bundle.strip():
+            if self.start_from_rig:
+                raise ArticulaInputError("Start From Rig's Pose needs a rig in the scene, not a bundle file")
             model_input = inputs.model_from_bundle(bpy.path.abspath(self.bundle))
         else:
-            model_input = inputs.model_from_rig(inputs.find_rig(context, self.rig))
+            arm = inputs.find_rig(context, self.rig)
+            model_input = inputs.model_from_rig(arm)
+            if self.start_from_rig:
+                model_input.start_pose = inputs.rig_start_pose(arm)
         ob = inputs.find_captures(context, self.captures)
         model_input.matrix = inputs.solve_matrix(model_input, ob)
         captures = inputs.captures_from_object(ob, model_input.matrix)

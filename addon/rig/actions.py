@@ -153,10 +153,38 @@ def read_action(arm, names, action=None, frame_start=None, frame_end=None) -> Po
         raise ArticulaInputError(f"action {action.name!r}: bone {names[b]!r} has a zero quaternion at frame {frames[f]}")
     loc = np.stack([values(names[0], "location", i, 0.0) for i in range(3)], -1)
     scale = np.stack([values(names[0], "scale", i, 1.0) for i in range(3)], -1)
+    return _poses(arm, names, rot / norm, loc, scale, f"action {action.name!r}", [f"frame {f}" for f in frames])
+
+
+def _poses(arm, names, rot, loc, scale, what: str, when: list) -> Poses:
+    """Articula poses from the channels of ``names``: unit quaternions ``rot (N, B, 4)`` and the root's
+    ``loc``/``scale (N, 3)`` in its pose-bone axes; refuses a non-uniform root scale (``what``/``when``
+    name it)."""
     spread = np.abs(scale - scale.mean(axis=1, keepdims=True)).max(axis=1)
     if np.any(spread > 1e-6 * np.abs(scale).max(axis=1)):
         f = int(np.argmax(spread))
-        raise ArticulaInputError(f"action {action.name!r}: root bone {names[0]!r} has a non-uniform scale "
-                                 f"{tuple(scale[f])} at frame {frames[f]}; Articula poses need a uniform scale")
+        raise ArticulaInputError(f"{what}: root bone {names[0]!r} has a non-uniform scale {tuple(scale[f])} "
+                                 f"at {when[f]}; Articula poses need a uniform scale")
     trans = loc @ root_rest_axes(arm, names[0]).T
-    return Poses(rot / norm, trans, scale.mean(axis=1))
+    return Poses(rot, trans, scale.mean(axis=1))
+
+
+def current_pose(arm, names) -> Poses:
+    """The pose (one frame) the bones ``names`` of armature object ``arm`` hold now (pose mode edits
+    included, keyed or not), in the convention of :func:`read_action`."""
+    bones = arm.pose.bones
+    missing = [n for n in names if n not in bones]
+    if missing:
+        raise ArticulaInputError(f"armature {arm.name!r} has no pose bone {missing[0]!r}")
+    for n in names:
+        if bones[n].rotation_mode != 'QUATERNION':
+            raise ArticulaInputError(f"armature {arm.name!r}: bone {n!r} uses rotation mode "
+                                     f"{bones[n].rotation_mode}; Articula rigs use quaternions")
+    rot = np.array([[list(bones[n].rotation_quaternion) for n in names]], np.float64)
+    norm = np.linalg.norm(rot, axis=-1, keepdims=True)
+    if np.any(norm < 1e-12):
+        raise ArticulaInputError(f"armature {arm.name!r}: bone {names[int(np.argmin(norm[0, :, 0]))]!r} "
+                                 f"has a zero quaternion")
+    root = bones[names[0]]
+    return _poses(arm, names, rot / norm, np.array([list(root.location)]), np.array([list(root.scale)]),
+                  f"armature {arm.name!r}", ["its current pose"])

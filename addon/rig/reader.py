@@ -12,7 +12,7 @@ import bpy
 import numpy as np
 
 from ...solver.errors import ArticulaInputError
-from ...solver.rig.model import Model, Skeleton
+from ...solver.rig.model import Model, Poses, Skeleton
 from . import actions
 from ...solver.rig import names as rig_names
 from ..scene.mesh_io import read_int_attribute, read_positions, read_triangles, read_vertex_groups
@@ -119,3 +119,8 @@ def read_model(arm) -> Model:
 def read_poses(arm, action=None, frame_start=None, frame_end=None):
     """Poses of ``arm``'s control bones from ``action`` (default: its active action)."""
     return actions.read_action(arm, control_names(arm), action, frame_start, frame_end)
+
+
+def read_current_pose(arm) -> Poses:
+    """The pose (one frame) ``arm``'s control bones hold now (:func:`.actions.current_pose`)."""
+    return actions.current_pose(arm, control_names(arm))

@@ -36,7 +36,8 @@ TRAINING_ACTION = "articula_training_action"   # rig ID property: the action its
 @dataclass
 class ModelInput:
     """The model to track with, the poses it was trained on (None: none, the generic prior is used),
-    how messages name it, its digest (``merge.model_digest``) and the rig it came from ("" for a file)."""
+    how messages name it, its digest (``merge.model_digest``), the rig it came from ("" for a file) and
+    optionally the pose the first tracked frame starts from."""
     model: Model
     training_poses: Poses = None
     label: str = ""
@@ -44,6 +45,7 @@ class ModelInput:
     rig: str = ""
     matrix: np.ndarray = None         # (4, 4) solve frame -> world; None: chosen by the captures
     training_action: str = ""
+    start_pose: Poses = None          # the first frame's start (one frame); None: found automatically
 
 
 @dataclass
@@ -76,6 +78,11 @@ def model_from_rig(arm) -> ModelInput:
     poses = reader.read_poses(arm, action) if action is not None else None
     return ModelInput(model, poses, f"rig {arm.name!r}", model_digest(model), arm.name,
                       np.array(arm.matrix_world, np.float64), action.name if action is not None else "")
+
+
+def rig_start_pose(arm) -> Poses:
+    """The pose ``arm`` holds now (object space, the solve frame of a rig) as the first frame's start."""
+    return reader.read_current_pose(arm)
 
 
 def _training_action(arm):

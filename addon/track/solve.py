@@ -71,7 +71,7 @@ def track(model_input: ModelInput, captures: CaptureInput, options: TrackOptions
 
     source = captures.source(options.max_points)
     result = track_sequence(model_input.model, source, options, training_poses=model_input.training_poses,
-                            progress=report)
+                            progress=report, start_pose=model_input.start_pose)
     errors = None
     if with_point_errors:
         errors = point_errors(result.model, result.poses, captures, int(result.first_frame), progress)

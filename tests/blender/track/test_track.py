@@ -145,7 +145,7 @@ class StubTracker:
 
     def __call__(self, model, source, options, training_poses=None, progress=None, start_pose=None):
         a, b = options.frames or (0, len(source))
-        self.calls.append({"model": model, "points": [source[i].points for i in range(a, b)],
+        self.calls.append({"model": model, "points": [source[i].points for i in range(a, b)], "start": start_pose,
                            "training_poses": training_poses, "options": options,
                            "cameras": getattr(source, "cameras", None)})
         rows = [{"frame": a + j, "name": source.names[a + j], "mean_mm": 1.0 + j, "median_mm": 0.5 + j,
@@ -298,6 +298,32 @@ def test_tracking_again_trains_on_the_same_action(pkg, tmp_path, truth, stub):
     assert rig["articula_training_action"] == training.name
 
 
+def test_start_from_the_rigs_current_pose(pkg, tmp_path, truth, stub):
+    """stub: with Start From Rig's Pose the tracker gets the pose the rig holds now (its action's value at
+    the current frame, with an unkeyed edit of one bone on top) in the solve frame; without it, none; the
+    report says how the first frame started."""
+    model, poses, captures = truth
+    tracker = stub()
+    ob = import_captures(tmp_path, captures)
+    rig, _ = build_rig(tmp_path, model, poses)
+    bpy.context.scene.frame_set(3)                                   # the action's third key: poses[2]
+    edited = rig.pose.bones[rig.data.bones[1].name]
+    edited.rotation_quaternion = (0.9, 0.1, 0.3, -0.2)
+    select(rig, ob)
+    assert bpy.ops.articula.track(start_from_rig=True, **FAST) == {'FINISHED'}
+    assert json.loads(rig["articula_track_report"])["input"]["start"] == "the rig's pose"
+    assert bpy.ops.articula.track(**FAST) == {'FINISHED'}
+    assert json.loads(rig["articula_track_report"])["input"]["start"] == "automatic"
+    start, none = tracker.calls[0]["start"], tracker.calls[1]["start"]
+    assert none is None and len(start) == 1
+    names = pkg("addon.rig.reader").control_names(rig)
+    want = poses.rotations[2].copy()
+    b = names.index(edited.name)
+    want[b] = np.array([0.9, 0.1, 0.3, -0.2]) / np.linalg.norm([0.9, 0.1, 0.3, -0.2])
+    np.testing.assert_allclose(start.rotations[0], want, atol=1e-6)
+    np.testing.assert_allclose(start.translations[0], poses.translations[2], atol=1e-6)
+
+
 # --------------------------------------------------------------------------- the real tracker
 
 def test_track_a_moved_scan_sequence_with_a_rig(pkg, tmp_path, truth):
@@ -361,6 +387,7 @@ def test_cancel_leaves_scene_unchanged(pkg, tmp_path, truth, monkeypatch):
     ("missing_bundle", "nowhere.npz: no such bundle file"),
     ("range", r"Frame Range 1..4 lies outside the captures' frames 3..7"),
     ("out_folder", "does not exist"),
+    ("start_with_bundle", "Start From Rig's Pose needs a rig in the scene"),
     ("units", "captures and model differ in size.*centimetres"),
 ])
 def test_bad_input_is_refused_and_leaves_scene_unchanged(pkg, tmp_path, truth, case, message):
@@ -387,6 +414,8 @@ def test_bad_input_is_refused_and_leaves_scene_unchanged(pkg, tmp_path, truth, c
         kwargs.update(use_frame_range=True, frame_first=1, frame_last=4)
     elif case == "out_folder":
         kwargs["output_bundle"] = str(tmp_path / "no" / "such" / "t.npz")
+    elif case == "start_with_bundle":
+        kwargs.update(bundle=str(tmp_path / "Person.npz"), start_from_rig=True)
     elif case == "units":
         ob.scale = (100, 100, 100)          # the captures are in centimetres as the scene shows them
     before = scene_state()
