@@ -32,6 +32,7 @@ from ..rig.model import Model, Poses
 from ..rig.skinning import AnchorGroups
 from . import metrics, robust
 from .adapt import adapt_model, mirror_pairs
+from .captures import CaptureSource
 from .frame_fit import fit_frame
 from .initialise import check_units, initialise
 from .options import ADAPT_MIN_FRAMES, MODEL_PRIOR_MIN_POSES, TrackOptions, frame_range
@@ -102,8 +103,9 @@ def _say(progress, fraction, text):
 
 def track_sequence(model, source, options: TrackOptions = TrackOptions(), training_poses: Poses = None,
                    progress=None, start_pose: Poses = None) -> TrackResult:
-    """Track ``model`` through ``source`` (a :class:`.captures.CaptureSource`, or any indexable sequence
-    of :class:`.frame_fit.Capture`), module docstring.  training_poses: the model's poses (prior and
+    """Track ``model`` through ``source`` (a :class:`.captures.CaptureSource`, thinned to
+    ``options.max_points`` whatever it was made with, or any indexable sequence of
+    :class:`.frame_fit.Capture`, used as it is), module docstring.  training_poses: the model's poses (prior and
     hypotheses); start_pose: the first frame's start (one frame) instead of the automatic
     initialisation; progress: ``progress(fraction, text)``, may raise :class:`..errors.Cancelled`."""
     options.validate()
@@ -116,6 +118,8 @@ class _Tracker:
     """The state of one :func:`track_sequence` run."""
 
     def __init__(self, model, source, options, training_poses, progress):
+        if isinstance(source, CaptureSource) and source.max_points != options.max_points:
+            source = source.with_max_points(options.max_points)      # the options decide the thinning
         self.model, self.source, self.options, self.progress = model, source, options, progress
         self.training = training_poses
         self.range = frame_range(options.frames, len(source))

@@ -280,3 +280,16 @@ def test_a_capture_of_another_body_is_reported_as_a_poor_fit(body):
     same = pipeline.track_sequence(body, cp.CaptureSource.from_arrays(pts, [body.faces] * 2), _options(),
                                    start_pose=start)
     assert not any(n.startswith("poor fit") for n in same.notes), same.notes
+
+
+def test_the_options_decide_how_far_captures_are_thinned(body):
+    """``TrackOptions.max_points`` applies to a CaptureSource made with another (or no) limit: the tracker
+    fits thinned captures (the report's per-frame point counts)."""
+    poses = _motion(body, 3)
+    posed, pts = _source(body, poses)
+    src = cp.CaptureSource.from_arrays(pts, [body.faces] * 3)
+    start = poses.take([0])
+    full = pipeline.track_sequence(body, src, _options(max_points=0), start_pose=start)
+    thin = pipeline.track_sequence(body, src, _options(max_points=500), start_pose=start)
+    assert [f["points"] for f in full.frames] == [len(p) for p in pts]
+    assert all(f["points"] <= 500 < len(p) for f, p in zip(thin.frames, pts))
