@@ -121,6 +121,7 @@ class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
             model_input = inputs.model_from_rig(arm)
             if self.start_from_rig:
                 model_input.start_pose = inputs.rig_start_pose(arm)
+                model_input.start_label = "the rig's pose"
         ob = inputs.find_captures(context, self.captures)
         model_input.matrix = inputs.solve_matrix(model_input, ob)
         captures = inputs.captures_from_object(ob, model_input.matrix)

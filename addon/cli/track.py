@@ -5,6 +5,7 @@ and ``merge-tracks`` (chunks tracked separately -> one tracked bundle).
     ./run track --model person.npz --scans scans/ --frames 0:60 --out part1.npz
     ./run track --model person.npz --scans scans/ --frames 55:120 --out part2.npz
     ./run merge-tracks part1.npz part2.npz --out tracked.npz --report merge.json
+    ./run track --model person.npz --scans scans/ --start-pose posed_over_frame0.npz --out tracked.npz
     blender -b -P batch.py -- track --model person.npz --scans scans/ --out tracked.npz --blend tracked.blend
 
 The captures are read as written (no axis conversion) and the tracked bundle holds the (adapted) model with
@@ -74,6 +75,9 @@ def run(args) -> int:
     options = _options(args, len(paths))
     model_input = inputs.model_from_bundle(os.path.abspath(args.model))
     model_input.matrix = np.eye(4)
+    if args.start_pose:
+        model_input.start_pose, model_input.start_label = inputs.bundle_start_pose(args.start_pose,
+                                                                                   model_input.model)
     captures = inputs.captures_from_files(paths)
     outcome = solve.track(model_input, captures, options, jobs.Progress("track", echo=True),
                           with_point_errors=bool(args.blend))
@@ -119,6 +123,10 @@ def add_commands(sub):
     p.add_argument("--report", help="write the per-frame residuals, lost frames and timings as JSON")
     p.add_argument("--blend", help="also save a .blend with the scans and the tracked rig")
     p.add_argument("--frames", metavar="A:B", help="track input frames A..B-1 only (0-based; A: or :B allowed)")
+    p.add_argument("--start-pose", metavar="BUNDLE.npz[:K]",
+                   help="start the first tracked frame from pose K (default 0) of this bundle (the model's bones, "
+                        "the captures' coordinates), e.g. exported from the rig posed over it, instead of "
+                        "searching for it")
     p.add_argument("--no-adapt", action="store_true", help="do not adapt the model (same as --adapt off)")
     p.add_argument("--adapt", choices=ADAPT_CHOICES, default=default.adapt,
                    help=f"adapt the rest mesh and joints to the recording (default {default.adapt})")

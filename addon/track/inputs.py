@@ -46,6 +46,7 @@ class ModelInput:
     matrix: np.ndarray = None         # (4, 4) solve frame -> world; None: chosen by the captures
     training_action: str = ""
     start_pose: Poses = None          # the first frame's start (one frame); None: found automatically
+    start_label: str = ""             # where start_pose came from (the report's input.start)
 
 
 @dataclass
@@ -83,6 +84,27 @@ def model_from_rig(arm) -> ModelInput:
 def rig_start_pose(arm) -> Poses:
     """The pose ``arm`` holds now (object space, the solve frame of a rig) as the first frame's start."""
     return reader.read_current_pose(arm)
+
+
+def bundle_start_pose(spec: str, model: Model, flag: str = "--start-pose") -> tuple:
+    """``(pose (one frame), label)`` from ``spec`` = ``BUNDLE.npz[:K]``: pose K (default 0) of a bundle whose
+    bones are ``model``'s (names and order), in the captures' coordinates like the tracked output."""
+    path, k = spec, 0
+    head, sep, tail = spec.rpartition(":")
+    if sep and tail.isdigit() and head:
+        path, k = head, int(tail)
+    try:
+        bundle = bundle_io.load_for_build(os.path.abspath(path), bake=False)
+    except ArticulaInputError as exc:
+        raise ArticulaInputError(f"{flag}: {exc}") from None
+    names = list(bundle.model.skeleton.names)
+    if names != list(model.skeleton.names):
+        raise ArticulaInputError(f"{flag}: {path} has other bones than the model ({len(names)} vs "
+                                 f"{model.skeleton.num_bones}; first: {names[:3]})")
+    count = 0 if bundle.poses is None else len(bundle.poses)
+    if not 0 <= k < count:
+        raise ArticulaInputError(f"{flag}: {path} has {count} pose(s); pose {k} asked for (0-based)")
+    return bundle.poses.take([k]), f"pose {k} of {os.path.basename(path)}"
 
 
 def _training_action(arm):

@@ -21,7 +21,7 @@ def options_dict(options) -> dict:
 def report_document(outcome) -> dict:
     """The report JSON of a :class:`addon.track.solve.TrackOutcome`: the solver's report plus ``model``
     (label, digest, vertices, bones, training poses), ``input`` (label, frames, tracked range, how the
-    first frame started: "automatic" or "the rig's pose"), ``options``
+    first frame started: "automatic", "the rig's pose", "pose K of FILE"), ``options``
     and, when measured, ``point_error_mm`` (median, mean, 95th percentile over every capture point of the
     tracked frames)."""
     result, mi, cap = outcome.result, outcome.model_input, outcome.captures
@@ -31,7 +31,7 @@ def report_document(outcome) -> dict:
                     "training_poses": 0 if mi.training_poses is None else int(len(mi.training_poses))}
     doc["input"] = {"source": cap.label, "frames": len(cap.names), "first_frame": outcome.first_frame,
                     "tracked": int(len(result.poses)),
-                    "start": "the rig's pose" if mi.start_pose is not None else "automatic"}
+                    "start": (mi.start_label or "given") if mi.start_pose is not None else "automatic"}
     doc["options"] = options_dict(outcome.options)
     if outcome.point_errors_mm:
         e = np.concatenate(outcome.point_errors_mm)

@@ -4,6 +4,7 @@ merged against one run, the same through ``batch.py``, and bad input (exit code 
 written).  Data: the tube body captures of test_track.py; the real pipeline with its fast settings."""
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -13,7 +14,7 @@ import pytest
 
 from articula.solver.formats.bundle import load_bundle, save_bundle
 from articula.solver.geometry.surface_distance import distance_to_surface
-from articula.solver.rig.model import Poses
+from articula.solver.rig.model import Model, Poses, Skeleton
 from articula.solver.rig.skinning import hybrid_skin
 from articula.solver.track.merge import model_digest
 from ...conftest import REPO
@@ -159,3 +160,41 @@ def test_batch_py_track(tmp_path, files):
     assert len(load_bundle(out).poses) == 3 and "3 frames tracked (input frames 1..3)" in res.stdout
     res = run("--frames", "x", "--out", str(tmp_path / "u.npz"))
     assert res.returncode == 2 and res.stderr.strip().splitlines()[-1].startswith("articula track: error: --frames")
+
+
+def test_start_pose_from_a_bundle(pkg, tmp_path, truth, files, monkeypatch, capsys):
+    """``--start-pose B.npz:K``: the tracker starts the first tracked frame from pose K of B (checked on
+    what it receives) and the report says so; a bundle with other bones, a pose number past its poses and a
+    missing file are refused before any tracking, naming the flag."""
+    model, poses, captures = truth
+    path, folder = files
+    start = str(tmp_path / "start.npz")
+    save_bundle(start, model, poses)
+    solve = pkg("addon.track.solve")
+    real, seen = solve.track_sequence, []
+
+    def recording(*args, **kwargs):
+        seen.append(kwargs.get("start_pose"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(solve, "track_sequence", recording)
+    cli = pkg("addon.cli.main")
+    out, rep = str(tmp_path / "t.npz"), str(tmp_path / "t.json")
+    assert cli.main(["track", "--model", path, "--scans", folder, "--frames", "2:4", "--start-pose", f"{start}:2",
+                     "--out", out, "--report", rep, *FAST]) == 0
+    np.testing.assert_array_equal(seen[0].rotations, poses.rotations[2:3])
+    assert json.load(open(rep))["input"]["start"] == "pose 2 of start.npz"
+    assert np.all(surface_mm(model, load_bundle(out).poses, captures, first=2) < 3.0)
+    other = str(tmp_path / "other.npz")
+    sk = model.skeleton
+    renamed = Skeleton([f"{n}_x" for n in sk.names], sk.parents, sk.heads, sk.tails, sk.frames)
+    save_bundle(other, Model(model.rest_vertices, model.faces, renamed, model.anchor, model.twist_weights,
+                             model.swing_weights), poses)
+    for spec, message in ((f"{other}:1", "--start-pose: .*other.npz has other bones than the model"),
+                          (f"{start}:9", f"--start-pose: .*start.npz has {N} pose\\(s\\); pose 9 asked for"),
+                          (str(tmp_path / "none.npz"), "--start-pose: .*none.npz: no such bundle file")):
+        seen.clear()
+        capsys.readouterr()
+        assert cli.main(["track", "--model", path, "--scans", folder, "--start-pose", spec, "--out", out, *FAST]) == 2
+        assert re.search(message, capsys.readouterr().err), spec
+        assert not seen
