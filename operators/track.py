@@ -13,6 +13,7 @@ from dataclasses import replace
 import bpy
 
 from ..addon.jobs import JobOperator
+from ..addon.rig import reader
 from ..addon.track import inputs, result, solve
 from ..addon.track.report import summary_text
 from ..solver.errors import ArticulaInputError
@@ -120,7 +121,7 @@ class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
             arm = inputs.find_rig(context, self.rig)
             model_input = inputs.model_from_rig(arm)
             if self.start_from_rig:
-                model_input.start_pose = inputs.rig_start_pose(arm)
+                model_input.start_pose = reader.read_current_pose(arm)    # object space: the solve frame
                 model_input.start_label = "the rig's pose"
         ob = inputs.find_captures(context, self.captures)
         model_input.matrix = inputs.solve_matrix(model_input, ob)

@@ -12,6 +12,7 @@ import bpy
 import numpy as np
 
 from ...solver.errors import ArticulaInputError
+from ...solver.geometry.rotations import rotation_between
 from ...solver.rig.model import Model, Poses, Skeleton
 from . import actions
 from ...solver.rig import names as rig_names
@@ -87,13 +88,7 @@ def _along_bones(F, heads, tails):
     1e-6 (measured 3.3e-6 on a learned rig), more than the model's frame tolerance."""
     y = tails - heads
     y /= np.linalg.norm(y, axis=1, keepdims=True)
-    a = F[:, :, 1]
-    v, c = np.cross(a, y), np.einsum("bi,bi->b", a, y)
-    K = np.zeros_like(F)
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    K -= np.swapaxes(K, 1, 2)
-    R = np.eye(3) + K + K @ K / (1.0 + c)[:, None, None]
-    return R @ F
+    return rotation_between(F[:, :, 1], y) @ F
 
 
 def read_model(arm) -> Model:

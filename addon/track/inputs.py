@@ -81,11 +81,6 @@ def model_from_rig(arm) -> ModelInput:
                       np.array(arm.matrix_world, np.float64), action.name if action is not None else "")
 
 
-def rig_start_pose(arm) -> Poses:
-    """The pose ``arm`` holds now (object space, the solve frame of a rig) as the first frame's start."""
-    return reader.read_current_pose(arm)
-
-
 def bundle_start_pose(spec: str, model: Model, flag: str = "--start-pose") -> tuple:
     """``(pose (one frame), label)`` from ``spec`` = ``BUNDLE.npz[:K]``: pose K (default 0) of a bundle whose
     bones are ``model``'s (names and order), in the captures' coordinates like the tracked output."""

@@ -113,6 +113,25 @@ def rotvec_to_matrix(r):
     return quat_to_matrix(rotvec_to_quat(r))
 
 
+def rotation_between(a, b):
+    """``(..., 3, 3)`` smallest rotations taking unit vectors ``a (..., 3)`` onto unit vectors ``b (..., 3)``
+    (broadcasting), about their common perpendicular: ``I + K + K² / (1 + a·b)`` with ``K = [a × b]×``; a
+    half turn about an axis normal to ``a`` where they are opposite."""
+    a, b = np.broadcast_arrays(np.asarray(a, np.float64), np.asarray(b, np.float64))
+    v, c = np.cross(a, b), np.einsum("...i,...i->...", a, b)
+    K = np.zeros(v.shape + (3,))
+    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    K -= np.swapaxes(K, -1, -2)
+    opposite = c < -1.0 + 1e-9
+    out = np.eye(3) + K + (K @ K) / np.where(opposite, 1.0, 1.0 + c)[..., None, None]
+    if opposite.any():
+        ao = a[opposite]
+        w = np.cross(ao, np.eye(3)[np.argmin(np.abs(ao), axis=-1)])
+        w /= np.linalg.norm(w, axis=-1, keepdims=True)
+        out[opposite] = 2.0 * w[:, :, None] * w[:, None, :] - np.eye(3)
+    return out
+
+
 def quat_apply(q, v):
     """Rotate vectors ``(..., 3)`` by unit quaternions ``(..., 4)`` (broadcasting): q v q*."""
     q = _as_quat(q)

@@ -368,7 +368,9 @@ def fit_frame(model, capture: Capture, init: Poses, prior: PosePrior = None,
     """Fit the pose of ``model`` (fixed; metres) to one unregistered ``capture`` starting from ``init``
     (one frame, e.g. the previous frame's pose).  prior: a :class:`PosePrior` (None or
     ``PosePrior.none(skeleton)``: no prior term and no bounds); groups: the model's :class:`AnchorGroups`
-    to reuse across frames.  Returns :class:`FrameFit` (module docstring).  Runs numpy's BLAS on one
+    to reuse across frames; motion: a :class:`.temporal.MotionPrior` added to Q (pass 1 of tracking) or
+    None.  The start is clamped into the prior's box (:func:`into_box`).  Returns :class:`FrameFit`
+    (module docstring).  Runs numpy's BLAS on one
     thread (:func:`solver.parallel.single_blas_thread`: its small products lose to thread start-up)."""
     with single_blas_thread():
         return _fit_frame(model, capture, init, prior, options, groups, motion)

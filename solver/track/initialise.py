@@ -20,7 +20,7 @@ import os
 import numpy as np
 
 from ..errors import ArticulaInputError
-from ..geometry.rotations import matrix_to_quat, quat_mul, quat_normalize, quat_to_matrix
+from ..geometry.rotations import matrix_to_quat, quat_mul, quat_normalize, quat_to_matrix, rotation_between
 from ..rig.model import Poses
 from ..rig.skinning import hybrid_skin
 from . import robust
@@ -116,22 +116,9 @@ def up_candidates(points) -> list:
     return [axis, -axis]
 
 
-def rotation_to(a, b):
-    """``(3, 3)`` rotation taking unit vector ``a`` onto unit vector ``b`` (a half turn about a
-    perpendicular axis when they are opposite)."""
-    v, c = np.cross(a, b), float(a @ b)
-    if c < -1.0 + 1e-9:
-        p = np.eye(3)[np.argmin(np.abs(a))]
-        v = np.cross(a, p)
-        v /= np.linalg.norm(v)
-        return 2.0 * np.outer(v, v) - np.eye(3)
-    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-    return np.eye(3) + K + K @ K / (1.0 + c)
-
-
 def facing_rotations(up) -> list:
     """World rotations taking the model's up onto ``up`` followed by ``FACINGS`` turns about it."""
-    base = rotation_to(UP, up)
+    base = rotation_between(UP, up)
     out = []
     for k in range(FACINGS):
         a = 2.0 * np.pi * k / FACINGS

@@ -16,10 +16,11 @@ This step is not in the dissertation, which starts from a manual placement (§4.
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry.rotations import matrix_to_quat
+from ..geometry.rotations import matrix_to_quat, rotation_between
 from ..rig.kinematics import forward_kinematics
 from ..rig.model import Poses
 from ..rig.skinning import hybrid_skin
+from .frame_fit import bone_depths
 
 DIRECTIONS = 64          # directions tried per bone (Fibonacci sphere, about 25 deg apart)
 TRUNCATE_M = 0.05        # a vertex farther than this from the capture counts as this far
@@ -39,24 +40,6 @@ def sphere_directions(n: int) -> np.ndarray:
     return np.stack([rho * np.cos(phi), rho * np.sin(phi), z], axis=1)
 
 
-def turn_onto(a, targets):
-    """``(n, 3, 3)`` rotations taking the unit vector ``a (3,)`` onto each unit vector of ``targets
-    (n, 3)`` about their common perpendicular (a half turn about an axis normal to ``a`` when opposite)."""
-    v = np.cross(a, targets)
-    c = targets @ a
-    K = np.zeros((len(targets), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    K -= np.swapaxes(K, 1, 2)
-    opposite = c < -1.0 + 1e-9
-    out = np.eye(3) + K + (K @ K) / np.where(opposite, 1.0, 1.0 + c)[:, None, None]
-    if opposite.any():
-        p = np.eye(3)[np.argmin(np.abs(a))]
-        w = np.cross(a, p)
-        w /= np.linalg.norm(w)
-        out[opposite] = 2.0 * np.outer(w, w) - np.eye(3)
-    return out
-
-
 def subtrees(parents) -> list:
     """``[bones of b's subtree]`` for every bone (b first); parents listed before their children."""
     out = [[b] for b in range(len(parents))]
@@ -68,9 +51,7 @@ def subtrees(parents) -> list:
 def search_order(parents) -> list:
     """Bones 1..B-1 by depth in the tree, then index: every bone of one depth (the trunk's next piece and
     the limbs' first bones) is placed before any deeper one claims their capture points."""
-    depth = np.zeros(len(parents), dtype=np.int64)
-    for b in range(1, len(parents)):
-        depth[b] = depth[parents[b]] + 1
+    depth = bone_depths(parents)
     return sorted(range(1, len(parents)), key=lambda b: (depth[b], b))
 
 
@@ -115,7 +96,7 @@ def _one_pass(model, pose, points, groups, cand):
         if np.linalg.norm(d) < 1e-6:
             placed |= anchor == b
             continue
-        G = turn_onto(d / np.linalg.norm(d), cand)
+        G = rotation_between(d / np.linalg.norm(d), cand)
         moved = np.einsum("kij,nj->kni", G, sample - joint) + joint
         scores = np.array([_score(tree, m) for m in moved])
         best = int(np.argmin(scores))

@@ -125,3 +125,33 @@ def test_swing_twist_pure_cases_and_guard():
     q = -rot.rotvec_to_quat([0, 3.0, 0])
     _, tw = rot.swing_twist_y(q)
     np.testing.assert_allclose(rot.quat_to_rotvec(tw), [0, 3.0, 0], atol=1e-12)
+
+
+def test_rotation_between_takes_a_onto_each_target_about_their_perpendicular():
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=3)
+    a /= np.linalg.norm(a)
+    t = np.concatenate([rng.normal(size=(20, 3)), [-a, a]])
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    G = rot.rotation_between(a, t)
+    np.testing.assert_allclose(np.einsum("kij,j->ki", G, a), t, atol=1e-12)
+    np.testing.assert_allclose(G @ np.swapaxes(G, 1, 2), np.broadcast_to(np.eye(3), G.shape), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(G), 1.0, atol=1e-12)
+    axis = np.cross(a, t[0])                                             # the perpendicular stays put
+    np.testing.assert_allclose(G[0] @ axis, axis, atol=1e-12)
+    np.testing.assert_allclose(G[-1], np.eye(3), atol=1e-12)
+
+
+def test_rotation_between_handles_opposite_vectors_and_broadcasts():
+    a = np.array([0.0, 0.0, 1.0])
+    G = rot.rotation_between(a, -a)
+    assert np.allclose(G @ a, -a) and np.isclose(np.linalg.det(G), 1.0)
+    rng = np.random.default_rng(2)
+    A = rng.normal(size=(2, 4, 3))
+    A /= np.linalg.norm(A, axis=-1, keepdims=True)
+    B = np.concatenate([-A[:, :1], rng.normal(size=(2, 3, 3))], axis=1)
+    B /= np.linalg.norm(B, axis=-1, keepdims=True)
+    G = rot.rotation_between(A, B)
+    assert G.shape == (2, 4, 3, 3)
+    np.testing.assert_allclose(np.einsum("...ij,...j->...i", G, A), B, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(G), 1.0, atol=1e-12)

@@ -1,6 +1,6 @@
-"""Limb placement on the first frame (solver.track.limb_search): the direction lattice, the turn between
-two directions (closed-form checks), the tree helpers against brute force, and arms put back where an
-exact capture has them on the arm body."""
+"""Limb placement on the first frame (solver.track.limb_search): the direction lattice (closed-form
+checks), the tree helpers against brute force, and arms put back where an exact capture has them on the
+arm body."""
 import numpy as np
 
 from articula.solver.geometry.rotations import quat_to_rotvec, rotvec_to_quat
@@ -23,21 +23,6 @@ def test_sphere_directions_are_unit_and_spread():
     u = rng.normal(size=(2000, 3))
     u /= np.linalg.norm(u, axis=1)[:, None]
     assert np.degrees(np.arccos((u @ d.T).max(axis=1))).max() < 25.0     # no direction far from the lattice
-
-
-def test_turn_onto_takes_a_onto_each_target_about_their_perpendicular():
-    rng = np.random.default_rng(1)
-    a = rng.normal(size=3)
-    a /= np.linalg.norm(a)
-    t = np.concatenate([rng.normal(size=(20, 3)), [-a, a]])
-    t /= np.linalg.norm(t, axis=1)[:, None]
-    G = ls.turn_onto(a, t)
-    np.testing.assert_allclose(np.einsum("kij,j->ki", G, a), t, atol=1e-12)
-    np.testing.assert_allclose(G @ np.swapaxes(G, 1, 2), np.broadcast_to(np.eye(3), G.shape), atol=1e-12)
-    np.testing.assert_allclose(np.linalg.det(G), 1.0, atol=1e-12)
-    axis = np.cross(a, t[0])                                             # the perpendicular stays put
-    np.testing.assert_allclose(G[0] @ axis, axis, atol=1e-12)
-    np.testing.assert_allclose(G[-1], np.eye(3), atol=1e-12)
 
 
 def test_subtrees_and_search_order_match_brute_force():
