@@ -14,6 +14,9 @@ hinge axis; the swing is then only about that axis.  Hinge axes are defined anat
 rig's roll (:func:`hinge_geometry`): in the plane of the two bones when the rest pose is bent (the
 elbows of MakeHuman's A-pose), otherwise towards :data:`FLEX_DIRECTION` (world, Z up, character facing
 -Y: the lower leg bends backward, +Y).
+
+Major joints (:func:`major_joints`): the 14 joints of tracking benchmarks (shoulders, elbows, wrists,
+hips, knees, ankles, neck, head) as bone heads of any of the four rigs.
 """
 from __future__ import annotations
 
@@ -21,6 +24,8 @@ import re
 from dataclasses import dataclass
 
 import numpy as np
+
+from ..solver.errors import ArticulaInputError
 
 _ROLE_PATTERNS = (
     ("twist_arm", r"^(upperarm02|lowerarm02)"),
@@ -121,4 +126,37 @@ def hinge_ranges(skeleton, roles) -> np.ndarray:
         if LIMITS[role].hinge is not None:
             lo, hi = np.radians(LIMITS[role].hinge) - rest[b]
             out[b] = min(lo, 0.0), max(hi, 0.0)          # the rest pose is always allowed
+    return out
+
+
+#: Labels of the major joints (benchmarks of trackers) and the (role, side) of the bone whose head is
+#: the joint; side "" = on the midline (the first bone of the role from the root, e.g. the lowest neck bone).
+MAJOR_JOINTS = (
+    ("shoulder.L", "upper_arm", ".L"), ("shoulder.R", "upper_arm", ".R"),
+    ("elbow.L", "forearm", ".L"), ("elbow.R", "forearm", ".R"),
+    ("wrist.L", "wrist", ".L"), ("wrist.R", "wrist", ".R"),
+    ("hip.L", "hip", ".L"), ("hip.R", "hip", ".R"),
+    ("knee.L", "knee", ".L"), ("knee.R", "knee", ".R"),
+    ("ankle.L", "ankle", ".L"), ("ankle.R", "ankle", ".R"),
+    ("neck", "neck", ""), ("head", "head", ""),
+)
+MAJOR_JOINT_LABELS = tuple(label for label, _, _ in MAJOR_JOINTS)
+
+
+def major_joints(skeleton) -> dict:
+    """``{label: bone index}`` for the 14 :data:`MAJOR_JOINT_LABELS`, in that order; the joint is the head
+    of that bone (shoulder = upper arm, elbow = forearm, wrist = hand, hip = thigh, knee = lower leg,
+    ankle = foot, neck = the first neck bone, head = head).  ``skeleton``: a ``Skeleton`` or its bone
+    names (``.L``/``.R`` form, parents before children).  MakeHuman's ``.L`` side is at +x (facing -Y)."""
+    names = list(getattr(skeleton, "names", skeleton))
+    roles = skeleton_roles(names)
+    out = {}
+    for label, role, side in MAJOR_JOINTS:
+        found = [b for b, (n, r) in enumerate(zip(names, roles)) if r == role and (n.endswith(side) if side
+                 else not n.endswith((".L", ".R")))]
+        if not found:
+            where = f"on side {side}" if side else "on the midline"
+            raise ArticulaInputError(f"major joints: no bone with the role {role!r} {where} for {label!r} "
+                                     f"among the {len(names)} bones of the skeleton")
+        out[label] = found[0]
     return out

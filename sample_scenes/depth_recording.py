@@ -9,7 +9,7 @@ the subject's centre in the horizontal direction ``azimuth_deg`` (0 = in front, 
 Output folder::
 
     depth_0000.png ...   16-bit grayscale, millimetres, 0 = no measurement
-    intrinsics.json      "articula-intrinsics/1"
+    intrinsics.json      "articula-intrinsics/1" with the static camera's ``cam_to_world``
     ground_truth.npz     "articula-depth-gt/1", keys below
 
 ``ground_truth.npz`` keys: ``format``; ``intrinsics`` (6,) width, height, fx, fy, cx, cy;
@@ -150,7 +150,7 @@ def generate_depth(out_dir, frames, faces, gt: dict | None = None, resolution=(3
             clean_all.append(to_millimetres(clean))
         if progress:
             progress(k + 1, len(frames))
-    cam.save_intrinsics(os.path.join(out_dir, "intrinsics.json"), intr)
+    cam.save_intrinsics(os.path.join(out_dir, "intrinsics.json"), intr, cam_to_world=c2w)
     gt_arrays = _ground_truth(frames, faces, gt, intr, c2w, vis, noise, seed, clean_all, save_vertices)
     gt_path = os.path.join(out_dir, "ground_truth.npz")
     np.savez_compressed(gt_path + ".part.npz", **gt_arrays)

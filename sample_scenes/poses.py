@@ -7,7 +7,7 @@ in bone-local axes as Blender's pose-bone quaternion (``solver.rig.model.Poses``
 from ``[-twist, twist]``; hinges (elbow, knee) draw the flexion angle uniformly from the rest-relative range
 (:func:`.bone_roles.hinge_ranges`) and rotate about the anatomical hinge axis
 (:func:`.bone_roles.hinge_geometry`).  ``amplitude`` in (0, 1] scales every limit (hinge ranges are
-scaled about the rest pose, so they always contain it).
+scaled about the rest pose, so they always contain it), ``role_amplitude`` some roles' limits further.
 
 ``key_every = k > 1`` draws key poses every k frames and interpolates the parameters linearly in
 between, which gives a smooth motion that stays within the limits (the disk and the intervals are
@@ -25,11 +25,15 @@ from ..solver.geometry.rotations import matrix_to_quat, quat_mul, rotvec_to_quat
 from .bone_roles import LIMITS, hinge_geometry, hinge_ranges, skeleton_roles
 
 
-def _check(n, amplitude, key_every, root_yaw, root_shift):
+def _check(n, amplitude, key_every, root_yaw, root_shift, role_amplitude):
     if int(n) != n or n < 1:
         raise ArticulaInputError(f"poses: the number of poses must be a positive integer, got {n}")
     if not 0 < amplitude <= 1:
         raise ArticulaInputError(f"amplitude: must be in (0, 1], got {amplitude}")
+    for role, factor in (role_amplitude or {}).items():
+        if role not in LIMITS or not 0 <= factor <= 1:
+            raise ArticulaInputError(f"role_amplitude: {role!r}: {factor} must be a role of bone_roles.LIMITS "
+                                     f"with a factor in [0, 1]")
     if int(key_every) != key_every or key_every < 1:
         raise ArticulaInputError(f"key_every: must be a positive integer, got {key_every}")
     if not 0 <= root_yaw <= 180:
@@ -40,11 +44,12 @@ def _check(n, amplitude, key_every, root_yaw, root_shift):
 
 def limit_arrays(skeleton, roles, amplitude=1.0):
     """cone, twist (B,) radians; rest-relative hinge ranges (B, 2) radians (NaN for ball joints),
-    all scaled by ``amplitude`` about the rest pose."""
+    all scaled by ``amplitude`` (a number or one per bone, (B,)) about the rest pose."""
     lim = [LIMITS[r] for r in roles]
+    amplitude = np.asarray(amplitude, dtype=float)
     cone = np.radians([l.cone for l in lim]) * amplitude
     twist = np.radians([l.twist for l in lim]) * amplitude
-    return cone, twist, hinge_ranges(skeleton, roles) * amplitude
+    return cone, twist, hinge_ranges(skeleton, roles) * amplitude[..., None]
 
 
 def _draw_keys(rng, K, skeleton, roles, amplitude):
@@ -87,13 +92,17 @@ def _root_motion(rng, K, root_yaw, root_shift):
 
 
 def rom_poses(skeleton, n: int, seed: int = 0, amplitude: float = 1.0, key_every: int = 1,
-              root_yaw: float = 0.0, root_shift: float = 0.0) -> Poses:
-    """``n`` random range-of-motion poses of ``skeleton`` (see the module docstring)."""
-    _check(n, amplitude, key_every, root_yaw, root_shift)
+              root_yaw: float = 0.0, root_shift: float = 0.0, role_amplitude: dict | None = None) -> Poses:
+    """``n`` random range-of-motion poses of ``skeleton`` (see the module docstring).
+
+    role_amplitude: optional ``{role: factor in [0, 1]}`` multiplying ``amplitude`` for the bones of
+    that role (roles not listed: 1).  The random draws do not depend on the amplitudes."""
+    _check(n, amplitude, key_every, root_yaw, root_shift, role_amplitude)
     rng = np.random.default_rng(seed)
     roles = skeleton_roles(skeleton.names)
     K = (n - 1) // key_every + 2
-    swing, twist = _draw_keys(rng, K, skeleton, roles, amplitude)
+    scale = amplitude * np.array([(role_amplitude or {}).get(r, 1.0) for r in roles])
+    swing, twist = _draw_keys(rng, K, skeleton, roles, scale)
     yaw, shift = _root_motion(rng, K, root_yaw, root_shift)
     rot = compose_swing_twist(_interpolate(swing, n, key_every), _interpolate(twist, n, key_every))
     rot[:, 0] = quat_mul(yaw_quaternions(skeleton.frames[0], _interpolate(yaw, n, key_every)), rot[:, 0])

@@ -28,6 +28,8 @@ pose_rotations (N,B,4)    (w,x,y,z) relative to rest, bone-local axes; pose_tran
 pose_scales (N,)          all 1
 bone_matrices (N,B,4,4)   rest-to-posed world map of each bone (x -> R x + t, homogeneous)
 posed_heads, posed_tails  (N,B,3) posed joint positions
+major_joint_labels (14,)  shoulder.L ... head (``bone_roles.major_joints``); major_joint_bones (14,) int32:
+                          the bone whose head is each (``posed_heads[:, major_joint_bones]``)
 lbs_weights (V,B) f32     the rig's weights (rows sum 1) — the skin for ``lbs``/``dqs``
 anchor (V,) int32,        hybrid skin (only for ``skin="hybrid"``): anchor part and twist/swing
 twist_weights, swing_weights (V,B) f32   weights on the anchor's children (solver.rig.model.Model)
@@ -51,21 +53,26 @@ from ..solver.errors import ArticulaInputError
 from ..solver.formats.axes import format_axes
 from ..solver.rig.kinematics import forward_kinematics
 from ..solver.rig.model import Model, Poses, Skeleton
+from .bone_roles import major_joints
 from .mesh_files import FORMATS, SequenceWriter
 from .poses import rom_poses
 from .subjects import make_subject
 
 SKINS = ("lbs", "dqs", "hybrid")
-MOTIONS = ("rom", "walk")
+MOTIONS = ("rom", "walk", "turn")
 
 
 def make_poses(subject, motion: str, n_poses: int, seed: int, **options):
-    """Poses of ``motion`` for a subject ("rom": :func:`.poses.rom_poses`, "walk": :func:`.walk.walk_poses`)."""
+    """Poses of ``motion`` for a subject ("rom": :func:`.poses.rom_poses`, "walk": :func:`.walk.walk_poses`,
+    "turn": :func:`.turn.turn_poses`)."""
     if motion == "rom":
         return rom_poses(subject.skeleton, n_poses, seed=seed, **options)
     if motion == "walk":
         from .walk import walk_poses
         return walk_poses(subject, n_poses, seed=seed, **options)
+    if motion == "turn":
+        from .turn import turn_poses
+        return turn_poses(subject, n_poses, seed=seed, **options)
     raise ArticulaInputError(f"motion: unknown motion {motion!r} (choose from {', '.join(MOTIONS)})")
 
 
@@ -99,6 +106,8 @@ def _ground_truth(subject, poses, Rm, tm, posed, model, meta):
         posed_tails=np.einsum("nbij,bj->nbi", Rm, sk.tails) + tm,
         lbs_weights=subject.lbs_weights.astype(np.float32), posed_vertices=posed,
         macros=np.array(json.dumps(subject.macros, sort_keys=True)))
+    major = major_joints(sk)
+    gt.update(major_joint_labels=np.array(list(major)), major_joint_bones=np.array(list(major.values()), np.int32))
     if model is not None:
         gt.update(anchor=model.anchor, twist_weights=model.twist_weights, swing_weights=model.swing_weights)
     gt.update({k: np.array(v) for k, v in meta.items()})

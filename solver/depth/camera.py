@@ -17,7 +17,11 @@ Conventions (the same for every depth tool in Articula)
 ``intrinsics.json`` ("articula-intrinsics/1")::
 
     {"format": "articula-intrinsics/1", "name": "kinect_v1", "width": 640, "height": 480,
-     "fx": 580.0, "fy": 580.0, "cx": 319.5, "cy": 239.5, "depth_unit_m": 0.001}
+     "fx": 580.0, "fy": 580.0, "cx": 319.5, "cy": 239.5, "depth_unit_m": 0.001,
+     "cam_to_world": [[1, 0, 0, 0], [0, 0, 1, -2.8], [0, -1, 0, 1.0], [0, 0, 0, 1]]}
+
+``cam_to_world`` is optional: the pose of a static camera, a rigid 4x4 matrix as a list of rows (metres),
+read by :func:`load_camera_pose` (None when absent).
 
 :func:`load_intrinsics` also accepts Open3D's ``PinholeCameraIntrinsic`` JSON (``width``,
 ``height``, column-major ``intrinsic_matrix``).
@@ -150,12 +154,15 @@ def preset(name: str, resolution=None) -> Intrinsics:
 
 # ------------------------------------------------------------------------------------------ files
 
-def save_intrinsics(path, intr: Intrinsics) -> None:
-    """Write ``intr`` as ``intrinsics.json`` ("articula-intrinsics/1"), atomically."""
+def save_intrinsics(path, intr: Intrinsics, cam_to_world=None) -> None:
+    """Write ``intr`` as ``intrinsics.json`` ("articula-intrinsics/1"), atomically; with ``cam_to_world``
+    (4, 4) rigid camera-to-world (metres), also the static camera's pose (validated as on reading)."""
     path = os.fspath(path)
     intr.validate(path)
     data = {"format": FORMAT, **asdict(intr)}
     data["width"], data["height"] = int(intr.width), int(intr.height)
+    if cam_to_world is not None:
+        data["cam_to_world"] = check_camera_pose(cam_to_world, path).tolist()
     tmp = f"{path}.part{os.getpid()}"
     with open(tmp, "w", encoding="utf-8") as f:
         json.dump(data, f, indent=1)
@@ -163,9 +170,7 @@ def save_intrinsics(path, intr: Intrinsics) -> None:
     os.replace(tmp, path)
 
 
-def load_intrinsics(path) -> Intrinsics:
-    """Read and validate ``intrinsics.json`` (Articula's format or Open3D's pinhole JSON)."""
-    path = os.fspath(path)
+def _read_json(path) -> dict:
     try:
         with open(path, encoding="utf-8") as f:
             data = json.load(f)
@@ -175,6 +180,13 @@ def load_intrinsics(path) -> Intrinsics:
         raise ArticulaInputError(f"{path}: not valid JSON ({exc})") from exc
     if not isinstance(data, dict):
         raise ArticulaInputError(f"{path}: expected a JSON object with width, height, fx, fy, cx, cy")
+    return data
+
+
+def load_intrinsics(path) -> Intrinsics:
+    """Read and validate ``intrinsics.json`` (Articula's format or Open3D's pinhole JSON)."""
+    path = os.fspath(path)
+    data = _read_json(path)
     if data.get("format", FORMAT) != FORMAT:
         raise ArticulaInputError(f"{path}: unknown intrinsics format {data['format']!r} (expected {FORMAT!r})")
     if "fx" not in data and "intrinsic_matrix" in data:
@@ -186,6 +198,45 @@ def load_intrinsics(path) -> Intrinsics:
                       cx=data["cx"], cy=data["cy"], depth_unit_m=data.get("depth_unit_m", 0.001),
                       name=str(data.get("name", os.path.basename(os.path.dirname(os.path.abspath(path))))))
     return intr.validate(path)
+
+
+def load_camera_pose(path) -> np.ndarray | None:
+    """The optional ``cam_to_world`` of ``intrinsics.json``: (4, 4) float64 camera (OpenCV axes) to world,
+    metres, validated by :func:`check_camera_pose`; None when the file has no such key."""
+    path = os.fspath(path)
+    data = _read_json(path)
+    if data.get("cam_to_world") is None:
+        return None
+    return check_camera_pose(data["cam_to_world"], path)
+
+
+#: Largest deviation of R^T R from the identity accepted in a camera pose.
+POSE_TOLERANCE = 1e-4
+
+
+def check_camera_pose(matrix, where: str = "cam_to_world") -> np.ndarray:
+    """``matrix`` as a (4, 4) float64 rigid transform, else :class:`ArticulaInputError` naming ``where`` and
+    the key: finite, last row (0, 0, 0, 1), rotation orthonormal within :data:`POSE_TOLERANCE`, det +1."""
+    def bad(problem):
+        return ArticulaInputError(f"{where}: cam_to_world {problem}")
+    try:
+        m = np.asarray(matrix, dtype=float)
+    except (TypeError, ValueError):
+        raise bad("must be a 4x4 matrix of numbers (a list of 4 rows)") from None
+    if m.shape != (4, 4):
+        raise bad(f"must be a 4x4 matrix (a list of 4 rows of 4 numbers), got shape {m.shape}")
+    if not np.isfinite(m).all():
+        raise bad("holds NaN or infinite values")
+    if np.abs(m[3] - (0, 0, 0, 1)).max() > 0:
+        raise bad(f"must end with the row [0, 0, 0, 1], got {m[3].tolist()}")
+    r = m[:3, :3]
+    err = np.abs(r.T @ r - np.eye(3)).max()
+    if err > POSE_TOLERANCE:
+        raise bad(f"is not rigid: its rotation is not orthonormal (|R^T R - I| = {err:.3g} > {POSE_TOLERANCE:g}; "
+                  "no scale or shear allowed, translation in metres)")
+    if np.linalg.det(r) < 0:
+        raise bad("is a reflection (rotation determinant -1); a camera pose needs determinant +1")
+    return m
 
 
 def _from_open3d(data, path):

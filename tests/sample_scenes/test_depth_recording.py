@@ -36,6 +36,7 @@ def test_noiseless_recording_reproduces_the_scene(tmp_path):
     g = np.load(out / "ground_truth.npz")
     assert str(g["format"]) == rec.GT_FORMAT and json.loads(str(g["noise_params"]))["quantization"] == "none"
     np.testing.assert_allclose(g["centres"], centres)
+    np.testing.assert_array_equal(camera.load_camera_pose(out / "intrinsics.json"), g["cam_to_world"][0])
     floor_z = frames[:, :, 2].min()
     for k in range(3):
         depth_m = png16.read_png16(out / f"depth_{k:04d}.png") * intr.depth_unit_m

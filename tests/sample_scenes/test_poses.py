@@ -111,6 +111,22 @@ def test_root_motion(skeleton):
     assert np.allclose(head, skeleton.heads[0] + poses.translations)
 
 
+def test_role_amplitude_scales_one_role(skeleton):
+    full = rom_poses(skeleton, 12, seed=6, amplitude=0.8)
+    part = rom_poses(skeleton, 12, seed=6, amplitude=0.8, role_amplitude={"upper_arm": 0.5, "knee": 0.0})
+    roles = np.array(skeleton_roles(skeleton.names))
+    arm, knee = roles == "upper_arm", roles == "knee"
+    sw_full, _, tw_full = _angles(full.rotations)
+    sw_part, _, tw_part = _angles(part.rotations)
+    np.testing.assert_allclose(sw_part[:, arm], 0.5 * sw_full[:, arm], atol=1e-9)    # the same draws, scaled
+    np.testing.assert_allclose(tw_part[:, arm], 0.5 * tw_full[:, arm], atol=1e-9)
+    assert np.abs(sw_part[:, knee]).max() < 1e-9 and np.abs(sw_full[:, knee]).max() > 0.1
+    rest = ~(arm | knee)
+    np.testing.assert_allclose(part.rotations[:, rest], full.rotations[:, rest], atol=1e-12)
+    with pytest.raises(ArticulaInputError, match="role_amplitude: 'elbow'"):
+        rom_poses(skeleton, 3, role_amplitude={"elbow": 0.5})
+
+
 @pytest.mark.parametrize("kwargs, word", [(dict(n=0), "positive"), (dict(n=3, amplitude=2), "amplitude"),
                                           (dict(n=3, key_every=0), "key_every"), (dict(n=3, root_yaw=200), "root_yaw"),
                                           (dict(n=3, root_shift=-1), "root_shift")])

@@ -120,3 +120,47 @@ def test_look_at_and_blender_convention():
     with pytest.raises(ArticulaInputError, match="parallel"):
         camera.look_at((0, 0, 3), (0, 0, 0))
     assert math.isclose(np.linalg.det(cam[:3, :3]), 1.0)
+
+
+def test_camera_pose_round_trips_through_intrinsics_json(tmp_path):
+    intr = camera.preset("kinect_v1", (320, 240))
+    pose = camera.look_at(eye=(0.3, -2.7, 0.9), target=(0.1, 0.0, 0.95))
+    path = tmp_path / "intrinsics.json"
+    camera.save_intrinsics(path, intr)
+    assert camera.load_camera_pose(path) is None                      # optional
+    camera.save_intrinsics(path, intr, cam_to_world=pose)
+    rows = json.loads(path.read_text())["cam_to_world"]
+    assert len(rows) == 4 and all(len(r) == 4 for r in rows) and rows[3] == [0, 0, 0, 1]
+    assert rows[0][3] == pytest.approx(0.3) and rows[1][3] == pytest.approx(-2.7)   # row-major: translation last
+    np.testing.assert_array_equal(camera.load_camera_pose(path), pose)
+    assert camera.load_intrinsics(path) == intr                       # the intrinsics read as before
+    with pytest.raises(ArticulaInputError, match="cam_to_world is not rigid"):
+        camera.save_intrinsics(path, intr, cam_to_world=np.diag([2.0, 2, 2, 1]))
+
+
+def _rotated(deg):
+    c, s = math.cos(math.radians(deg)), math.sin(math.radians(deg))
+    return [[c, -s, 0, 0.5], [s, c, 0, -2.0], [0, 0, 1, 1.0], [0, 0, 0, 1]]
+
+
+@pytest.mark.parametrize("value, message", [
+    ([[1, 0, 0], [0, 1, 0], [0, 0, 1]], r"4x4 matrix .* got shape \(3, 3\)"),
+    ("identity", "4x4 matrix"),
+    ([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 1, 1]], r"end with the row \[0, 0, 0, 1\]"),
+    ([[1, 0, 0, float("nan")], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "NaN or infinite"),
+    ([[1.001, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "not rigid"),
+    ([[1, 0.01, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "not rigid"),
+    ([[-1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "reflection"),
+])
+def test_bad_camera_poses_name_file_and_key(tmp_path, value, message):
+    path = tmp_path / "intrinsics.json"
+    data = {"format": camera.FORMAT, "width": 640, "height": 480, "fx": 580.0, "fy": 580.0,
+            "cx": 319.5, "cy": 239.5, "cam_to_world": value}
+    path.write_text(json.dumps(data))
+    with pytest.raises(ArticulaInputError, match=message) as err:
+        camera.load_camera_pose(path)
+    assert "intrinsics.json" in str(err.value) and "cam_to_world" in str(err.value)
+    data["cam_to_world"] = _rotated(30.0)                             # rounded to JSON's precision: accepted
+    data["cam_to_world"][0][0] += 5e-5
+    path.write_text(json.dumps(data))
+    assert camera.load_camera_pose(path)[1, 3] == -2.0
