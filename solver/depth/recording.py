@@ -288,6 +288,47 @@ def _refuse_out_of_range(first: str, n: int, opts: dp.DepthOptions, measured: li
         f"--depth-min/--depth-max){fix}")
 
 
+@dataclasses.dataclass
+class RecordingSetup:
+    """What every frame of a depth recording shares: the (rescaled) intrinsics ``intr``, the pixel
+    ``rays``, the static ``background`` (H, W) metres or None, the ``floor`` plane (n, d) in the sensor
+    frame or None, the frame ``shape`` (H, W), ``notes`` for the user, and ``src`` (the decoded set-up
+    frames, kept for the importer)."""
+    intr: object
+    rays: tuple
+    background: np.ndarray | None
+    floor: tuple | None
+    shape: tuple
+    notes: list
+    src: object
+
+
+def recording_setup(frames: list, intr, opts: dp.DepthOptions, background: DepthFrame | None = None,
+                    progress=_no_progress) -> RecordingSetup:
+    """Background (given frame or median) and floor of a recording, from a few frames spread over it
+    (the dissertation's ch. 5 preprocessing: ground plane fitted once, static background subtracted)."""
+    src = _SetupFrames(frames, opts)
+    notes = []
+    intr = _matching_intrinsics(intr, src.shape, frames[0].name, notes)
+    rays = dp.pixel_rays(intr)
+    bg = floor = None
+    if opts.subtract_background:
+        progress(0.0, "background")
+        bg = _background(src, background, opts, notes)
+    if opts.remove_floor:
+        progress(0.02, "floor")
+        floor = _depth_floor(src, rays, opts, notes)
+    return RecordingSetup(intr, rays, bg, floor, src.shape, notes, src)
+
+
+def stream_metres(frames: list, opts: dp.DepthOptions, shape):
+    """``(k, depth (H, W) float32 metres, NaN invalid)`` for every frame in order, decoding PNGs a few at
+    a time (memory stays bounded for recordings of any length)."""
+    prefetch = _Prefetch(frames)
+    for k, frame in enumerate(frames):
+        yield k, _frame_metres(frame, opts, shape, frames[0].name, prefetch.raw(k))
+
+
 # ------------------------------------------------------------------------------------ importers
 
 def import_depth(frames: list, intr, opts: dp.DepthOptions, progress=_no_progress,
@@ -312,17 +353,8 @@ def import_depth(frames: list, intr, opts: dp.DepthOptions, progress=_no_progres
                                  "the counts must match")
     check_png_frames(list(frames) + [background])
     t0 = time.perf_counter()
-    src = _SetupFrames(frames, opts)
-    notes = []
-    intr = _matching_intrinsics(intr, src.shape, frames[0].name, notes)
-    rays = dp.pixel_rays(intr)
-    bg = floor = None
-    if opts.subtract_background:
-        progress(0.0, "background")
-        bg = _background(src, background, opts, notes)
-    if opts.remove_floor:
-        progress(0.02, "floor")
-        floor = _depth_floor(src, rays, opts, notes)
+    setup = recording_setup(frames, intr, opts, background, progress)
+    src, intr, rays, bg, floor, notes = setup.src, setup.intr, setup.rays, setup.background, setup.floor, setup.notes
     t_frames = time.perf_counter()
     t_setup = t_frames - t0
     out, t_decode, t_proc, workers = _process_frames(src, colors, rays, bg, floor, progress)

@@ -1,0 +1,166 @@
+"""The model as the depth tracker sees it: a fixed subset of its vertices under linear blend skinning,
+posed by the model's own kinematic chain, and the linearised pose update of the depth-camera tracking
+dissertation (ch. 3, Eq. 3.24; ch. 5, Eq. 5.2): a root translation plus one world-axes rotation
+increment per joint, about the joint's current position, moving the joint's whole subtree.
+
+Skinning weights: the hybrid skin's swing weights on the anchor's children and the remainder on the anchor
+(the linear-blend reading of the swing/twist skin; twist ramps are not modelled), at most
+``MAX_INFLUENCES`` per vertex.  Joint positions come from the exact forward kinematics, so tracked poses
+are poses of the model itself.  Parameter vector (3 + 3B): ``[dt (3), omega_0 (3), ..., omega_{B-1} (3)]``.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..errors import ArticulaInputError
+from ..geometry.rotations import quat_mul, quat_normalize, rotvec_to_quat
+from ..rig.kinematics import forward_kinematics
+from ..rig.model import Model, Poses
+from ..track.visibility import vertex_normals
+
+MAX_INFLUENCES = 4
+SUBSET_SIZE = 1500      # model points used for correspondences (the dissertation's ch. 6 samples ~1000)
+
+
+def linear_blend_weights(model: Model) -> np.ndarray:
+    """(V, B) linear-blend weights of the swing/twist model: swing weights on the anchor's children, the
+    remainder (1 - sum) on the anchor; rows sum to 1."""
+    w = np.asarray(model.swing_weights, dtype=np.float64).copy()
+    rows = np.arange(model.num_vertices)
+    w[rows, model.anchor] += 1.0 - w.sum(axis=1)
+    return w
+
+
+def ancestor_table(parents) -> np.ndarray:
+    """(B, B) bool: ``[k, j]`` is True when bone j is bone k or one of its ancestors."""
+    B = len(parents)
+    table = np.eye(B, dtype=bool)
+    for k in range(1, B):
+        table[k] |= table[parents[k]]
+    return table
+
+
+def spread_subset(vertices: np.ndarray, count: int, seed: int = 0) -> np.ndarray:
+    """About ``count`` vertex ids spread evenly over the surface: one random vertex per occupied cell of
+    a grid whose cell size gives roughly ``count`` cells (sorted ids; deterministic for a seed)."""
+    n = len(vertices)
+    if count >= n:
+        return np.arange(n)
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(n)
+    lo, hi = vertices.min(0), vertices.max(0)
+    ids = order
+    for cell in np.geomspace(np.ptp(vertices, axis=0).max() / 4, 1e-4, 60):
+        keys = np.floor((vertices[order] - lo) / cell).astype(np.int64)
+        _, first = np.unique(keys, axis=0, return_index=True)
+        if len(first) >= count:
+            ids = order[first]
+            break
+    return np.sort(rng.choice(ids, size=min(count, len(ids)), replace=False))
+
+
+@dataclasses.dataclass
+class PosedBody:
+    """One pose of the body: ``points`` (M, 3) and ``normals`` (M, 3) of the subset, ``per_bone`` (M, I, 3)
+    each vertex moved by each of its influences, ``joints`` (B, 3) posed heads, ``world`` (B, 3, 3) world
+    rotations of the parts (scale removed)."""
+    points: np.ndarray
+    normals: np.ndarray
+    per_bone: np.ndarray
+    joints: np.ndarray
+    world: np.ndarray
+
+
+class TrackingBody:
+    """A subset of ``model``'s vertices with compact linear-blend weights (see the module docstring).
+
+    ``ids`` (M,) vertex ids; ``rest`` / ``rest_normals`` (M, 3); ``bones`` / ``weights`` (M, I) the
+    influences; ``main_bone`` (M,) the bone of largest weight (the relaxed bijectivity test, Eq. 5.3);
+    ``chain`` (M, B) the weight of each vertex's influences in each bone's subtree (beta of Eq. 3.26)."""
+
+    def __init__(self, model: Model, ids=None, count: int = SUBSET_SIZE, seed: int = 0):
+        verts = np.asarray(model.rest_vertices, dtype=np.float64)
+        if ids is None:
+            ids = spread_subset(verts, count, seed)
+        ids = np.asarray(ids, dtype=np.int64)
+        if len(ids) < 10:
+            raise ArticulaInputError(f"the model has {len(ids)} usable vertices; tracking needs at least 10")
+        self.model = model
+        self.ids = ids
+        self.rest = verts[ids]
+        self.rest_normals = vertex_normals(verts, model.faces)[ids] if len(model.faces) else np.zeros_like(self.rest)
+        w = linear_blend_weights(model)[ids]
+        order = np.argsort(-w, axis=1, kind="stable")[:, :MAX_INFLUENCES]
+        top = np.take_along_axis(w, order, axis=1)
+        self.bones = order.astype(np.int64)
+        self.weights = top / top.sum(axis=1, keepdims=True)
+        self.main_bone = order[:, 0]
+        self.ancestors = ancestor_table(model.skeleton.parents)
+        self.ancestors_f = self.ancestors.astype(np.float64)
+        self.chain = np.einsum("mi,mib->mb", self.weights, self.ancestors_f[self.bones])
+
+    @property
+    def num_bones(self) -> int:
+        return self.model.skeleton.num_bones
+
+    @property
+    def num_params(self) -> int:
+        return 3 + 3 * self.num_bones
+
+    def pose(self, poses: Poses) -> PosedBody:
+        """The subset posed by one frame of ``poses``."""
+        Rm, tm = forward_kinematics(self.model.skeleton, poses)
+        Rm, tm = Rm[0], tm[0]
+        B = len(Rm)
+        flat = Rm.transpose(2, 0, 1).reshape(3, 3 * B)                  # [c, (b, r)] = Rm[b, r, c]
+        moved = (self.rest @ flat).reshape(-1, B, 3) + tm[None]         # (M, B, 3) every bone's map
+        turned = (self.rest_normals @ flat).reshape(-1, B, 3)
+        rows = np.arange(len(self.rest))[:, None]
+        per_bone = moved[rows, self.bones]                              # (M, I, 3)
+        points = np.einsum("mi,mir->mr", self.weights, per_bone)
+        n = np.einsum("mi,mir->mr", self.weights, turned[rows, self.bones])
+        heads = self.model.skeleton.heads
+        joints = np.einsum("brc,bc->br", Rm, heads) + tm
+        world = Rm / poses.scales[0]
+        return PosedBody(points, n, per_bone, joints, world)
+
+    def lever_arms(self, posed: PosedBody, rows=None) -> np.ndarray:
+        """(m, 3, B) lever arms of the chosen subset points (``rows``, default all): the point's motion
+        under joint j's world rotation increment omega_j is ``omega_j x a[:, :, j]`` with
+        ``a_mj = S_mj - beta_mj g_j``, S_mj the weighted influences of vertex m in j's subtree (exact for
+        the linear blend: influences outside the subtree do not move)."""
+        sel = slice(None) if rows is None else rows
+        wy = self.weights[sel][:, :, None] * posed.per_bone[sel]
+        bones = self.bones[sel]
+        m, B = len(bones), self.num_bones
+        C = np.zeros((m, 3, B))
+        C[np.arange(m)[:, None], :, bones] = wy                         # influences are distinct bones
+        S = (C.reshape(3 * m, B) @ self.ancestors_f).reshape(m, 3, B)
+        return S - self.chain[sel][:, None, :] * posed.joints.T[None]
+
+    def jacobian(self, posed: PosedBody, rows=None) -> np.ndarray:
+        """(m, 3, 3 + 3B) derivative of the chosen points with respect to the parameter vector."""
+        a = self.lever_arms(posed, rows)
+        m, B = a.shape[0], self.num_bones
+        J = np.zeros((m, 3, 3 + 3 * B))
+        J[:, 0, 0] = J[:, 1, 1] = J[:, 2, 2] = 1.0
+        rot = J[:, :, 3:].reshape(m, 3, B, 3)
+        # omega x a = -[a]x omega
+        rot[:, 0, :, 1], rot[:, 0, :, 2] = a[:, 2], -a[:, 1]
+        rot[:, 1, :, 0], rot[:, 1, :, 2] = -a[:, 2], a[:, 0]
+        rot[:, 2, :, 0], rot[:, 2, :, 1] = a[:, 1], -a[:, 0]
+        return J
+
+    def apply(self, poses: Poses, delta: np.ndarray, posed: PosedBody) -> Poses:
+        """``poses`` (one frame) moved by the parameter step ``delta`` (3 + 3B,) taken at ``posed``: the
+        root translated, each joint's local rotation left-multiplied by its world increment expressed in
+        the bone's rest axes under the parent's current rotation (``q_j <- exp(F_jᵀ W_pᵀ omega_j) q_j``)."""
+        delta = np.asarray(delta, dtype=np.float64)
+        skel = self.model.skeleton
+        omega = delta[3:].reshape(-1, 3)
+        parent_world = np.concatenate([np.eye(3)[None], posed.world[skel.parents[1:]]])
+        local = np.einsum("bji,bkj,bk->bi", skel.frames, parent_world, omega)
+        rot = quat_normalize(quat_mul(rotvec_to_quat(local), poses.rotations[0]))
+        return Poses(rot[None], poses.translations + delta[:3], poses.scales.copy())

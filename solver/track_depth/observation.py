@@ -1,0 +1,155 @@
+"""One depth frame as the tracker sees it: the person's pixels, their points, normals and silhouette.
+
+Preprocessing (depth-camera tracking dissertation, ch. 2 and 5): range clip, static background and floor
+removed (:mod:`solver.depth.frames`), then the person is the largest connected foreground component,
+connectivity broken at depth jumps so an object touching the person in the image but standing apart in
+depth is not merged.  Points are sampled on the image grid (ch. 6 samples the observation uniformly on
+the grid), the silhouette edge pixels keep their 2D contour normals (ch. 5, §4.4 edge term).  Everything
+is in the tracking frame (``camera.cam_to_world`` applied).
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from ..depth import frames as dp
+
+JUMP_M = 0.05          # neighbouring pixels further apart in depth than this (+ noise) are not connected
+MIN_PERSON_SHARE = 0.004  # a component smaller than this share of the image is nobody
+MIN_PERSON_POINTS = 150
+
+
+@dataclasses.dataclass
+class ViewCamera:
+    """The depth camera: :class:`~solver.depth.camera.Intrinsics` and ``cam_to_world`` (4, 4) from the
+    camera frame (OpenCV axes) to the tracking frame."""
+    intr: object
+    cam_to_world: np.ndarray
+
+    def __post_init__(self):
+        self.cam_to_world = np.asarray(self.cam_to_world, dtype=np.float64)
+        self.R = self.cam_to_world[:3, :3]
+        self.t = self.cam_to_world[:3, 3]
+
+    @property
+    def centre(self) -> np.ndarray:
+        return self.t
+
+    def to_camera(self, points: np.ndarray) -> np.ndarray:
+        return (points - self.t) @ self.R
+
+    def project(self, points: np.ndarray):
+        """(N, 3) tracking-frame points -> pixel (N, 2) (u right, v down) and depth z (N,) metres."""
+        c = self.to_camera(points)
+        z = c[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv = np.stack((self.intr.fx * c[:, 0] / z + self.intr.cx, self.intr.fy * c[:, 1] / z + self.intr.cy), 1)
+        return uv, z
+
+
+@dataclasses.dataclass
+class Observation:
+    """The person in one frame.  ``points`` / ``normals`` (N, 3) tracking frame; ``pixels`` (N, 2);
+    ``boundary`` (N,) bool, points on the silhouette (their normals are unreliable, ch. 5 rejects pairs
+    with them); ``edge_points`` (E, 3), ``edge_pixels`` (E, 2), ``edge_normals`` (E, 2) the silhouette
+    pixels with outward 2D contour normals; ``mask`` (H, W) bool, the person's pixels; ``depth`` (H, W)
+    metres (NaN invalid), for the free-space test of hypotheses; ``person_pixels`` the component size."""
+    points: np.ndarray
+    normals: np.ndarray
+    pixels: np.ndarray
+    boundary: np.ndarray
+    edge_points: np.ndarray
+    edge_pixels: np.ndarray
+    edge_normals: np.ndarray
+    mask: np.ndarray
+    depth: np.ndarray
+    person_pixels: int
+
+    @property
+    def empty(self) -> bool:
+        return len(self.points) < MIN_PERSON_POINTS
+
+    def tree(self) -> cKDTree:
+        if not hasattr(self, "_tree"):
+            self._tree = cKDTree(self.points)
+        return self._tree
+
+    def edge_tree(self) -> cKDTree:
+        if not hasattr(self, "_edge_tree"):
+            self._edge_tree = cKDTree(self.edge_pixels)
+        return self._edge_tree
+
+
+def connected_person(keep: np.ndarray, depth_m: np.ndarray, noise: float, min_share: float = MIN_PERSON_SHARE):
+    """(H, W) bool mask of the largest 4-connected component of ``keep`` where neighbours closer than
+    ``JUMP_M + noise z^2`` in depth are connected; an empty mask when it is smaller than ``min_share`` of
+    the image."""
+    z = np.where(keep, depth_m, np.nan)
+    thr = JUMP_M + noise * np.nan_to_num(z, nan=0.0) ** 2
+    with np.errstate(invalid="ignore"):
+        jump_v = np.abs(np.diff(z, axis=0)) > np.minimum(thr[1:], thr[:-1])
+        jump_h = np.abs(np.diff(z, axis=1)) > np.minimum(thr[:, 1:], thr[:, :-1])
+    cut = np.zeros_like(keep)          # break connectivity: drop the farther pixel of each jump
+    far_v = np.nan_to_num(z[1:], nan=0) > np.nan_to_num(z[:-1], nan=0)
+    cut[1:] |= jump_v & far_v
+    cut[:-1] |= jump_v & ~far_v
+    far_h = np.nan_to_num(z[:, 1:], nan=0) > np.nan_to_num(z[:, :-1], nan=0)
+    cut[:, 1:] |= jump_h & far_h
+    cut[:, :-1] |= jump_h & ~far_h
+    labels, count = ndimage.label(keep & ~cut)
+    if count == 0:
+        return np.zeros_like(keep)
+    sizes = np.bincount(labels.ravel())[1:]
+    best = int(np.argmax(sizes)) + 1
+    if sizes[best - 1] < min_share * keep.size:
+        return np.zeros_like(keep)
+    person = labels == best
+    # the cut pixels that touch the person and lie at its depth belong to it
+    grown = ndimage.binary_dilation(person) & keep & cut
+    return person | grown
+
+
+def _silhouette(person: np.ndarray):
+    """Silhouette pixels (rows, cols) of the mask and their outward unit 2D normals (u, v)."""
+    inner = ndimage.binary_erosion(person, border_value=0)
+    edge = person & ~inner
+    rows, cols = np.nonzero(edge)
+    smooth = ndimage.gaussian_filter(person.astype(np.float32), 1.5)
+    gu = ndimage.sobel(smooth, axis=1)[rows, cols]
+    gv = ndimage.sobel(smooth, axis=0)[rows, cols]
+    n = -np.stack((gu, gv), axis=1)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-9)
+    return edge, rows, cols, n
+
+
+def grid_stride(count: int, max_points: int) -> int:
+    """Image-grid step giving at most about ``max_points`` of ``count`` pixels."""
+    return max(1, int(np.ceil(np.sqrt(count / max(max_points, 1)))))
+
+
+def observe(depth_m: np.ndarray, rays, camera: ViewCamera, opts: dp.DepthOptions, background=None, floor=None,
+            max_points: int = 2500, max_edges: int = 400) -> Observation:
+    """One depth frame (metres, NaN invalid) -> :class:`Observation` of the person (possibly empty)."""
+    grid = dp.backproject_grid(depth_m, rays)
+    keep = dp.frame_mask(depth_m, grid, opts, background, floor)
+    person = connected_person(keep, depth_m, opts.depth_noise)
+    count = int(person.sum())
+    edge, er, ec, en = _silhouette(person)
+    s = grid_stride(count, max_points)
+    sub = np.zeros_like(person)
+    off = s // 2
+    sub[off::s, off::s] = True
+    rows, cols = np.nonzero(person & sub)
+    normals = dp.grid_normals(grid, rows, cols, mask=person) if len(rows) else np.zeros((0, 3))
+    pts = grid[rows, cols]
+    k = grid_stride(len(er), max_edges) ** 2
+    er, ec, en = er[::k], ec[::k], en[::k]
+    R, t = camera.R, camera.t
+    return Observation(points=pts.astype(np.float64) @ R.T + t, normals=np.asarray(normals, np.float64) @ R.T,
+                       pixels=np.stack((cols, rows), 1).astype(np.float64), boundary=edge[rows, cols],
+                       edge_points=grid[er, ec].astype(np.float64) @ R.T + t,
+                       edge_pixels=np.stack((ec, er), 1).astype(np.float64), edge_normals=en,
+                       mask=person, depth=depth_m, person_pixels=count)
