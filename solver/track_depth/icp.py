@@ -56,6 +56,23 @@ def surface_pairs(body, posed, vis, obs, opts):
     return rows, targets
 
 
+def data_pairs(body, posed, vis, obs, opts, sample: int = 1000):
+    """Observed points (a grid-spread sample) paired with their nearest visible model point, the same
+    pruning as :func:`surface_pairs`: data the model does not explain pull the nearest part (ours; the
+    dissertation's ch. 5 pairs model points only)."""
+    if len(vis) == 0 or obs.empty:
+        return np.zeros(0, np.int64), np.zeros((0, 3))
+    pick = np.arange(0, len(obs.points), max(1, len(obs.points) // sample))
+    pick = pick[~obs.boundary[pick]]
+    x = obs.points[pick]
+    tree = cKDTree(posed.points[vis])
+    dist, i = tree.query(x, distance_upper_bound=opts.max_distance)
+    ok = np.isfinite(dist)
+    i = np.where(ok, i, 0)
+    ok &= (posed.normals[vis[i]] * obs.normals[pick]).sum(axis=1) >= np.cos(np.radians(opts.max_normal_angle))
+    return vis[i[ok]], x[ok]
+
+
 def contour_normals_2d(points, normals, camera):
     """(k, 2) image directions in which the points' normals point (unit)."""
     c = camera.to_camera(points)
@@ -130,24 +147,30 @@ def coverage(body, posed, obs, near_m: float, sample: int = 800):
     return float((d <= near_m).mean()), float(d.mean())
 
 
-def build_system(body, posed, obs, camera, opts, prior=None):
+def build_system(body, posed, pose, obs, camera, opts, prior=None):
     """The linear system of one ICP iteration and the rows it used."""
     vis = np.flatnonzero(visible(posed.points, posed.normals, camera, opts.visibility_tolerance))
     rows, targets = surface_pairs(body, posed, vis, obs, opts)
+    if opts.data_weight > 0:
+        drows, dtargets = data_pairs(body, posed, vis, obs, opts)
+        w = np.concatenate([np.full(len(rows), opts.point_weight), np.full(len(drows), opts.data_weight)])
+        rows, targets = np.concatenate([rows, drows]), np.concatenate([targets, dtargets])
+    else:
+        w = np.full(len(rows), opts.point_weight)
     system = System(body.num_bones)
     a = body.lever_arms(posed, rows)
     r = posed.points[rows] - targets
     if opts.plane_weight > 0:
         n = posed.normals[rows]
-        system.add_projected(a, n, (n * r).sum(axis=1), np.full(len(rows), opts.plane_weight))
-    system.add_points(a, r, np.full(len(rows), opts.point_weight))
+        system.add_projected(a, n, (n * r).sum(axis=1), opts.plane_weight * w / max(opts.point_weight, 1e-12))
+    system.add_points(a, r, w)
     erows, pix = edge_pairs(body, posed, vis, obs, camera, opts) if opts.edge_weight > 0 else ((), ())
     if len(erows):
         h, e = edge_rows(posed.points[erows], pix, camera)
         ae = body.lever_arms(posed, erows)
         system.add_projected(np.concatenate([ae, ae]), h, e, np.full(len(e), opts.edge_weight))
     if prior is not None:
-        prior.add_to(system, posed)
+        prior.add_to(system, posed, pose)
     return system, rows, a, len(erows)
 
 
@@ -157,7 +180,7 @@ def fit_frame(body, obs, camera, pose, opts, prior=None, iterations=None) -> Fra
     it, rows, n_edges = 0, (), 0
     for it in range(1, (iterations or opts.max_iterations) + 1):
         posed = body.pose(pose)
-        system, rows, a, n_edges = build_system(body, posed, obs, camera, opts, prior)
+        system, rows, a, n_edges = build_system(body, posed, pose, obs, camera, opts, prior)
         if len(rows) < 6:
             break
         delta = _shorten(system.solve(opts.damping))

@@ -20,6 +20,8 @@ from ..depth import frames as dp
 JUMP_M = 0.05          # neighbouring pixels further apart in depth than this (+ noise) are not connected
 MIN_PERSON_SHARE = 0.004  # a component smaller than this share of the image is nobody
 MIN_PERSON_POINTS = 150
+MIN_PART_PIXELS = 10      # smaller components near the person are noise, not body parts
+REACH_M = 0.08            # a component this close (3D) to the person's largest one is part of it
 
 
 @dataclasses.dataclass
@@ -83,22 +85,31 @@ class Observation:
         return self._edge_tree
 
 
-def connected_person(keep: np.ndarray, depth_m: np.ndarray, noise: float, min_share: float = MIN_PERSON_SHARE):
-    """(H, W) bool mask of the largest 4-connected component of ``keep`` where neighbours closer than
-    ``JUMP_M + noise z^2`` in depth are connected; an empty mask when it is smaller than ``min_share`` of
-    the image."""
+def _jump_cut(keep: np.ndarray, depth_m: np.ndarray, noise: float) -> np.ndarray:
+    """(H, W) bool: the farther pixel of every 4-neighbour pair of ``keep`` whose depths differ by more
+    than ``JUMP_M + noise z^2``."""
     z = np.where(keep, depth_m, np.nan)
     thr = JUMP_M + noise * np.nan_to_num(z, nan=0.0) ** 2
+    zz = np.nan_to_num(z, nan=0.0)
+    cut = np.zeros_like(keep)
     with np.errstate(invalid="ignore"):
         jump_v = np.abs(np.diff(z, axis=0)) > np.minimum(thr[1:], thr[:-1])
         jump_h = np.abs(np.diff(z, axis=1)) > np.minimum(thr[:, 1:], thr[:, :-1])
-    cut = np.zeros_like(keep)          # break connectivity: drop the farther pixel of each jump
-    far_v = np.nan_to_num(z[1:], nan=0) > np.nan_to_num(z[:-1], nan=0)
+    far_v, far_h = zz[1:] > zz[:-1], zz[:, 1:] > zz[:, :-1]
     cut[1:] |= jump_v & far_v
     cut[:-1] |= jump_v & ~far_v
-    far_h = np.nan_to_num(z[:, 1:], nan=0) > np.nan_to_num(z[:, :-1], nan=0)
     cut[:, 1:] |= jump_h & far_h
     cut[:, :-1] |= jump_h & ~far_h
+    return cut
+
+
+def connected_person(keep: np.ndarray, grid: np.ndarray, depth_m: np.ndarray, noise: float,
+                     min_share: float = MIN_PERSON_SHARE, reach: float = REACH_M) -> np.ndarray:
+    """(H, W) bool mask of the person: the largest 4-connected component of ``keep`` (neighbours further
+    apart in depth than ``JUMP_M + noise z^2`` are not connected) plus the smaller components that come
+    within ``reach`` metres of it in 3D (a forearm pointing at the camera is cut from the upper arm by a
+    depth jump but stays next to it); empty when the largest is below ``min_share`` of the image."""
+    cut = _jump_cut(keep, depth_m, noise)
     labels, count = ndimage.label(keep & ~cut)
     if count == 0:
         return np.zeros_like(keep)
@@ -107,8 +118,17 @@ def connected_person(keep: np.ndarray, depth_m: np.ndarray, noise: float, min_sh
     if sizes[best - 1] < min_share * keep.size:
         return np.zeros_like(keep)
     person = labels == best
-    # the cut pixels that touch the person and lie at its depth belong to it
-    grown = ndimage.binary_dilation(person) & keep & cut
+    pts = grid[person]
+    tree = cKDTree(pts[:: max(1, len(pts) // 4000)])
+    for lab in np.flatnonzero(sizes >= MIN_PART_PIXELS) + 1:
+        if lab == best:
+            continue
+        part = labels == lab
+        q = grid[part]
+        d, _ = tree.query(q[:: max(1, len(q) // 200)], distance_upper_bound=reach)
+        if np.isfinite(d).any():
+            person |= part
+    grown = ndimage.binary_dilation(person) & keep & cut & ~person   # cut pixels at its edge
     return person | grown
 
 
@@ -135,7 +155,7 @@ def observe(depth_m: np.ndarray, rays, camera: ViewCamera, opts: dp.DepthOptions
     """One depth frame (metres, NaN invalid) -> :class:`Observation` of the person (possibly empty)."""
     grid = dp.backproject_grid(depth_m, rays)
     keep = dp.frame_mask(depth_m, grid, opts, background, floor)
-    person = connected_person(keep, depth_m, opts.depth_noise)
+    person = connected_person(keep, grid, depth_m, opts.depth_noise)
     count = int(person.sum())
     edge, er, ec, en = _silhouette(person)
     s = grid_stride(count, max_points)

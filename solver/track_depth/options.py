@@ -22,10 +22,11 @@ class DepthTrackOptions:
     edge_normal_angle: float = 90.0   # edge pairs, 2D contour normals (Table 5.1)
     edge_candidates: int = 6          # k_s: 2D neighbours among which the 3D-closest edge point is taken
     point_weight: float = 1.0         # point-to-point rows (ch. 5, Eq. 5.1)
+    data_weight: float = 0.0          # observed-point-to-model rows (ours)
     plane_weight: float = 0.0         # point-to-plane rows along the model normal (ours)
     edge_weight: float = 1.0          # edge rows (metric: pixel error x depth / focal length) vs point rows
     visibility_tolerance: float = 0.03  # model points up to this behind the rendered model depth count as visible
-    damping: float = 0.02             # lambda_r of the small-update regulariser (metres^2 per radian^2)
+    damping: float = 0.05             # lambda_r of the small-update regulariser (metres^2 per radian^2)
     motion_weight: float = 0.0        # pull of joints without data towards the predicted pose (ours)
     gmm_sigma: float = 0.02           # initial sigma of the GMM tracker (Table 6.2: 0.02 m), reset every frame
     gmm_outliers: float = 0.01        # u, uniform outlier weight (ch. 6)

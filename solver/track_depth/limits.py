@@ -1,0 +1,60 @@
+"""Joint limits of the depth tracker (ours: the dissertation's trackers have none, ch. 5 §5.5 names the
+drift of weakly seen joints as a failure): soft box limits on each joint's bone-local rotation vector,
+from the generic human prior mapped by bone names (:func:`solver.track.pose_prior.generic_prior`), plus a
+weak pull towards the middle of the box scaled by 1/width^2, so joints the data hardly sees (hip girdle,
+clavicles, spine segments) do not wander while a limb's wide range is barely pulled."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..geometry.rotations import quat_to_rotvec
+from ..track.pose_prior import generic_prior, rotvec_increment_jacobian
+
+BOX_WEIGHT = 10.0      # m^2 per rad^2 outside the box
+CENTRE_WEIGHT = 0.02   # m^2 per (box width)^2 away from the middle
+
+
+class JointLimits:
+    """Box ``lower``/``upper`` (B, 3) radians (inf = free) and the bones that have one."""
+
+    def __init__(self, skeleton, lower=None, upper=None):
+        if lower is None:
+            prior = generic_prior(skeleton)
+            lower, upper = prior.lower, prior.upper
+        self.skeleton = skeleton
+        self.lower, self.upper = np.asarray(lower, float), np.asarray(upper, float)
+        self.bones = np.flatnonzero(np.isfinite(self.lower).all(axis=1) & np.isfinite(self.upper).all(axis=1))
+        finite = np.isfinite(self.lower) & np.isfinite(self.upper)
+        self.width = np.where(finite, np.maximum(self.upper - self.lower, np.radians(5.0)), np.inf)
+        self.centre = np.where(finite, 0.5 * (np.where(finite, self.lower, 0) + np.where(finite, self.upper, 0)), 0.0)
+
+    @classmethod
+    def none(cls, skeleton) -> "JointLimits":
+        inf = np.full((skeleton.num_bones, 3), np.inf)
+        return cls(skeleton, -inf, inf)
+
+    def add_to(self, system, posed, pose) -> None:
+        """Rows on the limited bones' rotation increments (left increments in bone axes, mapped to the
+        world-axes parameters through the parent's current rotation)."""
+        b = self.bones
+        if len(b) == 0:
+            return
+        sk = self.skeleton
+        r = quat_to_rotvec(pose.rotations[0, b])
+        # omega_b turns q_b by the left increment exp(F_bᵀ W_pᵀ omega_b); d log / d(left increment) is
+        # the inverse left Jacobian J_l^{-1}(r) = J_r^{-1}(-r)
+        Jlog = rotvec_increment_jacobian(-r)
+        parent_world = posed.world[sk.parents[b]]
+        to_local = np.swapaxes(sk.frames[b], 1, 2) @ np.swapaxes(parent_world, 1, 2)
+        D = Jlog @ to_local                                     # (k, 3, 3)
+        over = r - np.clip(r, self.lower[b], self.upper[b])
+        pull = (r - self.centre[b]) / self.width[b]
+        P = system.H.shape[0]
+        rows = np.zeros((len(b), 3, P))
+        for i, bone in enumerate(b):
+            rows[i, :, 3 + 3 * bone:6 + 3 * bone] = D[i]
+        rows = rows.reshape(-1, P)
+        w_box = np.where(over.ravel() != 0, BOX_WEIGHT, 0.0)
+        system.add_rows(rows, over.ravel(), w_box)
+        scale = (1.0 / self.width[b]).ravel()
+        system.add_rows(rows * scale[:, None], pull.ravel(), np.full(len(scale), CENTRE_WEIGHT))
