@@ -79,6 +79,12 @@ class Observation:
             self._tree = cKDTree(self.points)
         return self._tree
 
+    def mask_dilated(self, pixels: int = 2) -> np.ndarray:
+        """The person's mask grown by ``pixels`` (model points just past the silhouette are not in free space)."""
+        if not hasattr(self, "_dilated"):
+            self._dilated = ndimage.binary_dilation(self.mask, iterations=pixels)
+        return self._dilated
+
     def edge_tree(self) -> cKDTree:
         if not hasattr(self, "_edge_tree"):
             self._edge_tree = cKDTree(self.edge_pixels)

@@ -1,0 +1,113 @@
+"""The start pose of a depth recording without user action (depth-camera tracking dissertation ch. 3's
+pose-database idea, ch. 5 §5.3 and ch. 6 §6.5 need only the rough global orientation): the person stands
+roughly upright facing the camera (within +-45 deg).  Hypotheses = facings every ``YAW_STEP`` deg in
++-``YAW_RANGE`` x a few body poses (rest + the generic body poses); each is placed on the observed points,
+fitted by a few ICP iterations and scored by the observed points it leaves unexplained plus the model
+points that land where the camera sees no person (free space); the best is fitted to convergence.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..geometry.rotations import matrix_to_quat, quat_mul, rotation_between
+from ..rig.model import Poses
+from ..track.initialise import body_poses
+from . import icp
+
+YAW_RANGE = 45.0
+YAW_STEP = 15.0
+BODY_POSES = 4           # rest + 3 generic body poses
+SCREEN_ITERATIONS = 5
+MODEL_UP = np.array([0.0, 0.0, 1.0])
+MODEL_FRONT = np.array([0.0, -1.0, 0.0])   # MakeHuman and Blender characters face -Y
+
+
+@dataclasses.dataclass
+class Start:
+    """The chosen ``fit`` (:class:`.icp.FrameFit`), its ``score`` and the number of hypotheses ``tried``."""
+    fit: object
+    score: float
+    tried: int
+
+
+def facing_rotation(up: np.ndarray, towards: np.ndarray, yaw_deg: float) -> np.ndarray:
+    """(3, 3) world rotation taking the model's up to ``up`` and its front to ``towards`` (made
+    horizontal), then turned by ``yaw_deg`` about ``up``."""
+    up = up / np.linalg.norm(up)
+    R1 = rotation_between(MODEL_UP, up)
+    front = R1 @ MODEL_FRONT
+    t = towards - (towards @ up) * up
+    t /= max(np.linalg.norm(t), 1e-12)
+    angle = np.arctan2(np.cross(front, t) @ up, front @ t) + np.radians(yaw_deg)
+    K = np.array([[0, -up[2], up[1]], [up[2], 0, -up[0]], [-up[1], up[0], 0]])
+    R2 = np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+    return R2 @ R1
+
+
+def placed(model, body_rot: np.ndarray, world: np.ndarray, centre: np.ndarray, scale: float = 1.0) -> Poses:
+    """``body_rot`` (B, 4) local rotations with the root turned by ``world`` (3, 3) and translated so
+    the rest body's box centre lands on ``centre``."""
+    sk = model.skeleton
+    rot = body_rot.copy()
+    rot[0] = quat_mul(matrix_to_quat(sk.frames[0].T @ world @ sk.frames[0]), body_rot[0])
+    v = model.rest_vertices
+    c_model = 0.5 * (v.min(0) + v.max(0))
+    h0 = sk.heads[0]
+    t = centre - h0 - scale * world @ (c_model - h0)
+    return Poses(rot[None], t[None], np.array([scale]))
+
+
+def body_centre(obs, camera, up) -> np.ndarray:
+    """Centre of the person's body box: along ``up`` the middle of the observed points' 1-99 percentile
+    range, across it their median moved 10 cm away from the camera (the camera sees the front)."""
+    up = up / np.linalg.norm(up)
+    h = obs.points @ up
+    lo, hi = np.percentile(h, [1, 99])
+    c = np.median(obs.points, axis=0)
+    ray = c - camera.centre
+    ray -= (ray @ up) * up
+    c = c + 0.1 * ray / max(np.linalg.norm(ray), 1e-12)
+    return c + (0.5 * (lo + hi) - c @ up) * up
+
+
+def free_space(posed, obs, camera) -> float:
+    """Share of the model points in view that project outside the person's (dilated) silhouette."""
+    uv, z = camera.project(posed.points)
+    H, W = obs.mask.shape
+    u, v = np.round(uv[:, 0]), np.round(uv[:, 1])
+    ok = (z > 0) & (u >= 0) & (u < W) & (v >= 0) & (v < H)
+    if not ok.any():
+        return 1.0
+    return float((~obs.mask_dilated()[v[ok].astype(int), u[ok].astype(int)]).mean())
+
+
+def score(body, fit, obs, camera) -> float:
+    """Lower is better: unexplained observed points + model points in free space."""
+    return (1.0 - fit.near_share) + free_space(body.pose(fit.pose), obs, camera)
+
+
+def hypotheses(model, up, towards, centre, scale: float = 1.0):
+    """Start poses: facings x body poses (see the module docstring)."""
+    bodies = body_poses(model.skeleton, count=2 * BODY_POSES - 1).rotations[:BODY_POSES]
+    yaws = np.arange(-YAW_RANGE, YAW_RANGE + 1e-9, YAW_STEP)
+    for yaw in yaws:
+        world = facing_rotation(up, towards, yaw)
+        for rot in bodies:
+            yield placed(model, rot, world, centre, scale)
+
+
+def initialise(body, obs, camera, up, options, limits=None, scale: float = 1.0) -> Start:
+    """The best start pose for the observation ``obs`` (see the module docstring)."""
+    centre = body_centre(obs, camera, up)
+    towards = camera.centre - centre
+    best, tried = None, 0
+    for pose in hypotheses(body.model, up, towards, centre, scale):
+        fit = icp.fit_frame(body, obs, camera, pose, options, limits, iterations=SCREEN_ITERATIONS)
+        s = score(body, fit, obs, camera)
+        tried += 1
+        if best is None or s < best[0]:
+            best = (s, fit)
+    fit = icp.fit_frame(body, obs, camera, best[1].pose, options, limits)
+    return Start(fit, score(body, fit, obs, camera), tried)

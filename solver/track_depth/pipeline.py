@@ -1,0 +1,131 @@
+"""Tracking a depth recording frame by frame (depth-camera tracking dissertation ch. 5, Algorithm 1, and
+ch. 6): the first frame (and every frame after the person was lost or out of view) starts from the pose
+hypotheses of :mod:`.initialise`; the others from the previous pose.  A frame whose fit leaves more than
+``1 - lost_share`` of the observed points unexplained is re-initialised, and reported lost when that does
+not help; frames with nobody in view are reported and keep the last pose.  With the built-in template
+the body's size and surface adapt over the first frames (:mod:`.adapt`).
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from .. import parallel
+from ..errors import ArticulaInputError, Cancelled
+from ..rig.model import Model, Poses
+from . import icp
+from .body import TrackingBody
+from .initialise import initialise
+from .limits import JointLimits
+from .options import DepthTrackOptions
+
+
+@dataclasses.dataclass
+class DepthTrackResult:
+    """``model`` tracked (the given one or the adapted template), ``poses`` one per frame, ``frames``
+    per-frame dicts (name, status, pairs, edges, iterations, near_share, mean_mm, ms), ``notes``,
+    ``options``, ``template`` (True when the built-in body was used), ``seconds`` by stage."""
+    model: Model
+    poses: Poses
+    frames: list
+    notes: list
+    options: DepthTrackOptions
+    template: bool
+    seconds: dict
+
+    def report(self) -> dict:
+        status = [f["status"] for f in self.frames]
+        tracked = [f for f in self.frames if f["status"] in ("tracked", "initialised")]
+        ms = [f["ms"] for f in tracked]
+        return {
+            "format": "articula-depth-track-report/1", "tracker": self.options.tracker,
+            "template": self.template, "frames": len(self.frames),
+            "tracked": len(tracked), "lost": status.count("lost"), "no_person": status.count("no person"),
+            "initialised": status.count("initialised"),
+            "frames_per_second": 1000.0 / float(np.mean(ms)) if ms else 0.0,
+            "median_mean_mm": float(np.median([f["mean_mm"] for f in tracked])) if tracked else None,
+            "seconds": self.seconds, "notes": self.notes, "options": dataclasses.asdict(self.options),
+            "per_frame": self.frames,
+        }
+
+
+def _entry(k, name, status, fit=None, ms=0.0):
+    e = {"frame": k, "name": name, "status": status, "ms": round(ms, 2)}
+    if fit is not None:
+        e.update(pairs=int(fit.pairs), edges=int(fit.edges), iterations=int(fit.iterations),
+                 near_share=round(fit.near_share, 4), mean_mm=round(1000 * fit.mean_m, 2))
+    return e
+
+
+class _Sequence:
+    """The state of one tracking run (see :func:`track_recording`)."""
+
+    def __init__(self, recording, model, options, limits, progress):
+        self.rec, self.opts, self.progress = recording, options, progress
+        self.model = model
+        self.body = TrackingBody(model, count=options.model_points)
+        self.limits = limits if limits is not None else JointLimits(model.skeleton)
+        self.poses, self.frames = [], []
+        self.pose = None
+
+    def step(self, k, obs):
+        name = self.rec.names[k]
+        t0 = time.perf_counter()
+        if obs.empty:
+            self.pose = None if self.pose is None else self.pose
+            self.lost = True
+            return _entry(k, name, "no person")
+        status = "tracked"
+        if self.pose is None or getattr(self, "lost", False):
+            fit = initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits).fit
+            status = "initialised"
+        else:
+            fit = icp.fit_frame(self.body, obs, self.rec.camera, self.pose, self.opts, self.limits)
+            if fit.near_share < self.opts.lost_share:
+                again = initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits).fit
+                fit, status = (again, "initialised") if again.near_share > fit.near_share else (fit, status)
+        self.lost = fit.near_share < self.opts.lost_share
+        if self.lost:
+            status = "lost"
+        self.pose = fit.pose
+        return _entry(k, name, status, fit, 1000 * (time.perf_counter() - t0))
+
+
+def _fill(poses: list, num_bones: int) -> Poses:
+    """Frames without a pose (nobody seen yet) take the first pose found; later gaps keep the last."""
+    first = next((p for p in poses if p is not None), None)
+    if first is None:
+        raise ArticulaInputError("nobody was found in any frame of the recording")
+    out, last = [], first
+    for p in poses:
+        last = p if p is not None else last
+        out.append(last)
+    return Poses(np.concatenate([p.rotations for p in out]), np.concatenate([p.translations for p in out]),
+                 np.concatenate([p.scales for p in out]))
+
+
+def track_recording(recording, model: Model, options: DepthTrackOptions = DepthTrackOptions(),
+                    limits: JointLimits | None = None, progress=None) -> DepthTrackResult:
+    """Track every frame of ``recording`` (:class:`.source.DepthRecording`) with ``model``.
+    ``progress(fraction, text)`` is called after every frame and may raise :class:`Cancelled`."""
+    options.validate()
+    model.validate()
+    t0 = time.perf_counter()
+    say = progress or (lambda f, t="": None)
+    recording.prepare()
+    run = _Sequence(recording, model, options, limits, progress)
+    n = len(recording)
+    t_setup = time.perf_counter() - t0
+    t_frames = time.perf_counter()
+    with parallel.single_blas_thread():
+        for k, obs in recording.observations(options.data_points):
+            entry = run.step(k, obs)
+            run.frames.append(entry)
+            run.poses.append(None if run.pose is None else run.pose)
+            say((k + 1) / n, f"frame {k + 1} of {n}: {entry['status']}"
+                + (f", {entry['mean_mm']:.1f} mm" if "mean_mm" in entry else ""))
+    poses = _fill(run.poses, model.skeleton.num_bones)
+    seconds = {"setup": t_setup, "frames": time.perf_counter() - t_frames}
+    return DepthTrackResult(model, poses, run.frames, list(recording.notes), options, False, seconds)

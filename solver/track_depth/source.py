@@ -1,0 +1,104 @@
+"""A depth recording to track, read one frame at a time (memory stays bounded for any length): the frame
+files of a folder in natural order, the camera (``intrinsics.json`` or a preset; its optional
+``cam_to_world`` gives the tracking frame, otherwise the camera frame, OpenCV axes), the floor and
+static background fitted once from frames spread over the recording, and gaps in the frame numbering.
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+import re
+
+import numpy as np
+
+from ..depth import camera as cam
+from ..depth import frames as dp
+from ..depth import recording as rec
+from ..errors import ArticulaInputError
+from .observation import ViewCamera, observe
+
+
+def numbering_gaps(names) -> list:
+    """``(after, before)`` name pairs between which the trailing frame numbers skip values."""
+    nums = []
+    for n in names:
+        m = re.search(r"(\d+)(?=\.[^.]+$)", os.path.basename(n))
+        nums.append(int(m.group(1)) if m else None)
+    return [(os.path.basename(names[i]), os.path.basename(names[i + 1])) for i in range(len(names) - 1)
+            if nums[i] is not None and nums[i + 1] is not None and nums[i + 1] - nums[i] > 1]
+
+
+@dataclasses.dataclass
+class DepthRecording:
+    """``paths`` of the depth PNG frames; ``camera`` (:class:`.observation.ViewCamera`); ``world`` True
+    when ``cam_to_world`` came from ``intrinsics.json``; ``options`` (:class:`solver.depth.frames.DepthOptions`);
+    ``notes`` for the report."""
+    paths: list
+    camera: ViewCamera
+    world: bool
+    options: dp.DepthOptions
+    notes: list
+    setup: object = None
+
+    @classmethod
+    def from_folder(cls, folder: str, preset: str | None = None, options: dp.DepthOptions | None = None,
+                    frames=None) -> "DepthRecording":
+        """The PNG frames of ``folder`` (``frames``: an optional ``slice`` of them) with ``intrinsics.json``
+        from the folder, else the camera ``preset`` (e.g. ``kinect_v1``, noted in the report)."""
+        opts = options or dp.DepthOptions()
+        opts.validate()
+        paths = rec.list_frames(folder, (".png",))
+        if frames is not None:
+            paths = paths[frames]
+            if not paths:
+                raise ArticulaInputError(f"{folder}: the frame range selects no frame")
+        notes = []
+        ipath = os.path.join(folder, "intrinsics.json")
+        if os.path.exists(ipath):
+            intr, c2w = cam.load_intrinsics(ipath), cam.load_camera_pose(ipath)
+        elif preset:
+            intr, c2w = cam.preset(preset), None
+            notes.append(f"no intrinsics.json: the {preset} camera preset is assumed")
+        else:
+            raise ArticulaInputError(f"{folder}: no intrinsics.json; give a camera preset "
+                                     f"({', '.join(cam.PRESETS)})")
+        rec.check_png_frames(rec.png_frames(paths))
+        for a, b in numbering_gaps(paths):
+            notes.append(f"frames missing in the numbering between {a} and {b}")
+        camera = ViewCamera(intr, np.eye(4) if c2w is None else c2w)
+        notes.append("poses in the world frame of intrinsics.json's cam_to_world" if c2w is not None
+                     else "poses in the camera frame (OpenCV: +X right, +Y down, +Z forward)")
+        return cls(paths, camera, c2w is not None, opts, notes)
+
+    def __len__(self) -> int:
+        return len(self.paths)
+
+    @property
+    def names(self) -> list:
+        return [os.path.basename(p) for p in self.paths]
+
+    def prepare(self, progress=None) -> None:
+        """Fit the floor (and background) once; rescales the intrinsics to the frames' size."""
+        if self.setup is None:
+            frames = rec.png_frames(self.paths)
+            self.setup = rec.recording_setup(frames, self.camera.intr, self.options,
+                                             progress=progress or (lambda f, t="": None))
+            self.camera = ViewCamera(self.setup.intr, self.camera.cam_to_world)
+            self.notes.extend(self.setup.notes)
+
+    def up(self) -> np.ndarray:
+        """The up direction in the tracking frame: world +Z with ``cam_to_world``, else the floor's
+        normal, else the camera's up (-Y)."""
+        if self.world:
+            return np.array([0.0, 0.0, 1.0])
+        if self.setup is not None and self.setup.floor is not None:
+            return np.asarray(self.setup.floor[0], float)
+        return np.array([0.0, -1.0, 0.0])
+
+    def observations(self, max_points: int, start: int = 0):
+        """``(k, Observation)`` for every frame from ``start``, decoded in order."""
+        self.prepare()
+        frames = rec.png_frames(self.paths)
+        s = self.setup
+        for k, z in rec.stream_metres(frames[start:], self.options, s.shape):
+            yield start + k, observe(z, s.rays, self.camera, self.options, s.background, s.floor, max_points=max_points)
