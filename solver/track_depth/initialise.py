@@ -14,7 +14,7 @@ import numpy as np
 from ..geometry.rotations import matrix_to_quat, quat_mul, rotation_between
 from ..rig.model import Poses
 from ..track.initialise import body_poses
-from . import icp
+from .trackers import frame_fitter
 
 YAW_RANGE = 45.0
 YAW_STEP = 15.0
@@ -103,11 +103,12 @@ def initialise(body, obs, camera, up, options, limits=None, scale: float = 1.0) 
     centre = body_centre(obs, camera, up)
     towards = camera.centre - centre
     best, tried = None, 0
+    fitter = frame_fitter(options)
     for pose in hypotheses(body.model, up, towards, centre, scale):
-        fit = icp.fit_frame(body, obs, camera, pose, options, limits, iterations=SCREEN_ITERATIONS)
+        fit = fitter(body, obs, camera, pose, options, limits, iterations=SCREEN_ITERATIONS)
         s = score(body, fit, obs, camera)
         tried += 1
         if best is None or s < best[0]:
             best = (s, fit)
-    fit = icp.fit_frame(body, obs, camera, best[1].pose, options, limits)
+    fit = fitter(body, obs, camera, best[1].pose, options, limits)
     return Start(fit, score(body, fit, obs, camera), tried)

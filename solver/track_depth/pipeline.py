@@ -13,13 +13,14 @@ import time
 import numpy as np
 
 from .. import parallel
-from ..errors import ArticulaInputError, Cancelled
+from ..errors import ArticulaInputError
 from ..rig.model import Model, Poses
-from . import icp
 from .body import TrackingBody
 from .initialise import initialise
 from .limits import JointLimits
 from .options import DepthTrackOptions
+from .template import load_template
+from .trackers import frame_fitter
 
 
 @dataclasses.dataclass
@@ -69,6 +70,7 @@ class _Sequence:
         self.limits = limits if limits is not None else JointLimits(model.skeleton)
         self.poses, self.frames = [], []
         self.pose = None
+        self.fit = frame_fitter(options)
 
     def step(self, k, obs):
         name = self.rec.names[k]
@@ -82,7 +84,7 @@ class _Sequence:
             fit = initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits).fit
             status = "initialised"
         else:
-            fit = icp.fit_frame(self.body, obs, self.rec.camera, self.pose, self.opts, self.limits)
+            fit = self.fit(self.body, obs, self.rec.camera, self.pose, self.opts, self.limits)
             if fit.near_share < self.opts.lost_share:
                 again = initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits).fit
                 fit, status = (again, "initialised") if again.near_share > fit.near_share else (fit, status)
@@ -106,11 +108,15 @@ def _fill(poses: list, num_bones: int) -> Poses:
                  np.concatenate([p.scales for p in out]))
 
 
-def track_recording(recording, model: Model, options: DepthTrackOptions = DepthTrackOptions(),
+def track_recording(recording, model: Model | None = None, options: DepthTrackOptions = DepthTrackOptions(),
                     limits: JointLimits | None = None, progress=None) -> DepthTrackResult:
-    """Track every frame of ``recording`` (:class:`.source.DepthRecording`) with ``model``.
+    """Track every frame of ``recording`` (:class:`.source.DepthRecording`) with ``model``, or with the
+    built-in template body (:mod:`.template`) adapted to the person when ``model`` is None.
     ``progress(fraction, text)`` is called after every frame and may raise :class:`Cancelled`."""
     options.validate()
+    template = model is None
+    if template:
+        model = load_template().base
     model.validate()
     t0 = time.perf_counter()
     say = progress or (lambda f, t="": None)
@@ -128,4 +134,5 @@ def track_recording(recording, model: Model, options: DepthTrackOptions = DepthT
                 + (f", {entry['mean_mm']:.1f} mm" if "mean_mm" in entry else ""))
     poses = _fill(run.poses, model.skeleton.num_bones)
     seconds = {"setup": t_setup, "frames": time.perf_counter() - t_frames}
-    return DepthTrackResult(model, poses, run.frames, list(recording.notes), options, False, seconds)
+    notes = list(recording.notes) + (["the built-in template body was tracked"] if template else [])
+    return DepthTrackResult(run.model, poses, run.frames, notes, options, template, seconds)

@@ -1,0 +1,10 @@
+"""The per-frame trackers by name (``DepthTrackOptions.tracker``): each is a function
+``fit(body, obs, camera, pose, options, limits=None, iterations=None) -> icp.FrameFit``."""
+from __future__ import annotations
+
+from . import icp
+
+
+def frame_fitter(options):
+    """The per-frame fit of ``options.tracker``."""
+    return {"icp": icp.fit_frame}[options.tracker]
