@@ -179,3 +179,18 @@ def observe(depth_m: np.ndarray, rays, camera: ViewCamera, opts: dp.DepthOptions
                        edge_points=grid[er, ec].astype(np.float64) @ R.T + t,
                        edge_pixels=np.stack((ec, er), 1).astype(np.float64), edge_normals=en,
                        mask=person, depth=depth_m, person_pixels=count)
+
+
+def depth_image(points_cam: np.ndarray, intr) -> np.ndarray:
+    """(H, W) float32 metres (NaN = nothing) of camera-frame points (N, 3) seen by ``intr``: each point
+    fills its pixel, the nearest one wins (points imported from a depth image land back on their pixels)."""
+    z = np.full(intr.height * intr.width, np.inf)
+    p = np.asarray(points_cam, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.round(intr.fx * p[:, 0] / p[:, 2] + intr.cx)
+        v = np.round(intr.fy * p[:, 1] / p[:, 2] + intr.cy)
+    ok = (p[:, 2] > 0) & (u >= 0) & (u < intr.width) & (v >= 0) & (v < intr.height)
+    np.minimum.at(z, (v[ok] * intr.width + u[ok]).astype(np.int64), p[ok, 2])
+    z = z.reshape(intr.height, intr.width).astype(np.float32)
+    z[~np.isfinite(z)] = np.nan
+    return z

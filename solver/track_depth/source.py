@@ -15,7 +15,7 @@ from ..depth import camera as cam
 from ..depth import frames as dp
 from ..depth import recording as rec
 from ..errors import ArticulaInputError
-from .observation import ViewCamera, observe
+from .observation import ViewCamera, depth_image, observe
 
 
 def numbering_gaps(names) -> list:
@@ -102,3 +102,50 @@ class DepthRecording:
         s = self.setup
         for k, z in rec.stream_metres(frames[start:], self.options, s.shape):
             yield start + k, observe(z, s.rays, self.camera, self.options, s.background, s.floor, max_points=max_points)
+
+
+class PointsRecording:
+    """The same interface as :class:`DepthRecording` for frames already turned into sensor-frame points
+    (an imported depth object's cache, :class:`solver.formats.point_files.PointSequence`): each frame
+    is rendered back into the camera's depth image (:func:`.observation.depth_image`) and observed like
+    a depth frame; floor and background were removed by the import.  Without intrinsics (plain
+    point-cloud files) ``default_preset`` stands in for the camera at the sensor origin."""
+
+    def __init__(self, seq, cam_to_world=None, default_preset: str = "kinect_v1", frames=None,
+                 options: dp.DepthOptions | None = None):
+        self.seq, self.options = seq, options or dp.DepthOptions()
+        self.index = list(range(seq.frame_count))[frames] if frames is not None else list(range(seq.frame_count))
+        if not self.index:
+            raise ArticulaInputError("the frame range selects no frame of the recording")
+        self.notes = []
+        if seq.intrinsics is not None:
+            w, h, fx, fy, cx, cy = seq.intrinsics
+            intr = cam.Intrinsics(int(w), int(h), float(fx), float(fy), float(cx), float(cy)).validate()
+        else:
+            intr = cam.preset(default_preset)
+            self.notes.append(f"point clouds without intrinsics: seen through a {default_preset} camera at the origin")
+        self.world = cam_to_world is not None
+        self.camera = ViewCamera(intr, np.eye(4) if cam_to_world is None else cam_to_world)
+        self.notes.append("poses in the world frame" if self.world else "poses in the sensor frame")
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    @property
+    def names(self) -> list:
+        names = self.seq.frame_names or []
+        return [names[k] if k < len(names) else f"frame {k}" for k in self.index]
+
+    def prepare(self, progress=None) -> None:
+        pass
+
+    def up(self) -> np.ndarray:
+        if self.seq.floor is not None:
+            return self.camera.R @ np.asarray(self.seq.floor[0], float)
+        return self.camera.R @ np.array([0.0, -1.0, 0.0])
+
+    def observations(self, max_points: int, start: int = 0):
+        rays = dp.pixel_rays(self.camera.intr)
+        for i, k in enumerate(self.index[start:], start=start):
+            z = depth_image(self.seq.points[self.seq.frame(k)], self.camera.intr)
+            yield i, observe(z, rays, self.camera, self.options, max_points=max_points)
