@@ -169,9 +169,20 @@ def build_system(body, posed, pose, obs, camera, opts, prior=None):
         h, e = edge_rows(posed.points[erows], pix, camera)
         ae = body.lever_arms(posed, erows)
         system.add_projected(np.concatenate([ae, ae]), h, e, np.full(len(e), opts.edge_weight))
+    if obs.floor is not None and opts.floor_weight > 0:
+        add_floor_rows(system, body, posed, obs, opts.floor_weight)
     if prior is not None:
         prior.add_to(system, posed, pose)
     return system, rows, a, len(erows)
+
+
+def add_floor_rows(system, body, posed, obs, weight: float) -> None:
+    """Model points below the floor plane are pushed up onto it (the body cannot sink into the floor)."""
+    below = np.flatnonzero(obs.height(posed.points) < 0)
+    if len(below):
+        n = np.broadcast_to(obs.floor[0], (len(below), 3))
+        system.add_projected(body.lever_arms(posed, below), n, obs.height(posed.points[below]),
+                             np.full(len(below), weight))
 
 
 def fit_frame(body, obs, camera, pose, opts, prior=None, iterations=None) -> FrameFit:

@@ -21,6 +21,7 @@ JUMP_M = 0.05          # neighbouring pixels further apart in depth than this (+
 MIN_PERSON_SHARE = 0.004  # a component smaller than this share of the image is nobody
 MIN_PERSON_POINTS = 150
 MIN_PART_PIXELS = 10      # smaller components near the person are noise, not body parts
+CONTACT_M = 0.02          # see floor_margin
 REACH_M = 0.08            # a component this close (3D) to the person's largest one is part of it
 
 
@@ -69,6 +70,12 @@ class Observation:
     mask: np.ndarray
     depth: np.ndarray
     person_pixels: int
+    floor: tuple | None = None
+
+    def height(self, points: np.ndarray) -> np.ndarray:
+        """Signed height (m) of tracking-frame points above the floor plane (needs ``floor``)."""
+        n, d = self.floor
+        return points @ n + d
 
     @property
     def empty(self) -> bool:
@@ -151,16 +158,23 @@ def _silhouette(person: np.ndarray):
     return edge, rows, cols, n
 
 
+def floor_margin(opts: dp.DepthOptions, z) -> np.ndarray:
+    """Height (m) below which an observed point may be where the floor removal cut the person: the
+    removal's tolerance plus its noise term, plus ``CONTACT_M``."""
+    return opts.floor_tolerance + opts.depth_noise * np.asarray(z, float) ** 2 + CONTACT_M
+
+
 def grid_stride(count: int, max_points: int) -> int:
     """Image-grid step giving at most about ``max_points`` of ``count`` pixels."""
     return max(1, int(np.ceil(np.sqrt(count / max(max_points, 1)))))
 
 
 def observe(depth_m: np.ndarray, rays, camera: ViewCamera, opts: dp.DepthOptions, background=None, floor=None,
-            max_points: int = 2500, max_edges: int = 400) -> Observation:
-    """One depth frame (metres, NaN invalid) -> :class:`Observation` of the person (possibly empty)."""
+            max_points: int = 2500, max_edges: int = 400, floor_removed: bool = False) -> Observation:
+    """One depth frame (metres, NaN invalid) -> :class:`Observation` of the person (possibly empty).
+    ``floor`` (n, d) sensor frame: removed from the frame unless ``floor_removed`` (already done)."""
     grid = dp.backproject_grid(depth_m, rays)
-    keep = dp.frame_mask(depth_m, grid, opts, background, floor)
+    keep = dp.frame_mask(depth_m, grid, opts, background, None if floor_removed else floor)
     person = connected_person(keep, grid, depth_m, opts.depth_noise)
     count = int(person.sum())
     edge, er, ec, en = _silhouette(person)
@@ -171,14 +185,20 @@ def observe(depth_m: np.ndarray, rays, camera: ViewCamera, opts: dp.DepthOptions
     rows, cols = np.nonzero(person & sub)
     normals = dp.grid_normals(grid, rows, cols, mask=person) if len(rows) else np.zeros((0, 3))
     pts = grid[rows, cols]
+    R, t = camera.R, camera.t
+    plane = None
+    if floor is not None:       # silhouette pixels where the floor was cut off are not occluding contours
+        n = R @ np.asarray(floor[0], float)
+        plane = (n, float(floor[1]) - float(n @ t))
+        high = dp.plane_distance(grid[er, ec].astype(np.float64), floor) > floor_margin(opts, depth_m[er, ec])
+        er, ec, en = er[high], ec[high], en[high]
     k = grid_stride(len(er), max_edges) ** 2
     er, ec, en = er[::k], ec[::k], en[::k]
-    R, t = camera.R, camera.t
     return Observation(points=pts.astype(np.float64) @ R.T + t, normals=np.asarray(normals, np.float64) @ R.T,
                        pixels=np.stack((cols, rows), 1).astype(np.float64), boundary=edge[rows, cols],
                        edge_points=grid[er, ec].astype(np.float64) @ R.T + t,
                        edge_pixels=np.stack((ec, er), 1).astype(np.float64), edge_normals=en,
-                       mask=person, depth=depth_m, person_pixels=count)
+                       mask=person, depth=depth_m, person_pixels=count, floor=plane)
 
 
 def depth_image(points_cam: np.ndarray, intr) -> np.ndarray:

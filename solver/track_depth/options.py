@@ -25,12 +25,18 @@ class DepthTrackOptions:
     data_weight: float = 0.0          # observed-point-to-model rows (ours)
     plane_weight: float = 0.0         # point-to-plane rows along the model normal (ours)
     edge_weight: float = 1.0          # edge rows (metric: pixel error x depth / focal length) vs point rows
+    floor_weight: float = 1.0         # model points below the floor plane (ours)
     visibility_tolerance: float = 0.03  # model points up to this behind the rendered model depth count as visible
     damping: float = 0.05             # lambda_r of the small-update regulariser (metres^2 per radian^2)
     motion_weight: float = 0.0        # pull of joints without data towards the predicted pose (ours)
     gmm_sigma: float = 0.02           # initial sigma of the GMM tracker (Table 6.2: 0.02 m), reset every frame
     gmm_outliers: float = 0.01        # u, uniform outlier weight (ch. 6)
     gmm_neighbours: int = 8           # model components evaluated per observed point (truncated E-step, ours)
+    gmm_points: int = 1000            # observed points per frame for the GMM (a stride of the grid sample; ch. 6 ~1000)
+    gmm_iterations: int = 15          # EM iterations per step of Algorithm 3 (ch. 6: < 15)
+    gmm_converged_m: float = 0.001    # EM stops when no model point moves more than this (ch. 6: 1 mm)
+    gmm_lambda_r: float = 1000.0      # lambda_r, small-update term (Table 6.2)
+    gmm_lambda_p: float = 500.0       # lambda_p, pull of the joint rotations to the prediction (Table 6.2)
     lost_share: float = 0.35          # a frame is lost when fewer observed points than this lie near the model
     near_m: float = 0.05              # "near the model" for the lost test and the report
     adapt_size: bool = True           # template only: limb lengths on the first frames (Algorithm 4)
@@ -45,10 +51,14 @@ class DepthTrackOptions:
                   ("max_iterations", self.max_iterations, 1, 200), ("converged_m", self.converged_m, 1e-6, 0.1),
                   ("max_distance", self.max_distance, 0.01, 2.0), ("max_normal_angle", self.max_normal_angle, 1, 180),
                   ("edge_normal_angle", self.edge_normal_angle, 1, 180), ("edge_candidates", self.edge_candidates, 1, 64),
-                  ("edge_weight", self.edge_weight, 0, 100), ("visibility_tolerance", self.visibility_tolerance, 0, 1),
+                  ("edge_weight", self.edge_weight, 0, 100),
+                  ("floor_weight", self.floor_weight, 0, 1e4), ("visibility_tolerance", self.visibility_tolerance, 0, 1),
                   ("damping", self.damping, 0, 1e6), ("motion_weight", self.motion_weight, 0, 1e6),
                   ("gmm_sigma", self.gmm_sigma, 1e-3, 1.0), ("gmm_outliers", self.gmm_outliers, 0, 0.99),
-                  ("gmm_neighbours", self.gmm_neighbours, 1, 64), ("lost_share", self.lost_share, 0, 1),
+                  ("gmm_neighbours", self.gmm_neighbours, 1, 64), ("gmm_points", self.gmm_points, 50, 100000),
+                  ("gmm_iterations", self.gmm_iterations, 1, 200), ("gmm_converged_m", self.gmm_converged_m, 1e-6, 0.1),
+                  ("gmm_lambda_r", self.gmm_lambda_r, 0, 1e9), ("gmm_lambda_p", self.gmm_lambda_p, 0, 1e9),
+                  ("lost_share", self.lost_share, 0, 1),
                   ("near_m", self.near_m, 1e-3, 1.0), ("size_frames", self.size_frames, 1, 1000),
                   ("surface_every", self.surface_every, 1, 1000))
         for name, value, lo, hi in checks:

@@ -15,7 +15,9 @@ import numpy as np
 from .. import parallel
 from ..errors import ArticulaInputError
 from ..rig.model import Model, Poses
+from .adapt import TemplateAdaptation
 from .body import TrackingBody
+from .body_size import scaled_model
 from .initialise import initialise
 from .limits import JointLimits
 from .options import DepthTrackOptions
@@ -63,10 +65,12 @@ def _entry(k, name, status, fit=None, ms=0.0):
 class _Sequence:
     """The state of one tracking run (see :func:`track_recording`)."""
 
-    def __init__(self, recording, model, options, limits, progress):
+    def __init__(self, recording, model, options, limits, progress, template=False):
         self.rec, self.opts, self.progress = recording, options, progress
         self.model = model
         self.body = TrackingBody(model, count=options.model_points)
+        self.adaptation = (TemplateAdaptation(model, options, recording.options, recording.camera.centre)
+                           if template else None)
         self.limits = limits if limits is not None else JointLimits(model.skeleton)
         self.poses, self.frames = [], []
         self.pose = None
@@ -80,6 +84,9 @@ class _Sequence:
             self.lost = True
             return _entry(k, name, "no person")
         status = "tracked"
+        if self.adaptation is not None and self.pose is None and self.adaptation.done == 0:
+            scales = self.adaptation.start_scales(obs, self.rec.up())
+            self.body = TrackingBody(scaled_model(self.model, scales), ids=self.body.ids)
         if self.pose is None or getattr(self, "lost", False):
             fit = initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits).fit
             status = "initialised"
@@ -88,6 +95,8 @@ class _Sequence:
             if fit.near_share < self.opts.lost_share:
                 again = initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits).fit
                 fit, status = (again, "initialised") if again.near_share > fit.near_share else (fit, status)
+        if self.adaptation is not None and self.adaptation.wants() and fit.near_share >= self.opts.lost_share:
+            self.body, fit = self.adaptation.adapt(k, self.body, fit.pose, obs, self.rec.camera, self.limits, self.fit)
         self.lost = fit.near_share < self.opts.lost_share
         if self.lost:
             status = "lost"
@@ -121,7 +130,7 @@ def track_recording(recording, model: Model | None = None, options: DepthTrackOp
     t0 = time.perf_counter()
     say = progress or (lambda f, t="": None)
     recording.prepare()
-    run = _Sequence(recording, model, options, limits, progress)
+    run = _Sequence(recording, model, options, limits, progress, template)
     n = len(recording)
     t_setup = time.perf_counter() - t0
     t_frames = time.perf_counter()
@@ -135,4 +144,4 @@ def track_recording(recording, model: Model | None = None, options: DepthTrackOp
     poses = _fill(run.poses, model.skeleton.num_bones)
     seconds = {"setup": t_setup, "frames": time.perf_counter() - t_frames}
     notes = list(recording.notes) + (["the built-in template body was tracked"] if template else [])
-    return DepthTrackResult(run.model, poses, run.frames, notes, options, template, seconds)
+    return DepthTrackResult(run.body.model, poses, run.frames, notes, options, template, seconds)

@@ -148,4 +148,5 @@ class PointsRecording:
         rays = dp.pixel_rays(self.camera.intr)
         for i, k in enumerate(self.index[start:], start=start):
             z = depth_image(self.seq.points[self.seq.frame(k)], self.camera.intr)
-            yield i, observe(z, rays, self.camera, self.options, max_points=max_points)
+            yield i, observe(z, rays, self.camera, self.options, floor=self.seq.floor, max_points=max_points,
+                             floor_removed=True)

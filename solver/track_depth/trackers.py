@@ -2,9 +2,9 @@
 ``fit(body, obs, camera, pose, options, limits=None, iterations=None) -> icp.FrameFit``."""
 from __future__ import annotations
 
-from . import icp
+from . import gmm, icp
 
 
 def frame_fitter(options):
     """The per-frame fit of ``options.tracker``."""
-    return {"icp": icp.fit_frame}[options.tracker]
+    return {"icp": icp.fit_frame, "gmm": gmm.fit_frame}[options.tracker]
