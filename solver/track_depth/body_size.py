@@ -118,60 +118,55 @@ def pair_weights(skeleton: Skeleton) -> list:
     return pairs
 
 
-class SizeFit:
-    """Accumulates the scale equations of several frames (Algorithm 4 runs on the first F) and solves
-    them with the regulariser; ``scales`` (B,) absolute factors over the template."""
+@dataclasses.dataclass
+class FramePairs:
+    """What one adaptation frame contributes: subset vertex ids ``ids`` (n,) with observed ``targets``
+    (n, 3) at ``pose``; ``contact`` (vertex id, n (3,), d) a vertex standing on the floor plane or None."""
+    ids: np.ndarray
+    targets: np.ndarray
+    pose: object
+    contact: tuple | None = None
 
-    def __init__(self, template: Model):
-        self.template = template
-        B = template.skeleton.num_bones
-        self.frames = {}
-        self.pairs = pair_weights(template.skeleton)
-        self.scales = np.ones(B)
-        self.prior = np.ones(B)       # what parts without data keep (the start scales)
 
-    def add_frame(self, k: int, body_ids, pose, rows, targets, contact=None) -> None:
-        """Frame k's pairs: subset rows (body-local indices) and their observed targets (n, 3); replaces
-        an earlier system of the same frame.  The root translation is a free unknown per frame.
-        ``contact``: ``(row, n (3,), d)``: that subset point stands on the floor plane ``n.x + d = 0``
-        (the calibration frames' standing person; weight ``CONTACT_WEIGHT`` pairs)."""
-        if len(rows) == 0:
-            return
-        ids = np.asarray(body_ids)
-        c, E = linear_terms(self.template, ids[rows], pose)
-        B = E.shape[1]
-        A = np.concatenate([E.transpose(0, 2, 1), np.broadcast_to(np.eye(3), (len(rows), 3, 3))], axis=2)
-        A = A.reshape(-1, B + 3)
-        b = (targets - c).reshape(-1)
-        AtA, Atb = A.T @ A, A.T @ b
-        if contact is not None:
-            row, n, d = contact
-            cc, EE = linear_terms(self.template, ids[[row]], pose)
-            a = np.concatenate([EE[0] @ n, n]) * np.sqrt(CONTACT_WEIGHT)
-            AtA += np.outer(a, a)
-            Atb += a * (-(cc[0] @ n + d) * np.sqrt(CONTACT_WEIGHT))
-        self.frames[k] = (AtA, Atb)
+def frame_system(frame: FramePairs, terms) -> tuple:
+    """``(AtA, Atb)`` of one frame's pairs for unknowns ``[p (P), translation (3)]``, where
+    ``terms(ids, pose) -> (c (n, 3), E (n, P, 3))`` gives the posed points as ``c + sum_i p_i E_i``."""
+    c, E = terms(frame.ids, frame.pose)
+    n, P = E.shape[:2]
+    A = np.concatenate([E.transpose(0, 2, 1), np.broadcast_to(np.eye(3), (n, 3, 3))], axis=2).reshape(-1, P + 3)
+    AtA, Atb = A.T @ A, A.T @ (frame.targets - c).reshape(-1)
+    if frame.contact is not None:
+        vid, normal, d = frame.contact
+        cc, EE = terms(np.array([vid]), frame.pose)
+        a = np.concatenate([EE[0] @ normal, normal]) * np.sqrt(CONTACT_WEIGHT)
+        AtA += np.outer(a, a)
+        Atb -= a * (cc[0] @ normal + d) * np.sqrt(CONTACT_WEIGHT)
+    return AtA, Atb
 
-    def solve(self) -> np.ndarray:
-        """The scales minimising the accumulated point terms + regularisers (translations eliminated)."""
-        B = len(self.scales)
-        if not self.frames:
-            return self.scales
-        H = np.zeros((B, B))
-        g = np.zeros(B)
-        for AtA, Atb in self.frames.values():     # eliminate each frame's translation (Schur complement)
-            Hss, Hst, Htt = AtA[:B, :B], AtA[:B, B:], AtA[B:, B:]
-            Htt_inv = np.linalg.inv(Htt + 1e-9 * np.eye(3))
-            H += Hss - Hst @ Htt_inv @ Hst.T
-            g += Atb[:B] - Hst @ Htt_inv @ Atb[B:]
-        scale = max(float(np.mean(np.diag(H))), 1e-9)
-        R = np.zeros((B, B))
-        for i, j, nu in self.pairs:
-            R[i, i] += nu
-            R[j, j] += nu
-            R[i, j] -= nu
-            R[j, i] -= nu
-        H = H + REGULARISER * scale * R + KEEP_WEIGHT * scale * np.eye(B)
-        g = g + KEEP_WEIGHT * scale * self.prior
-        self.scales = np.clip(np.linalg.solve(H, g), *SCALE_RANGE)
-        return self.scales
+
+def pooled(frames, terms, P: int) -> tuple:
+    """Sum over frames of the systems with each frame's translation eliminated (Schur complement)."""
+    H, g = np.zeros((P, P)), np.zeros(P)
+    for f in frames:
+        AtA, Atb = frame_system(f, terms)
+        Hst, Htt = AtA[:P, P:], AtA[P:, P:] + 1e-9 * np.eye(3)
+        K = Hst @ np.linalg.inv(Htt)
+        H += AtA[:P, :P] - K @ Hst.T
+        g += Atb[:P] - K @ Atb[P:]
+    return H, g
+
+
+def solve_scales(template: Model, frames, prior) -> np.ndarray:
+    """Per-part scales over ``template`` from the frames' pairs (Eq. 5.19 / 6.16-6.17): data term,
+    mirror/connected regulariser and a weak pull to ``prior`` (B,), clipped to :data:`SCALE_RANGE`."""
+    B = template.skeleton.num_bones
+    H, g = pooled(frames, lambda ids, pose: linear_terms(template, ids, pose), B)
+    scale = max(float(np.mean(np.diag(H))), 1e-9)
+    R = np.zeros((B, B))
+    for i, j, nu in pair_weights(template.skeleton):
+        R[[i, j], [i, j]] += nu
+        R[i, j] -= nu
+        R[j, i] -= nu
+    H = H + REGULARISER * scale * R + KEEP_WEIGHT * scale * np.eye(B)
+    g = g + KEEP_WEIGHT * scale * np.asarray(prior, float)
+    return np.clip(np.linalg.solve(H, g), *SCALE_RANGE)

@@ -17,7 +17,6 @@ from ..errors import ArticulaInputError
 from ..rig.model import Model, Poses
 from .adapt import TemplateAdaptation
 from .body import TrackingBody
-from .body_size import scaled_model
 from .initialise import initialise
 from .limits import JointLimits
 from .options import DepthTrackOptions
@@ -65,12 +64,12 @@ def _entry(k, name, status, fit=None, ms=0.0):
 class _Sequence:
     """The state of one tracking run (see :func:`track_recording`)."""
 
-    def __init__(self, recording, model, options, limits, progress, template=False):
+    def __init__(self, recording, model, options, limits, progress, template=None):
         self.rec, self.opts, self.progress = recording, options, progress
         self.model = model
         self.body = TrackingBody(model, count=options.model_points)
-        self.adaptation = (TemplateAdaptation(model, options, recording.options, recording.camera.centre)
-                           if template else None)
+        self.adaptation = (TemplateAdaptation(template, options, recording.options, recording.camera.centre)
+                           if template is not None else None)
         self.limits = limits if limits is not None else JointLimits(model.skeleton)
         self.poses, self.frames = [], []
         self.pose = None
@@ -85,8 +84,7 @@ class _Sequence:
             return _entry(k, name, "no person")
         status = "tracked"
         if self.adaptation is not None and self.pose is None and self.adaptation.done == 0:
-            scales = self.adaptation.start_scales(obs, self.rec.up())
-            self.body = TrackingBody(scaled_model(self.model, scales), ids=self.body.ids)
+            self.body = TrackingBody(self.adaptation.start_model(obs, self.rec.up()), ids=self.body.ids)
         if self.pose is None or getattr(self, "lost", False):
             fit = initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits).fit
             status = "initialised"
@@ -123,9 +121,9 @@ def track_recording(recording, model: Model | None = None, options: DepthTrackOp
     built-in template body (:mod:`.template`) adapted to the person when ``model`` is None.
     ``progress(fraction, text)`` is called after every frame and may raise :class:`Cancelled`."""
     options.validate()
-    template = model is None
-    if template:
-        model = load_template().base
+    template = load_template() if model is None else None
+    if template is not None:
+        model = template.base
     model.validate()
     t0 = time.perf_counter()
     say = progress or (lambda f, t="": None)
@@ -143,5 +141,5 @@ def track_recording(recording, model: Model | None = None, options: DepthTrackOp
                 + (f", {entry['mean_mm']:.1f} mm" if "mean_mm" in entry else ""))
     poses = _fill(run.poses, model.skeleton.num_bones)
     seconds = {"setup": t_setup, "frames": time.perf_counter() - t_frames}
-    notes = list(recording.notes) + (["the built-in template body was tracked"] if template else [])
-    return DepthTrackResult(run.body.model, poses, run.frames, notes, options, template, seconds)
+    notes = list(recording.notes) + (["the built-in template body was tracked"] if template is not None else [])
+    return DepthTrackResult(run.body.model, poses, run.frames, notes, options, template is not None, seconds)
