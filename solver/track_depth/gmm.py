@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import dataclasses
 import time
-import weakref
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -33,30 +32,8 @@ from .icp import MAX_TURN, FrameFit, coverage
 from .normal_equations import System
 from .visibility import in_view, visible
 
-AREA_PRIORS = False
 SIGMA_FLOOR = 0.002      # metres: sigma never drops below this (exact data would make it vanish)
 MIN_MASS = 1e-6          # model points with less posterior mass than this get no row
-_PRIORS = weakref.WeakKeyDictionary()
-
-
-def surface_priors(body) -> np.ndarray:
-    """(M,) share of the model's surface area nearest (rest pose) to each subset point: the mixture
-    weights that make the sparse, unevenly spread subset a density like the evenly sampled data
-    (equal weights pull dense clusters of subset points towards sparsely covered data).  Cached."""
-    if body in _PRIORS:
-        return _PRIORS[body]
-    model = body.model
-    v, f = np.asarray(model.rest_vertices, np.float64), np.asarray(model.faces)
-    if len(f) == 0:
-        out = np.ones(len(body.ids))
-    else:
-        area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
-        per_vertex = np.bincount(f.ravel(), np.repeat(area / 3.0, 3), minlength=len(v))
-        _, near = cKDTree(body.rest).query(v)
-        out = np.bincount(near, per_vertex, minlength=len(body.ids))
-        out = np.maximum(out, 1e-3 * out.mean())
-    _PRIORS[body] = out / out.mean()
-    return _PRIORS[body]
 
 
 def outlier_constant(sigma2: float, outliers: float, M: int, N: int) -> float:
@@ -64,11 +41,10 @@ def outlier_constant(sigma2: float, outliers: float, M: int, N: int) -> float:
     return (2.0 * np.pi * sigma2) ** 1.5 * outliers * M / ((1.0 - outliers) * N)
 
 
-def posterior(x: np.ndarray, v: np.ndarray, sigma2: float, outliers: float, neighbours=None, priors=None):
+def posterior(x: np.ndarray, v: np.ndarray, sigma2: float, outliers: float, neighbours=None):
     """E-step (Eq. 6.4) for observed points ``x`` (N, 3) and model points ``v`` (M, 3): ``(idx, p)``
     both (N, k), ``p[n, i]`` the posterior of component ``idx[n, i]`` for point n.  ``neighbours``
-    (k) truncates each point to its k nearest components (None or >= M: all, exact).  ``priors`` (M,)
-    component weights (normalised here; None: equal, 1/M as in Eq. 6.2)."""
+    (k) truncates each point to its k nearest components (None or >= M: all, exact)."""
     N, M = len(x), len(v)
     if neighbours is None or neighbours >= M:
         idx = np.broadcast_to(np.arange(M), (N, M))
@@ -78,8 +54,6 @@ def posterior(x: np.ndarray, v: np.ndarray, sigma2: float, outliers: float, neig
         d2 = d.reshape(N, -1) ** 2
         idx = idx.reshape(N, -1)
     g = np.exp(-d2 / (2.0 * sigma2))
-    if priors is not None:
-        g *= (priors * (M / priors.sum()))[idx]
     denom = g.sum(axis=1, keepdims=True) + outlier_constant(sigma2, outliers, M, N)
     return idx, g / np.maximum(denom, 1e-300)
 
@@ -126,12 +100,11 @@ def add_prediction(system: System, body, posed, pose: Poses, predicted: Poses, w
         return
     d = quat_to_rotvec(quat_mul(pose.rotations[0, b], quat_conj(predicted.rotations[0, b])))
     to_local = np.swapaxes(sk.frames[b], 1, 2) @ np.swapaxes(posed.world[sk.parents[b]], 1, 2)
-    D = rotvec_increment_jacobian(-d) @ to_local                     # (k, 3, 3)
-    P = system.H.shape[0]
-    rows = np.zeros((len(b), 3, P))
-    for i, bone in enumerate(b):
-        rows[i, :, 3 + 3 * bone:6 + 3 * bone] = D[i]
-    system.add_rows(rows.reshape(-1, P), d.ravel(), np.full(3 * len(b), weight))
+    D = rotvec_increment_jacobian(-d) @ to_local                     # (k, 3, 3) rows of each bone's block
+    cols = 3 + 3 * b[:, None] + np.arange(3)                         # (k, 3) parameter ids of the blocks
+    system.H[cols[:, :, None], cols[:, None, :]] += weight * np.swapaxes(D, 1, 2) @ D
+    system.g[cols] += weight * np.einsum("kri,kr->ki", D, d)
+    system.energy += weight * float((d * d).sum())
 
 
 def _active(posed, camera, opts, step: int) -> np.ndarray:
@@ -180,8 +153,7 @@ def _em(body, x, camera, state: _State, opts, prior, predicted, step: int, max_i
         rows = _active(posed, camera, opts, step)
         if len(rows) < 10:
             break
-        idx, p = posterior(x, posed.points[rows], state.sigma2, opts.gmm_outliers, opts.gmm_neighbours,
-                           surface_priors(body)[rows] if AREA_PRIORS else None)
+        idx, p = posterior(x, posed.points[rows], state.sigma2, opts.gmm_outliers, opts.gmm_neighbours)
         P1, PX = reduce(x, idx, p, len(rows))
         state.mass = float(P1.sum())
         if state.mass < 6:

@@ -14,6 +14,7 @@ import numpy as np
 from ..geometry.rotations import matrix_to_quat, quat_mul, rotation_between
 from ..rig.model import Poses
 from ..track.initialise import body_poses
+from .limb_search import place_limbs
 from .trackers import frame_fitter
 
 YAW_RANGE = 45.0
@@ -110,5 +111,6 @@ def initialise(body, obs, camera, up, options, limits=None, scale: float = 1.0) 
         tried += 1
         if best is None or s < best[0]:
             best = (s, fit)
-    fit = fitter(body, obs, camera, best[1].pose, options, limits)
+    start = place_limbs(body, best[1].pose, obs, camera, options.near_m)
+    fit = fitter(body, obs, camera, start, options, limits)
     return Start(fit, score(body, fit, obs, camera), tried)

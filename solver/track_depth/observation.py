@@ -21,6 +21,8 @@ JUMP_M = 0.05          # neighbouring pixels further apart in depth than this (+
 MIN_PERSON_SHARE = 0.004  # a component smaller than this share of the image is nobody
 MIN_PERSON_POINTS = 150
 MIN_PART_PIXELS = 10      # smaller components near the person are noise, not body parts
+FREE_BEHIND_M = 0.1      # a pixel seeing this far behind a model point shows free space there
+FLOOR_BAND_M = 0.12       # model points lower than this over the floor may hide in the cut-off floor band
 CONTACT_M = 0.02          # see floor_margin
 REACH_M = 0.08            # a component this close (3D) to the person's largest one is part of it
 
@@ -91,6 +93,27 @@ class Observation:
         if not hasattr(self, "_dilated"):
             self._dilated = ndimage.binary_dilation(self.mask, iterations=pixels)
         return self._dilated
+
+    def in_free_space(self, points: np.ndarray, camera: "ViewCamera") -> np.ndarray:
+        """(N,) True for points (tracking frame) the camera sees through: they project outside the
+        person's (dilated) silhouette onto a pixel whose measured depth lies more than ``FREE_BEHIND_M``
+        behind them, or onto a pixel without depth unless they are down where the floor was cut off."""
+        uv, z = camera.project(points)
+        H, W = self.mask.shape
+        u, v = np.round(uv[:, 0]), np.round(uv[:, 1])
+        inside = (z > 0) & (u >= 0) & (u < W) & (v >= 0) & (v < H)
+        out = np.zeros(len(points), bool)
+        i = np.flatnonzero(inside)
+        ui, vi = u[i].astype(int), v[i].astype(int)
+        seen = self.depth[vi, ui]
+        free = ~self.mask_dilated()[vi, ui]
+        with np.errstate(invalid="ignore"):
+            behind = seen > z[i] + FREE_BEHIND_M
+        unknown = ~np.isfinite(seen)
+        if self.floor is not None:
+            unknown &= self.height(points[i]) > FLOOR_BAND_M
+        out[i] = free & (behind | unknown)
+        return out
 
     def edge_tree(self) -> cKDTree:
         if not hasattr(self, "_edge_tree"):

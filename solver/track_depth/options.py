@@ -37,6 +37,7 @@ class DepthTrackOptions:
     gmm_converged_m: float = 0.001    # EM stops when no model point moves more than this (ch. 6: 1 mm)
     gmm_lambda_r: float = 1000.0      # lambda_r, small-update term (Table 6.2)
     gmm_lambda_p: float = 500.0       # lambda_p, pull of the joint rotations to the prediction (Table 6.2)
+    smooth: bool = True               # centred 3-frame smoothing of the tracked poses at the end (ours)
     lost_share: float = 0.35          # a frame is lost when fewer observed points than this lie near the model
     near_m: float = 0.05              # "near the model" for the lost test and the report
     adapt_size: bool = True           # template only: limb lengths on the first frames (Algorithm 4)

@@ -20,6 +20,7 @@ from .body import TrackingBody
 from .initialise import initialise
 from .limits import JointLimits
 from .options import DepthTrackOptions
+from .smoothing import smooth
 from .template import load_template
 from .trackers import frame_fitter
 
@@ -140,6 +141,8 @@ def track_recording(recording, model: Model | None = None, options: DepthTrackOp
             say((k + 1) / n, f"frame {k + 1} of {n}: {entry['status']}"
                 + (f", {entry['mean_mm']:.1f} mm" if "mean_mm" in entry else ""))
     poses = _fill(run.poses, model.skeleton.num_bones)
+    if options.smooth:
+        poses = smooth(poses, [f["status"] for f in run.frames])
     seconds = {"setup": t_setup, "frames": time.perf_counter() - t_frames}
     notes = list(recording.notes) + (["the built-in template body was tracked"] if template is not None else [])
     return DepthTrackResult(run.body.model, poses, run.frames, notes, options, template is not None, seconds)
