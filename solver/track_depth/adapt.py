@@ -14,8 +14,10 @@ from .body import TrackingBody
 from .body_shape import ShapeTerms, same_world_pose, solve_coefficients
 from .body_size import SCALE_RANGE, FramePairs, scaled_model, solve_scales
 from .observation import floor_margin
+from .surface import SurfaceFit
 from .visibility import visible
 
+FACING_COS = 0.5         # surface offsets only from points facing the camera (grazing pairs are biased)
 SIZE_ROUNDS = 3          # pose <-> body alternations per adaptation frame
 
 
@@ -44,6 +46,8 @@ class TemplateAdaptation:
         self.state = BodyState(np.zeros(template.num_basis), np.ones(B))
         self.frames = {}
         self.done = 0
+        self.surface = None
+        self.since = 0
 
     def model(self):
         return scaled_model(self.template.shaped(self.state.coefficients), self.state.scales)
@@ -58,6 +62,25 @@ class TemplateAdaptation:
 
     def wants(self) -> bool:
         return self.opts.adapt_size and self.done < self.opts.size_frames
+
+    def surface_step(self, body, pose, obs, camera):
+        """After the size frames: record the frame's pairs for the surface and, every ``surface_every``
+        frames, return a body with the displaced rest surface (else None)."""
+        if not self.opts.adapt_surface or self.wants():
+            return None
+        if self.surface is None:
+            self.surface = SurfaceFit(body.model)
+        posed = body.pose(pose)
+        vis = np.flatnonzero(visible(posed.points, posed.normals, camera, self.opts.visibility_tolerance))
+        rows, targets = icp.surface_pairs(body, posed, vis, obs, self.opts)
+        ray = posed.points[rows] - camera.centre
+        facing = (posed.normals[rows] * ray).sum(axis=1) < -FACING_COS * np.linalg.norm(ray, axis=1)
+        self.surface.add_frame(body.ids[rows[facing]], targets[facing], pose, camera.centre)
+        self.since += 1
+        if self.since < self.opts.surface_every:
+            return None
+        self.since = 0
+        return TrackingBody(self.surface.displaced(), ids=body.ids)
 
     def contact(self, posed, obs, ids):
         """(vertex id, n, d): the lowest model point stands on the floor, when the person's lowest

@@ -17,7 +17,7 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .normal_equations import System
+from .normal_equations import System, cross
 from .visibility import visible
 
 GRAZING_COS = 0.35       # model points whose normal is this close to perpendicular to the view are contour points
@@ -129,7 +129,7 @@ def edge_rows(points, pixels, camera):
 def predicted_motion(delta, a):
     """(m, 3) linear motion of points with lever arms ``a`` (m, 3, B) under the step ``delta``."""
     omega = delta[3:].reshape(-1, 3)
-    return delta[:3] + np.cross(omega[None], a.transpose(0, 2, 1)).sum(axis=1)
+    return delta[:3] + cross(omega[None], a.transpose(0, 2, 1)).sum(axis=1)
 
 
 def _shorten(delta):

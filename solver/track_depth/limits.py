@@ -51,8 +51,8 @@ class JointLimits:
         pull = (r - self.centre[b]) / self.width[b]
         P = system.H.shape[0]
         rows = np.zeros((len(b), 3, P))
-        for i, bone in enumerate(b):
-            rows[i, :, 3 + 3 * bone:6 + 3 * bone] = D[i]
+        cols = 3 + 3 * b[:, None] + np.arange(3)                     # (k, 3) the bones' parameter columns
+        rows[np.arange(len(b))[:, None, None], np.arange(3)[None, :, None], cols[:, None, :]] = D
         rows = rows.reshape(-1, P)
         w_box = np.where(over.ravel() != 0, BOX_WEIGHT, 0.0)
         system.add_rows(rows, over.ravel(), w_box)

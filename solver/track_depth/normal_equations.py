@@ -9,6 +9,13 @@ from __future__ import annotations
 import numpy as np
 
 
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a x b`` over the last axis (broadcasting), without ``np.cross``'s axis handling."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack((a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0), axis=-1)
+
+
 def skew(v: np.ndarray) -> np.ndarray:
     """(..., 3) -> (..., 3, 3) cross-product matrices ``[v]x``."""
     out = np.zeros(v.shape[:-1] + (3, 3))
@@ -44,7 +51,7 @@ class System:
         H[3:, :3] += side.transpose(1, 0, 2).reshape(3, 3 * B).T
         wr = r * w[:, None]
         self.g[:3] += wr.sum(axis=0)
-        self.g[3:] += np.cross(a.transpose(0, 2, 1), wr[:, None, :]).sum(axis=0).reshape(-1)
+        self.g[3:] += cross(a.transpose(0, 2, 1), wr[:, None, :]).sum(axis=0).reshape(-1)
         self.energy += float((w * (r * r).sum(axis=1)).sum())
 
     def add_projected(self, a: np.ndarray, h: np.ndarray, e: np.ndarray, w: np.ndarray) -> None:
@@ -52,7 +59,7 @@ class System:
         (m, 3), residuals ``e`` (m,), weights (m,) (the edge rows of Eq. 5.4)."""
         if len(a) == 0:
             return
-        rows = np.concatenate([h, np.cross(a.transpose(0, 2, 1), h[:, None, :]).reshape(len(a), -1)], axis=1)
+        rows = np.concatenate([h, cross(a.transpose(0, 2, 1), h[:, None, :]).reshape(len(a), -1)], axis=1)
         self.add_rows(rows, e, w)
 
     def add_rows(self, rows: np.ndarray, e: np.ndarray, w: np.ndarray) -> None:

@@ -94,13 +94,24 @@ class _Sequence:
             if fit.near_share < self.opts.lost_share:
                 again = initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits).fit
                 fit, status = (again, "initialised") if again.near_share > fit.near_share else (fit, status)
-        if self.adaptation is not None and self.adaptation.wants() and fit.near_share >= self.opts.lost_share:
-            self.body, fit = self.adaptation.adapt(k, self.body, fit.pose, obs, self.rec.camera, self.limits, self.fit)
+        if self.adaptation is not None and fit.near_share >= self.opts.lost_share:
+            fit = self._adapt(k, obs, fit)
         self.lost = fit.near_share < self.opts.lost_share
         if self.lost:
             status = "lost"
         self.pose = fit.pose
         return _entry(k, name, status, fit, 1000 * (time.perf_counter() - t0))
+
+
+    def _adapt(self, k, obs, fit):
+        """The template's body adapted on frame k (size on the first frames, then the surface)."""
+        if self.adaptation.wants():
+            self.body, fit = self.adaptation.adapt(k, self.body, fit.pose, obs, self.rec.camera, self.limits, self.fit)
+            return fit
+        body = self.adaptation.surface_step(self.body, fit.pose, obs, self.rec.camera)
+        if body is not None:
+            self.body = body
+        return fit
 
 
 def _fill(poses: list, num_bones: int) -> Poses:
