@@ -106,7 +106,8 @@ class ARTICULA_PT_track(_ArticulaPanel, bpy.types.Panel):
 
     def draw(self, context):
         col = self.layout.column(align=True)
-        col.label(text="Select a rig and a scan or point sequence")
+        col.label(text="Select a rig and a scan or point sequence,")
+        col.label(text="or a depth recording (no rig: template body)")
         _button(col, "articula.track", "Track Captures…", 'CON_ARMATURE')
 
 

@@ -1,11 +1,14 @@
 """``articula.track``: track a sequence of unregistered captures with a person's model and bake the motion
-on the rig, which then plays over the captures, with per-frame residual curves and error colours on the
-captures.
+on the rig, which then plays over the captures, with per-frame residual curves (and, for scans, error
+colours on the captures).
 
 Input: the model of the Articula rig named ``rig`` (empty: the active or a selected rig), or of the
 bundle file ``bundle``; the captures of the scan-sequence or point-cloud object named ``captures``
-(empty: the one selected).  The work is in :mod:`addon.track`; the settings' defaults come from
-:class:`solver.track.options.TrackOptions`.
+(empty: the one selected).  ``method`` picks the tracker: a depth recording (a point cloud imported with
+its camera) goes to the depth-camera tracker (:mod:`addon.track_depth`; no rig or bundle: the built-in
+template body, adapted to the person; the recording's camera becomes the scene camera), everything else
+to the capture tracker (:mod:`addon.track`).  The settings' defaults come from
+:class:`solver.track.options.TrackOptions` and :class:`solver.track_depth.options.DepthTrackOptions`.
 """
 import os
 from dataclasses import replace
@@ -16,10 +19,19 @@ from ..addon.jobs import JobOperator
 from ..addon.rig import reader
 from ..addon.track import inputs, result, solve
 from ..addon.track.report import summary_text
+from ..addon.track_depth import inputs as depth_inputs
+from ..addon.track_depth import result as depth_result
+from ..addon.track_depth import solve as depth_solve
+from ..addon.track_depth.report import summary_text as depth_summary
 from ..solver.errors import ArticulaInputError
 from ..solver.track.options import TrackOptions
+from ..solver.track_depth.options import TRACKERS, DepthTrackOptions
 
 _DEFAULT = TrackOptions()
+_DEPTH_DEFAULT = DepthTrackOptions()
+TRACKER_ITEMS = tuple((t.upper(), t.upper(), {"icp": "Iterative closest points with silhouette edges (ch. 5)",
+                                               "gmm": "Gaussian mixture of the body's surface (ch. 6)"}.get(t, t))
+                      for t in TRACKERS)
 ADAPT_ITEMS = (('AUTO', "Auto", "Adapt the rest mesh and joints when the tracked range is long enough"),
                ('ON', "On", "Always adapt the model to the recording"),
                ('OFF', "Off", "Keep the model as it is"))
@@ -30,8 +42,9 @@ PRIOR_ITEMS = (('AUTO', "Auto", "The model's own training poses when it has some
 
 
 class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
-    """Track unregistered captures (a scan-sequence or point-cloud object) with a person's rig: one pose
-    per frame baked as an action, residual curves, error colours on the captures"""
+    """Track unregistered captures (a scan-sequence or point-cloud object) with a person's rig, or a depth
+    recording with a rig or the built-in template body: one pose per frame baked as an action, residual
+    curves, error colours on scans"""
     bl_idname = "articula.track"
     bl_label = "Track Captures"
     bl_options = {'REGISTER', 'UNDO'}
@@ -46,6 +59,11 @@ class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
     captures: bpy.props.StringProperty(
         name="Captures", options={'SKIP_SAVE'},
         description="Scan-sequence or point-cloud object to track (empty: the selected one)")
+    method: bpy.props.EnumProperty(name="Tracker", items=depth_inputs.METHOD_ITEMS, default='AUTO',
+                                   description="Which tracker follows the person")
+    depth_tracker: bpy.props.EnumProperty(name="Depth Tracker", items=TRACKER_ITEMS,
+                                          default=_DEPTH_DEFAULT.tracker.upper(),
+                                          description="How the depth-camera tracker fits each frame")
     adapt: bpy.props.EnumProperty(name="Adapt Model", items=ADAPT_ITEMS, default=_DEFAULT.adapt.upper(),
                                   description="Refine the model's rest mesh and joints from the recording")
     prior: bpy.props.EnumProperty(name="Pose Prior", items=PRIOR_ITEMS, default=_DEFAULT.prior.upper(),
@@ -94,9 +112,16 @@ class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
     def draw(self, context):
         col = self.layout.column()
         col.prop(self, "bundle")
+        col.prop(self, "method")
+        sub = col.column()
+        sub.enabled = self.method != 'CAPTURES'
+        sub.prop(self, "depth_tracker")
+        box = col.box().column()
+        box.enabled = self.method != 'DEPTH'
+        box.label(text="Scans and point clouds:")
         for prop in ("adapt", "prior", "temporal", "fit_scale", "max_points"):
-            col.prop(self, prop)
-        sub = col.row()
+            box.prop(self, prop)
+        sub = box.row()
         sub.enabled = not self.bundle.strip()
         sub.prop(self, "start_from_rig")
         col.prop(self, "use_frame_range")
@@ -109,10 +134,14 @@ class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
 
     # -- job parts -----------------------------------------------------------------------------------
     def prepare(self, context):
-        options = TrackOptions(adapt=self.adapt.lower(), prior=self.prior.lower(), temporal=self.temporal,
-                               fit_scale=self.fit_scale, max_points=self.max_points).validate()
+        ob = inputs.find_captures(context, self.captures)
         out = bpy.path.abspath(self.output_bundle) if self.output_bundle else ""
         result.check_output_path(out)
+        self._output = out
+        if depth_inputs.uses_depth_tracker(ob, self.method):
+            return self._prepare_depth(context, ob)
+        options = TrackOptions(adapt=self.adapt.lower(), prior=self.prior.lower(), temporal=self.temporal,
+                               fit_scale=self.fit_scale, max_points=self.max_points).validate()
         if self.bundle.strip():
             if self.start_from_rig:
                 raise ArticulaInputError("Start From Rig's Pose needs a rig in the scene, not a bundle file")
@@ -123,24 +152,36 @@ class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
             if self.start_from_rig:
                 model_input.start_pose = reader.read_current_pose(arm)    # object space: the solve frame
                 model_input.start_label = "the rig's pose"
-        ob = inputs.find_captures(context, self.captures)
         model_input.matrix = inputs.solve_matrix(model_input, ob)
         captures = inputs.captures_from_object(ob, model_input.matrix)
         if self.use_frame_range:
-            first, last = self.frame_first - captures.frame_start, self.frame_last - captures.frame_start
-            n = len(captures.names)
-            if not 0 <= first <= last < n:
-                raise ArticulaInputError(f"Frame Range {self.frame_first}..{self.frame_last} lies outside the "
-                                         f"captures' frames {captures.frame_start}..{captures.frame_start + n - 1}")
-            options = replace(options, frames=(first, last + 1)).validate()
-        self._output = out
+            span = depth_inputs.frame_slice(self.frame_first, self.frame_last, len(captures.names),
+                                            captures.frame_start)
+            options = replace(options, frames=(span.start, span.stop)).validate()
 
         def work(progress):
             progress(0.0, "reading captures")
             return solve.track(model_input, captures, options, progress)
         return work
 
+    def _prepare_depth(self, context, ob):
+        """The depth-camera tracker on depth object ``ob``: the bundle, else the rig, else the template."""
+        if self.start_from_rig:
+            raise ArticulaInputError("Start From Rig's Pose is for scans and point clouds; the depth tracker "
+                                     "finds the first frame's pose itself")
+        options = DepthTrackOptions(tracker=self.depth_tracker.lower()).validate()
+        bundle = bpy.path.abspath(self.bundle) if self.bundle.strip() else ""
+        model_input = depth_inputs.find_model(context, self.rig, bundle)
+        span = None
+        if self.use_frame_range:
+            span = depth_inputs.frame_slice(self.frame_first, self.frame_last, ob.articula.frame_count,
+                                            ob.articula.frame_start)
+        captures = depth_inputs.recording_from_object(ob, model_input.matrix, span)
+        return lambda progress: depth_solve.track(model_input, captures, options, progress)
+
     def finish(self, context, outcome):
+        if isinstance(outcome, depth_solve.DepthOutcome):
+            return self._finish_depth(context, outcome)
         arm, action, warnings = result.build(context, outcome, self.name)
         if self._output:
             result.save(self._output, outcome)
@@ -151,6 +192,20 @@ class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
         saved = f"; saved {os.path.basename(self._output)}" if self._output else ""
         self.report({'INFO'}, f"Tracked {outcome.captures.label} with {arm.name!r} (action {action.name!r}): "
                               f"{summary_text(outcome)}{saved}")
+
+    def _finish_depth(self, context, outcome):
+        arm, action, warnings = depth_result.build(context, outcome, self.name)
+        if self._output:
+            depth_result.save(self._output, outcome)
+        seen = depth_result.look_through(context, outcome.captures.camera_name)
+        for text in warnings:
+            self.report({'WARNING'}, text)
+        for note in outcome.result.notes:
+            self.report({'INFO'}, f"{outcome.captures.label}: {note}")
+        saved = f"; saved {os.path.basename(self._output)}" if self._output else ""
+        camera = f"; seen through {outcome.captures.camera_name!r}" if seen else ""
+        self.report({'INFO'}, f"Tracked {outcome.captures.label} with {arm.name!r} (action {action.name!r}): "
+                              f"{depth_summary(outcome)}{saved}{camera}")
 
 
 classes = (ARTICULA_OT_track,)

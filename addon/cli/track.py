@@ -1,5 +1,6 @@
-"""Batch commands ``track`` (unregistered captures + a model bundle -> a tracked bundle, + report, + .blend)
-and ``merge-tracks`` (chunks tracked separately -> one tracked bundle).
+"""Batch commands ``track`` (unregistered captures + a model bundle -> a tracked bundle, + report, + .blend;
+with ``--depth`` a depth recording, see :mod:`.track_depth`) and ``merge-tracks`` (chunks tracked
+separately -> one tracked bundle).
 
     ./run track --model person.npz --scans scans/ --out tracked.npz --report tracked.json
     ./run track --model person.npz --scans scans/ --frames 0:60 --out part1.npz
@@ -30,6 +31,7 @@ from ...solver.track.options import ADAPT_CHOICES, PRIOR_CHOICES, TrackOptions
 from .. import jobs
 from ..track import inputs, result, solve
 from ..track.report import report_document, summary_text
+from . import track_depth
 from .common import call_operator, check_blend_output, editing, finish, write_json
 from .scans import add_axis_arguments, axis_props
 
@@ -64,6 +66,20 @@ def _save_blend(blend: str, paths, outcome, axes: dict) -> None:
 
 
 def run(args) -> int:
+    if args.depth is not None and args.scans is not None:
+        raise ArticulaInputError("--depth and --scans exclude each other: track a depth recording (--depth DIR) "
+                                 "or captures (--scans PATH...), not both")
+    if args.depth is not None:
+        return track_depth.run(args)
+    if args.scans is None:
+        raise ArticulaInputError("nothing to track: give --scans PATH... (captures) or --depth DIR (a depth "
+                                 "recording)")
+    given = [flag for flag, value in (("--camera", args.camera), ("--tracker", args.tracker)) if value]
+    if given:
+        raise ArticulaInputError(f"{', '.join(given)}: for --depth only")
+    if not args.model:
+        raise ArticulaInputError("--scans needs --model MODEL.npz (the person's model bundle); only --depth can "
+                                 "track with the built-in template body")
     for path in (args.out, args.report):
         result.check_output_path(path or "")
     check_blend_output(args.blend)
@@ -114,14 +130,18 @@ def run_merge(args) -> int:
 
 def add_commands(sub):
     default = TrackOptions()
-    p = sub.add_parser("track", help="track unregistered captures with a model bundle (one pose per frame)")
-    p.add_argument("--model", required=True, help="model bundle (.npz) of the person, e.g. from learn-rig")
-    p.add_argument("--scans", nargs="+", required=True, metavar="PATH",
+    p = sub.add_parser("track", help="track unregistered captures (--scans) with a model bundle, or a depth "
+                                     "recording (--depth) with a model bundle or the built-in template body "
+                                     "(one pose per frame)")
+    p.add_argument("--model", help="model bundle (.npz) of the person, e.g. from learn-rig (needed with --scans; "
+                                   "with --depth, without it the built-in template body adapts to the person)")
+    p.add_argument("--scans", nargs="+", metavar="PATH",
                    help="a folder of captures (OBJ/PLY/STL/OFF meshes or NPY/XYZ/TXT point files) or such files "
                         "(natural order)")
+    track_depth.add_arguments(p)
     p.add_argument("--out", required=True, help="tracked bundle to write (.npz)")
     p.add_argument("--report", help="write the per-frame residuals, lost frames and timings as JSON")
-    p.add_argument("--blend", help="also save a .blend with the scans and the tracked rig")
+    p.add_argument("--blend", help="also save a .blend with the scans (or the depth recording) and the tracked rig")
     p.add_argument("--frames", metavar="A:B", help="track input frames A..B-1 only (0-based; A: or :B allowed)")
     p.add_argument("--start-pose", metavar="BUNDLE.npz[:K]",
                    help="start the first tracked frame from pose K (default 0) of this bundle (the model's bones, "

@@ -54,7 +54,7 @@ def build(context, outcome, name: str = "", blend_path: str = ""):
         arm.matrix_world = Matrix(np.asarray(mi.matrix, np.float64).tolist())
         names = list(outcome.model.skeleton.names)
         if old is not None:
-            _hide_rig(old)
+            hide_rig(old)
     frame0 = cap.frame_start + outcome.first_frame
     action = actions.write_action(arm, names, outcome.poses, name=f"{arm.name} tracked", frame_start=frame0,
                                   scene=context.scene)
@@ -67,7 +67,7 @@ def build(context, outcome, name: str = "", blend_path: str = ""):
     return arm, action, warnings
 
 
-def _hide_rig(arm) -> None:
+def hide_rig(arm) -> None:
     """Hide the objects of the rig ``arm`` in the view layer (the adapted rig replaces it)."""
     for ob in (arm, *arm.children_recursive):
         try:
@@ -87,12 +87,13 @@ def _channels(arm, action):
     raise ArticulaInputError(f"action {action.name!r} has no keyframe strip")
 
 
-def add_residual_curves(arm, action, result, frame0: int) -> None:
-    """Key the per-frame residuals (median and mean scan-to-model distance, mm) as the armature's custom
-    properties on frames ``frame0 ..``; frames without a value (skipped) get no key."""
+def add_residual_curves(arm, action, result, frame0: int, properties=RESIDUAL_PROPERTIES) -> None:
+    """Key the per-frame residuals (``properties``: (custom property, key of ``result.frames``' rows);
+    by default the median and mean scan-to-model distance, mm) as the armature's custom properties on
+    frames ``frame0 ..``; frames without a value (skipped) get no key."""
     bag = _channels(arm, action)
     constant = bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items["CONSTANT"].value
-    for prop, key in RESIDUAL_PROPERTIES:
+    for prop, key in properties:
         values = residuals_mm(result, key)
         arm[prop] = 0.0
         ok = np.flatnonzero(np.isfinite(values))

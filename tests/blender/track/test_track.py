@@ -425,9 +425,10 @@ def test_bad_input_is_refused_and_leaves_scene_unchanged(pkg, tmp_path, truth, c
 
 
 def test_point_cloud_object_is_tracked_in_world_coordinates(pkg, tmp_path, truth, stub):
-    """stub: a point-cloud object (points in its sensor frame, placed by world_from_sensor): with a bundle the
-    solver gets the points in world coordinates and the cameras of the recording, the rig stands at the
-    origin, and the point cloud gets its error colours."""
+    """stub: a point-cloud object (points in its sensor frame, placed by world_from_sensor) given to the
+    capture tracker (Tracker: Captures; Auto takes the depth tracker for a cloud with a camera): with a
+    bundle the solver gets the points in world coordinates and the cameras of the recording, the rig stands
+    at the origin, and the point cloud gets its error colours."""
     from types import SimpleNamespace
     model, poses, captures = truth
     tracker = stub()
@@ -444,7 +445,7 @@ def test_point_cloud_object_is_tracked_in_world_coordinates(pkg, tmp_path, truth
     ob, cam = points.create_sequence_objects(bpy.context, "cloud", seq, cache, "test", frame_start=FRAME_START)
     path = str(tmp_path / "person.npz")
     save_bundle(path, model, poses)
-    assert bpy.ops.articula.track(bundle=path, captures=ob.name, **FAST) == {'FINISHED'}
+    assert bpy.ops.articula.track(bundle=path, captures=ob.name, method='CAPTURES', **FAST) == {'FINISHED'}
     (call,) = tracker.calls
     for k in range(N):
         np.testing.assert_allclose(call["points"][k], captures[k][0], atol=1e-5)        # world coordinates
