@@ -38,6 +38,7 @@ class DepthTrackOptions:
     gmm_lambda_r: float = 1000.0      # lambda_r, small-update term (Table 6.2)
     gmm_lambda_p: float = 500.0       # lambda_p, pull of the joint rotations to the prediction (Table 6.2)
     smooth: bool = True               # centred 3-frame smoothing of the tracked poses at the end (ours)
+    limb_share: float = 0.96          # below this share the limbs are searched again (a limb was lost, ours)
     lost_share: float = 0.35          # a frame is lost when fewer observed points than this lie near the model
     near_m: float = 0.05              # "near the model" for the lost test and the report
     adapt_size: bool = True           # template only: limb lengths on the first frames (Algorithm 4)
@@ -59,7 +60,7 @@ class DepthTrackOptions:
                   ("gmm_neighbours", self.gmm_neighbours, 1, 64), ("gmm_points", self.gmm_points, 50, 100000),
                   ("gmm_iterations", self.gmm_iterations, 1, 200), ("gmm_converged_m", self.gmm_converged_m, 1e-6, 0.1),
                   ("gmm_lambda_r", self.gmm_lambda_r, 0, 1e9), ("gmm_lambda_p", self.gmm_lambda_p, 0, 1e9),
-                  ("lost_share", self.lost_share, 0, 1),
+                  ("lost_share", self.lost_share, 0, 1), ("limb_share", self.limb_share, 0, 1),
                   ("near_m", self.near_m, 1e-3, 1.0), ("size_frames", self.size_frames, 1, 1000),
                   ("surface_every", self.surface_every, 1, 1000))
         for name, value, lo, hi in checks:

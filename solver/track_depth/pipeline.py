@@ -18,6 +18,7 @@ from ..rig.model import Model, Poses
 from .adapt import TemplateAdaptation
 from .body import TrackingBody
 from .initialise import initialise
+from .limb_search import place_limbs
 from .limits import JointLimits
 from .options import DepthTrackOptions
 from .smoothing import smooth
@@ -40,13 +41,13 @@ class DepthTrackResult:
 
     def report(self) -> dict:
         status = [f["status"] for f in self.frames]
-        tracked = [f for f in self.frames if f["status"] in ("tracked", "initialised")]
+        tracked = [f for f in self.frames if f["status"] in ("tracked", "limbs searched", "initialised")]
         ms = [f["ms"] for f in tracked]
         return {
             "format": "articula-depth-track-report/1", "tracker": self.options.tracker,
             "template": self.template, "frames": len(self.frames),
             "tracked": len(tracked), "lost": status.count("lost"), "no_person": status.count("no person"),
-            "initialised": status.count("initialised"),
+            "initialised": status.count("initialised"), "limbs_searched": status.count("limbs searched"),
             "frames_per_second": 1000.0 / float(np.mean(ms)) if ms else 0.0,
             "median_mean_mm": float(np.median([f["mean_mm"] for f in tracked])) if tracked else None,
             "seconds": self.seconds, "notes": self.notes, "options": dataclasses.asdict(self.options),
@@ -91,6 +92,8 @@ class _Sequence:
             status = "initialised"
         else:
             fit = self.fit(self.body, obs, self.rec.camera, self.pose, self.opts, self.limits)
+            if self.opts.lost_share <= fit.near_share < self.opts.limb_share:
+                fit, status = self._limbs(obs, fit)
             if fit.near_share < self.opts.lost_share:
                 again = initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits).fit
                 fit, status = (again, "initialised") if again.near_share > fit.near_share else (fit, status)
@@ -102,6 +105,13 @@ class _Sequence:
         self.pose = fit.pose
         return _entry(k, name, status, fit, 1000 * (time.perf_counter() - t0))
 
+
+    def _limbs(self, obs, fit):
+        """A limb lost (observed points left unexplained): the limb search from the fitted pose, kept when
+        it explains more (status "limbs searched")."""
+        start = place_limbs(self.body, fit.pose, obs, self.rec.camera, self.opts.near_m)
+        again = self.fit(self.body, obs, self.rec.camera, start, self.opts, self.limits)
+        return (again, "limbs searched") if again.near_share > fit.near_share + 0.005 else (fit, "tracked")
 
     def _adapt(self, k, obs, fit):
         """The template's body adapted on frame k (size on the first frames, then the surface)."""

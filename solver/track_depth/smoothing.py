@@ -16,11 +16,11 @@ def runs(statuses) -> list:
     """``(start, stop)`` of the runs of consecutive frames tracked from their predecessor."""
     out, start = [], None
     for k, s in enumerate(list(statuses) + ["end"]):
-        cont = s == "tracked"
+        cont = s in ("tracked", "limbs searched")
         if start is not None and not cont:
             out.append((start, k))
             start = None
-        if s in ("tracked", "initialised") and start is None:
+        if s in ("tracked", "limbs searched", "initialised") and start is None:
             start = k
     return out
 
