@@ -30,6 +30,7 @@ import _common  # noqa: E402  (makes ``import articula`` work)
 
 import numpy as np  # noqa: E402
 
+OPTS = {}   # DepthTrackOptions fields of the template runs (scripts set them)
 SEGMENTS = (("shoulder.L", "elbow.L"), ("elbow.L", "wrist.L"), ("shoulder.R", "elbow.R"), ("elbow.R", "wrist.R"),
             ("hip.L", "knee.L"), ("knee.L", "ankle.L"), ("hip.R", "knee.R"), ("knee.R", "ankle.R"),
             ("neck", "head"), ("hip.L", "hip.R"), ("shoulder.L", "shoulder.R"))

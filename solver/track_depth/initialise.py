@@ -21,6 +21,7 @@ YAW_RANGE = 45.0
 YAW_STEP = 15.0
 BODY_POSES = 4           # rest + 3 generic body poses
 SCREEN_ITERATIONS = 5
+EDGE_PIXELS = 2          # a silhouette this close to the image's top or bottom is cut by it
 MODEL_UP = np.array([0.0, 0.0, 1.0])
 MODEL_FRONT = np.array([0.0, -1.0, 0.0])   # MakeHuman and Blender characters face -Y
 
@@ -60,17 +61,32 @@ def placed(model, body_rot: np.ndarray, world: np.ndarray, centre: np.ndarray, s
     return Poses(rot[None], t[None], np.array([scale]))
 
 
-def body_centre(obs, camera, up) -> np.ndarray:
-    """Centre of the person's body box: along ``up`` the middle of the observed points' 1-99 percentile
-    range, across it their median moved 10 cm away from the camera (the camera sees the front)."""
+def cut_edges(obs) -> tuple:
+    """``(top, bottom)``: whether the person's silhouette touches the image's top / bottom row."""
+    rows = np.flatnonzero(obs.mask.any(axis=1))
+    H = obs.mask.shape[0]
+    return (len(rows) > 0 and rows[0] <= EDGE_PIXELS), (len(rows) > 0 and rows[-1] >= H - 1 - EDGE_PIXELS)
+
+
+def body_centre(obs, camera, up, height: float) -> np.ndarray:
+    """Centre of the person's body box (``height`` metres tall): along ``up`` the middle of the observed
+    points' 1-99 percentile range, or ``height``/2 below their top (above their bottom) when the image's
+    bottom (top) edge cuts the person; across it their median moved 10 cm away from the camera (the camera
+    sees the front)."""
     up = up / np.linalg.norm(up)
     h = obs.points @ up
     lo, hi = np.percentile(h, [1, 99])
+    top_cut, bottom_cut = cut_edges(obs)
+    middle = 0.5 * (lo + hi)
+    if bottom_cut and not top_cut:
+        middle = hi - 0.5 * height
+    elif top_cut and not bottom_cut:
+        middle = lo + 0.5 * height
     c = np.median(obs.points, axis=0)
     ray = c - camera.centre
     ray -= (ray @ up) * up
     c = c + 0.1 * ray / max(np.linalg.norm(ray), 1e-12)
-    return c + (0.5 * (lo + hi) - c @ up) * up
+    return c + (middle - c @ up) * up
 
 
 def free_space(posed, obs, camera) -> float:
@@ -101,7 +117,8 @@ def hypotheses(model, up, towards, centre, scale: float = 1.0):
 
 def initialise(body, obs, camera, up, options, limits=None, scale: float = 1.0) -> Start:
     """The best start pose for the observation ``obs`` (see the module docstring)."""
-    centre = body_centre(obs, camera, up)
+    height = scale * float(np.ptp(body.model.rest_vertices[:, 2]))
+    centre = body_centre(obs, camera, up, height)
     towards = camera.centre - centre
     best, tried = None, 0
     fitter = frame_fitter(options)

@@ -63,6 +63,10 @@ def _entry(k, name, status, fit=None, ms=0.0):
     return e
 
 
+RECENT = 15       # frames whose typical explained share sets the limb-search threshold
+LIMB_DROP = 0.03  # share below the typical one at which the limbs are searched again
+
+
 class _Sequence:
     """The state of one tracking run (see :func:`track_recording`)."""
 
@@ -73,7 +77,7 @@ class _Sequence:
         self.adaptation = (TemplateAdaptation(template, options, recording.options, recording.camera.centre)
                            if template is not None else None)
         self.limits = limits if limits is not None else JointLimits(model.skeleton)
-        self.poses, self.frames = [], []
+        self.poses, self.frames = [], []          # the run appends to both
         self.pose = None
         self.fit = frame_fitter(options)
 
@@ -92,7 +96,7 @@ class _Sequence:
             status = "initialised"
         else:
             fit = self.fit(self.body, obs, self.rec.camera, self.pose, self.opts, self.limits)
-            if self.opts.lost_share <= fit.near_share < self.opts.limb_share:
+            if self.opts.lost_share <= fit.near_share < self._limb_threshold():
                 fit, status = self._limbs(obs, fit)
             if fit.near_share < self.opts.lost_share:
                 again = initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits).fit
@@ -105,6 +109,14 @@ class _Sequence:
         self.pose = fit.pose
         return _entry(k, name, status, fit, 1000 * (time.perf_counter() - t0))
 
+
+    def _limb_threshold(self) -> float:
+        """``limb_share``, or 3 points below the recent frames' typical share when that is lower (a body
+        the model fits less well, e.g. the template on a clothed person, explains less every frame)."""
+        recent = [f["near_share"] for f in self.frames[-RECENT:] if "near_share" in f]
+        if len(recent) < RECENT // 2:
+            return self.opts.limb_share
+        return min(self.opts.limb_share, float(np.median(recent)) - LIMB_DROP)
 
     def _limbs(self, obs, fit):
         """A limb lost (observed points left unexplained): the limb search from the fitted pose, kept when

@@ -19,11 +19,15 @@ from .observation import ViewCamera, depth_image, observe
 
 
 def numbering_gaps(names) -> list:
-    """``(after, before)`` name pairs between which the trailing frame numbers skip values."""
+    """``(after, before)`` name pairs between which the trailing frame numbers skip values, when the
+    names are numbered frame by frame (most steps are 1; time stamps in names are not a numbering)."""
     nums = []
     for n in names:
         m = re.search(r"(\d+)(?=\.[^.]+$)", os.path.basename(n))
         nums.append(int(m.group(1)) if m else None)
+    steps = [b - a for a, b in zip(nums, nums[1:]) if a is not None and b is not None]
+    if not steps or np.mean(np.array(steps) == 1) < 0.5:
+        return []
     return [(os.path.basename(names[i]), os.path.basename(names[i + 1])) for i in range(len(names) - 1)
             if nums[i] is not None and nums[i + 1] is not None and nums[i + 1] - nums[i] > 1]
 
