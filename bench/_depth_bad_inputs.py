@@ -5,8 +5,6 @@ import json
 import os
 import resource
 import shutil
-import struct
-import zlib
 
 import numpy as np
 
@@ -42,17 +40,6 @@ def _cut_right(depth, share):
     out = depth.copy()
     out[:, int((1 - share) * depth.shape[1]):] = 0
     return out
-
-
-def _write_png8(path, image):
-    h, w = image.shape
-    raw = b"".join(b"\x00" + image[r].astype(np.uint8).tobytes() for r in range(h))
-
-    def chunk(t, d):
-        return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xffffffff)
-    with open(path, "wb") as f:
-        f.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
-                + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
 
 
 def _statuses(res, frames):
@@ -109,7 +96,8 @@ def bad_inputs(subject, frames, long_frames, cache):
     _refused("focal length 5 px", os.path.dirname(paths[0]))
     # an 8-bit frame
     paths = _copy(src, cache("bad_8bit"), range(4))
-    _write_png8(paths[2], np.full((240, 320), 128))
+    from articula.solver.formats.png16 import write_png16
+    write_png16(paths[2], np.full((240, 320), 128, np.uint8))          # an 8-bit PNG
     _refused("8-bit PNG", os.path.dirname(paths[0]))
     _long(src, model, frames, long_frames, cache)
 

@@ -38,33 +38,45 @@ def build(context, outcome, name: str = "", blend_path: str = ""):
     not the open file.  Returns ``(armature, action, warnings)``.  Call inside ``scene_guard``."""
     mi, cap = outcome.model_input, outcome.captures
     old = bpy.data.objects.get(mi.rig) if mi.rig else None
-    warnings = []
-    if old is not None and not outcome.result.adapted:
-        arm = old
-        names = reader.control_names(arm)
-        if names != list(outcome.model.skeleton.names):
-            raise ArticulaInputError(f"rig {arm.name!r}: its bones changed while tracking; track again")
-        if mi.training_action and not arm.get(TRAINING_ACTION):
-            arm[TRAINING_ACTION] = mi.training_action
-    else:
-        base = name or (f"{old.name} adapted" if old is not None else f"{os.path.splitext(mi.label)[0]} tracked")
-        rig = rig_builder.build_rig(context, outcome.model, base)
-        warnings += list(rig.warnings)
-        arm = rig.armature
-        arm.matrix_world = Matrix(np.asarray(mi.matrix, np.float64).tolist())
-        names = list(outcome.model.skeleton.names)
-        if old is not None:
-            hide_rig(old)
+    keep = old is not None and not outcome.result.adapted
+    base = name or (f"{old.name} adapted" if old is not None else f"{os.path.splitext(mi.label)[0]} tracked")
+    arm, names, warnings = tracking_rig(context, outcome.model, old, keep, base, mi.matrix)
+    if keep and mi.training_action and not arm.get(TRAINING_ACTION):
+        arm[TRAINING_ACTION] = mi.training_action
     frame0 = cap.frame_start + outcome.first_frame
-    action = actions.write_action(arm, names, outcome.poses, name=f"{arm.name} tracked", frame_start=frame0,
-                                  scene=context.scene)
-    action[TRACKED_ACTION] = True
-    add_residual_curves(arm, action, outcome.result, frame0)
-    arm[REPORT_PROPERTY] = json.dumps(report_document(outcome))
+    action = bake(context, arm, names, outcome, frame0, RESIDUAL_PROPERTIES, report_document(outcome))
     if cap.object_name and outcome.point_errors_mm is not None:
         error_colors.write_errors(bpy.data.objects[cap.object_name], outcome.point_errors_mm, outcome.first_frame,
                                   blend_path=blend_path)
     return arm, action, warnings
+
+
+def tracking_rig(context, model, old, keep: bool, base: str, matrix):
+    """The rig that plays the tracked motion: ``old`` itself when ``keep`` (its control bones must still
+    be the model's), else a rig built from ``model`` named after ``base`` at ``matrix`` (4, 4), ``old``
+    hidden.  Returns ``(armature, bone names, warnings)``."""
+    if keep:
+        names = reader.control_names(old)
+        if names != list(model.skeleton.names):
+            raise ArticulaInputError(f"rig {old.name!r}: its bones changed while tracking; track again")
+        return old, names, []
+    rig = rig_builder.build_rig(context, model, base)
+    arm = rig.armature
+    arm.matrix_world = Matrix(np.asarray(matrix, np.float64).tolist())
+    if old is not None:
+        hide_rig(old)
+    return arm, list(model.skeleton.names), list(rig.warnings)
+
+
+def bake(context, arm, names, outcome, frame0: int, residual_properties, report: dict):
+    """The tracked poses as the action "<rig> tracked" from scene frame ``frame0``, marked as tracked,
+    with the residual curves and the ``report`` (JSON) on the armature."""
+    action = actions.write_action(arm, names, outcome.poses, name=f"{arm.name} tracked", frame_start=frame0,
+                                  scene=context.scene)
+    action[TRACKED_ACTION] = True
+    add_residual_curves(arm, action, outcome.result, frame0, residual_properties)
+    arm[REPORT_PROPERTY] = json.dumps(report)
+    return action
 
 
 def hide_rig(arm) -> None:

@@ -10,22 +10,14 @@ it plays over the point cloud.  The action also animates the armature's custom p
 stored on the armature.  :func:`look_through` makes the recording's camera the scene camera (and the 3D
 views look through it); :func:`save` writes the tracked bundle.
 """
-import json
 import os
 
 import bpy
-import numpy as np
-from mathutils import Matrix
 
 from ...solver.errors import ArticulaInputError
 from ...solver.formats.bundle import save_bundle
 from ...solver.track.merge import track_provenance
-from ..rig import actions
-from ..rig import builder as rig_builder
-from ..rig import reader
-from ..track.inputs import TRACKED_ACTION
-from ..track.report import REPORT_PROPERTY
-from ..track.result import add_residual_curves, check_output_path, hide_rig
+from ..track.result import bake, check_output_path, tracking_rig
 from .report import options_dict, report_document
 
 RESIDUAL_PROPERTIES = (("articula_residual_mean_mm", "mean_mm"),)
@@ -37,32 +29,16 @@ def build(context, outcome, name: str = ""):
     (module docstring).  Returns ``(armature, action, warnings)``.  Call inside ``scene_guard``."""
     mi, cap = outcome.model_input, outcome.captures
     old = bpy.data.objects.get(mi.rig) if mi.rig else None
-    warnings = []
-    if old is not None and not outcome.new_model:
-        arm = old
-        names = reader.control_names(arm)
-        if names != list(outcome.model.skeleton.names):
-            raise ArticulaInputError(f"rig {arm.name!r}: its bones changed while tracking; track again")
+    if name:
+        base = name
+    elif old is not None:
+        base = f"{old.name} adapted"
     else:
-        if name:
-            base = name
-        elif old is not None:
-            base = f"{old.name} adapted"
-        else:
-            base = TEMPLATE_RIG if mi.model is None else f"{os.path.splitext(mi.label)[0]} tracked"
-        rig = rig_builder.build_rig(context, outcome.model, base)
-        warnings += list(rig.warnings)
-        arm = rig.armature
-        arm.matrix_world = Matrix(np.asarray(mi.matrix, np.float64).tolist())
-        names = list(outcome.model.skeleton.names)
-        if old is not None:
-            hide_rig(old)
+        base = TEMPLATE_RIG if mi.model is None else f"{os.path.splitext(mi.label)[0]} tracked"
+    arm, names, warnings = tracking_rig(context, outcome.model, old, old is not None and not outcome.new_model,
+                                        base, mi.matrix)
     frame0 = cap.frame_start + outcome.first_frame
-    action = actions.write_action(arm, names, outcome.poses, name=f"{arm.name} tracked", frame_start=frame0,
-                                  scene=context.scene)
-    action[TRACKED_ACTION] = True
-    add_residual_curves(arm, action, outcome.result, frame0, RESIDUAL_PROPERTIES)
-    arm[REPORT_PROPERTY] = json.dumps(report_document(outcome))
+    action = bake(context, arm, names, outcome, frame0, RESIDUAL_PROPERTIES, report_document(outcome))
     return arm, action, warnings
 
 

@@ -33,20 +33,6 @@ def _joints(model, poses, bones):
     return (np.einsum("nbij,bj->nbi", Rm, model.skeleton.heads) + tm)[:, bones]
 
 
-def _write_png8(path, image):
-    """A valid 8-bit grayscale PNG (what a screenshot of a depth view would be)."""
-    import struct
-    import zlib
-    h, w = image.shape
-    raw = b"".join(b"\x00" + image[r].tobytes() for r in range(h))
-
-    def chunk(t, d):
-        return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xffffffff)
-    with open(path, "wb") as f:
-        f.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
-                + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
-
-
 def _copy(src, dst):
     shutil.copytree(src, dst)
     return dst
@@ -108,7 +94,7 @@ def test_bad_inputs_are_refused_early(recording, tmp_path):
     with pytest.raises(ArticulaInputError, match="no intrinsics.json"):
         DepthRecording.from_folder(folder)
     assert DepthRecording.from_folder(folder, preset="kinect_v1").notes[0].startswith("no intrinsics.json")
-    _write_png8(os.path.join(folder, "depth_0002.png"), np.full((240, 320), 100, np.uint8))
+    write_png16(os.path.join(folder, "depth_0002.png"), np.full((240, 320), 100, np.uint8))   # 8-bit PNG
     with pytest.raises(ArticulaInputError, match="8-bit"):
         DepthRecording.from_folder(folder, preset="kinect_v1")
     with pytest.raises(ArticulaInputError, match="not a folder"):
