@@ -36,9 +36,11 @@ def _only_floor(depth):
     return out
 
 
-def _cut_right(depth, share):
-    out = depth.copy()
-    out[:, int((1 - share) * depth.shape[1]):] = 0
+def _shifted_right(depth, share):
+    """The frame's content moved right by ``share`` of its width (the person walks out through the edge)."""
+    out = np.zeros_like(depth)
+    s = int(share * depth.shape[1])
+    out[:, s:] = depth[:, :depth.shape[1] - s]
     return out
 
 
@@ -74,9 +76,11 @@ def bad_inputs(subject, frames, long_frames, cache):
     _common.report("bad input nobody in view (frames 20-29)", _statuses(res, [19, 20, 29, 30, 31]),
                    note=f"joint error after the person returns (frames 31-{frames - 1}): "
                         f"{_joint_error(res, r, slice(31, None)):.1f} mm")
-    # the person leaves through the right edge (frames 30-39: the right 60% of the image blank)
+    # the person leaves through the right edge (frames 30-39: the image content moves right by 8% more
+    # each frame), then is back where it was
     paths = _copy(src, cache("bad_edge"))
-    _edit(paths, range(30, 40), lambda d: _cut_right(d, 0.6))
+    for k in range(30, 40):
+        _edit(paths, [k], lambda d, k=k: _shifted_right(d, 0.08 * (k - 29)))
     res, _ = track(os.path.dirname(paths[0]), model)
     _common.report("bad input person at the frame edge (frames 30-39)", _statuses(res, [30, 35, 39, 40, 41]),
                    note=f"joint error frames 0-29 {_joint_error(res, r, slice(0, 30)):.1f} mm, "

@@ -61,11 +61,15 @@ def placed(model, body_rot: np.ndarray, world: np.ndarray, centre: np.ndarray, s
     return Poses(rot[None], t[None], np.array([scale]))
 
 
-def cut_edges(obs) -> tuple:
-    """``(top, bottom)``: whether the person's silhouette touches the image's top / bottom row."""
-    rows = np.flatnonzero(obs.mask.any(axis=1))
-    H = obs.mask.shape[0]
-    return (len(rows) > 0 and rows[0] <= EDGE_PIXELS), (len(rows) > 0 and rows[-1] >= H - 1 - EDGE_PIXELS)
+def cut_edges(obs, sides: bool = False) -> tuple:
+    """``(top, bottom)`` (with ``sides``: ``(top, bottom, left, right)``): whether the person's silhouette
+    touches that edge of the image."""
+    def ends(any_along):
+        idx = np.flatnonzero(any_along)
+        n = len(any_along)
+        return (len(idx) > 0 and idx[0] <= EDGE_PIXELS), (len(idx) > 0 and idx[-1] >= n - 1 - EDGE_PIXELS)
+    out = ends(obs.mask.any(axis=1))
+    return out + ends(obs.mask.any(axis=0)) if sides else out
 
 
 def body_centre(obs, camera, up, height: float) -> np.ndarray:

@@ -17,7 +17,7 @@ from ..errors import ArticulaInputError
 from ..rig.model import Model, Poses
 from .adapt import TemplateAdaptation
 from .body import TrackingBody
-from .initialise import initialise
+from .initialise import cut_edges, initialise
 from .limb_search import place_limbs
 from .limits import JointLimits
 from .options import DepthTrackOptions
@@ -42,12 +42,14 @@ class DepthTrackResult:
     def report(self) -> dict:
         status = [f["status"] for f in self.frames]
         tracked = [f for f in self.frames if f["status"] in ("tracked", "limbs searched", "initialised")]
+        status_counts = {s: status.count(s) for s in sorted(set(status))}
         ms = [f["ms"] for f in tracked]
         return {
             "format": "articula-depth-track-report/1", "tracker": self.options.tracker,
             "template": self.template, "frames": len(self.frames),
             "tracked": len(tracked), "lost": status.count("lost"), "no_person": status.count("no person"),
             "initialised": status.count("initialised"), "limbs_searched": status.count("limbs searched"),
+            "partly_out_of_view": status.count("partly out of view"), "statuses": status_counts,
             "frames_per_second": 1000.0 / float(np.mean(ms)) if ms else 0.0,
             "median_mean_mm": float(np.median([f["mean_mm"] for f in tracked])) if tracked else None,
             "seconds": self.seconds, "notes": self.notes, "options": dataclasses.asdict(self.options),
@@ -65,6 +67,7 @@ def _entry(k, name, status, fit=None, ms=0.0):
 
 RECENT = 15       # frames whose typical explained share sets the limb-search threshold
 LIMB_DROP = 0.03  # share below the typical one at which the limbs are searched again
+LOST_DROP = 0.25  # share below the typical one at which the frame is lost (and started anew)
 
 
 class _Sequence:
@@ -79,44 +82,64 @@ class _Sequence:
         self.limits = limits if limits is not None else JointLimits(model.skeleton)
         self.poses, self.frames = [], []          # the run appends to both
         self.pose = None
+        self.lost = False
         self.fit = frame_fitter(options)
 
     def step(self, k, obs):
         name = self.rec.names[k]
         t0 = time.perf_counter()
         if obs.empty:
-            self.pose = None if self.pose is None else self.pose
             self.lost = True
             return _entry(k, name, "no person")
-        status = "tracked"
+        starting = self.pose is None or self.lost
+        if starting and any(cut_edges(obs, sides=True)[2:]):
+            return _entry(k, name, "partly out of view")     # no start from half a person: wait for all of it
         if self.adaptation is not None and self.pose is None and self.adaptation.done == 0:
             self.body = TrackingBody(self.adaptation.start_model(obs, self.rec.up()), ids=self.body.ids)
-        if self.pose is None or getattr(self, "lost", False):
-            fit = initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits).fit
-            status = "initialised"
+        if starting:
+            fit, status = self._initialise(obs), "initialised"
         else:
-            fit = self.fit(self.body, obs, self.rec.camera, self.pose, self.opts, self.limits)
-            if self.opts.lost_share <= fit.near_share < self._limb_threshold():
-                fit, status = self._limbs(obs, fit)
-            if fit.near_share < self.opts.lost_share:
-                again = initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits).fit
-                fit, status = (again, "initialised") if again.near_share > fit.near_share else (fit, status)
-        if self.adaptation is not None and fit.near_share >= self.opts.lost_share:
+            fit, status = self._track(obs)
+        if self.adaptation is not None and not self._is_lost(fit):
             fit = self._adapt(k, obs, fit)
-        self.lost = fit.near_share < self.opts.lost_share
+        self.lost = self._is_lost(fit)
         if self.lost:
             status = "lost"
         self.pose = fit.pose
         return _entry(k, name, status, fit, 1000 * (time.perf_counter() - t0))
 
+    def _initialise(self, obs):
+        return initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits).fit
+
+    def _track(self, obs):
+        """The frame tracked from the last pose; limbs searched when points are left unexplained, a new
+        start when the fit explains far less than the recent frames did."""
+        fit = self.fit(self.body, obs, self.rec.camera, self.pose, self.opts, self.limits)
+        status = "tracked"
+        if not self._is_lost(fit) and fit.near_share < self._limb_threshold():
+            fit, status = self._limbs(obs, fit)
+        if self._is_lost(fit) and not any(cut_edges(obs, sides=True)[2:]):
+            again = self._initialise(obs)
+            if again.near_share > fit.near_share:
+                fit, status = again, "initialised"
+        return fit, status
+
+    def _typical_share(self):
+        """The median explained share of the recent frames (None while there are few)."""
+        recent = [f["near_share"] for f in self.frames[-RECENT:] if "near_share" in f]
+        return float(np.median(recent)) if len(recent) >= RECENT // 2 else None
+
+    def _is_lost(self, fit) -> bool:
+        """Below ``lost_share``, or ``LOST_DROP`` below what the recent frames explained."""
+        typical = self._typical_share()
+        bar = self.opts.lost_share if typical is None else max(self.opts.lost_share, typical - LOST_DROP)
+        return fit.near_share < bar
 
     def _limb_threshold(self) -> float:
-        """``limb_share``, or 3 points below the recent frames' typical share when that is lower (a body
-        the model fits less well, e.g. the template on a clothed person, explains less every frame)."""
-        recent = [f["near_share"] for f in self.frames[-RECENT:] if "near_share" in f]
-        if len(recent) < RECENT // 2:
-            return self.opts.limb_share
-        return min(self.opts.limb_share, float(np.median(recent)) - LIMB_DROP)
+        """``limb_share``, or ``LIMB_DROP`` below the recent frames' typical share when that is lower (a
+        body the model fits less well, e.g. the template on a clothed person, explains less every frame)."""
+        typical = self._typical_share()
+        return self.opts.limb_share if typical is None else min(self.opts.limb_share, typical - LIMB_DROP)
 
     def _limbs(self, obs, fit):
         """A limb lost (observed points left unexplained): the limb search from the fitted pose, kept when
