@@ -1,21 +1,27 @@
 """The GMM/EM pose tracker of one frame (depth-camera tracking dissertation, ch. 6, §6.1-6.3; Algorithms
 2-3): the posed model points are the centroids of an isotropic Gaussian mixture with equal priors and a
 uniform outlier term (Eq. 6.1-6.2); the E-step gives CPD's posteriors (Eq. 6.4), the M-step solves the
-linearised pose update (Eq. 6.7-6.10) plus a small-update term and a pull of the joint rotations
-towards a predicted pose (Eq. 6.12-6.14), then updates sigma^2 (Eq. 6.11).  sigma^2 starts at
-``gmm_sigma^2`` every frame (Table 6.2).  Monocular scheme (Algorithm 3): step one uses the model
-points inside the view frustum, visible or not; step two only the visible ones (z-buffer).
+linearised pose update (Eq. 6.7-6.10) with the small-update term E_r and the pull E_p of the joint
+rotations towards a predicted pose (Eq. 6.12-6.14), then updates sigma^2 (Eq. 6.11).  sigma^2 starts at
+``gmm_sigma^2`` every frame (Table 6.2), never from the data.  Monocular scheme (Algorithm 3): step one
+uses the model points inside the view frustum, visible or not; step two only those facing the camera.
+Step two has no z-buffer test of the model against itself (ours): a misplaced limb would hide the
+model's torso points behind it, and the torso data the camera does see there would then pull the limb
+into the torso; points facing the camera but hidden behind other parts usually lie many sigma from any
+data and get next to no posterior mass anyway.
 
-E-step truncation (ours): each observed point's posterior is evaluated on its ``gmm_neighbours``
-nearest model points only; at sigma ~ 2 cm the other terms of the normaliser are negligible.
+E-step truncation (ours): each observed point's posterior is evaluated on its ``gmm_neighbours`` nearest
+model points, which also drops the farther components from its normaliser; on a ~1000-point body at
+sigma = 2 cm that moves single posteriors by a few hundredths (k = 8), less as sigma shrinks.
 
 Units: the M-step rows are the CPD reduction, one point row per model point m towards ``x~_m / P1_m``
 with weight ``P1_m / sigma^2`` (:meth:`.normal_equations.System.add_points`), i.e. twice the
-dissertation's ``Q = sum p_mn |x_n - v_m|^2 / (2 sigma^2)``.  The regularisers therefore enter with
-twice the dissertation's weights: damping ``2 lambda_r`` on every parameter (metres, radians) and
-``2 lambda_p`` per rad^2 on each joint's bone-local rotation away from the prediction (Table 6.2:
-lambda_r = 1000, lambda_p = 500).  Joint limits (:mod:`.limits`, weighted for ICP's unit point rows)
-are scaled by ``1 / sigma^2`` so they keep their strength relative to the data.
+dissertation's ``Q = sum p_mn |x_n - v_m|^2 / (2 sigma^2)``, so the regularisers enter with twice its
+weights: damping ``2 lambda_r`` on every parameter (metres, radians) and ``2 lambda_p`` per rad^2 on each
+non-root joint's bone-local rotation away from the prediction.  The options hold the lambdas in the
+dissertation's units (Table 6.2: lambda_r = 1000, lambda_p = 500).  Joint limits (:mod:`.limits`,
+weighted against ICP's unit point rows) are scaled by ``1 / sigma^2`` to keep their strength relative
+to the data.
 """
 from __future__ import annotations
 
@@ -25,12 +31,12 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry.rotations import quat_conj, quat_mul, quat_normalize, quat_to_rotvec, rotvec_to_quat
+from ..geometry.rotations import quat_conj, quat_mul, quat_to_rotvec
 from ..rig.model import Poses
 from ..track.pose_prior import rotvec_increment_jacobian
 from .icp import MAX_TURN, FrameFit, coverage
 from .normal_equations import System
-from .visibility import in_view, visible
+from .visibility import facing, in_view
 
 SIGMA_FLOOR = 0.002      # metres: sigma never drops below this (exact data would make it vanish)
 MIN_MASS = 1e-6          # model points with less posterior mass than this get no row
@@ -73,23 +79,6 @@ def sigma2_update(x: np.ndarray, v: np.ndarray, idx: np.ndarray, p: np.ndarray) 
     return float((p * d2).sum() / max(3.0 * p.sum(), 1e-12))
 
 
-def extrapolate(history) -> Poses:
-    """Linear third-order prediction of the next frame (Eq. 6.13, constant acceleration,
-    ``theta = 3 theta_1 - 3 theta_2 + theta_3``) from the last poses ``history`` (oldest first, each one
-    frame): rotations ``q_1 exp(2 log(q_2^-1 q_1) - log(q_3^-1 q_2))``; with two poses constant velocity,
-    with one the pose itself."""
-    h = list(history)[-3:]
-    last = h[-1]
-    if len(h) == 1:
-        return Poses(last.rotations.copy(), last.translations.copy(), last.scales.copy())
-    step = [quat_to_rotvec(quat_mul(quat_conj(a.rotations), b.rotations)) for a, b in zip(h[:-1], h[1:])]
-    turn = step[-1] if len(h) == 2 else 2 * step[-1] - step[-2]
-    t = [p.translations for p in h]
-    move = t[-1] - t[-2] if len(h) == 2 else 2 * (t[-1] - t[-2]) - (t[-2] - t[-3])
-    rot = quat_normalize(quat_mul(last.rotations, rotvec_to_quat(turn)))
-    return Poses(rot, last.translations + move, last.scales.copy())
-
-
 def add_prediction(system: System, body, posed, pose: Poses, predicted: Poses, weight: float) -> None:
     """E_p (Eq. 6.13) as rows ``weight |log(q_b q_pred_b^-1)|^2`` on every non-root joint's local rotation;
     a world increment omega_b changes the local rotation by the left increment ``F_bᵀ W_pᵀ omega_b``
@@ -107,19 +96,20 @@ def add_prediction(system: System, body, posed, pose: Poses, predicted: Poses, w
     system.energy += weight * float((d * d).sum())
 
 
-def _active(posed, camera, opts, step: int) -> np.ndarray:
-    """Model points of the step: in the view frustum (step one) or visible (step two); all of them
-    without a camera."""
+def _active(posed, camera, step: int) -> np.ndarray:
+    """Model points of the step: in the view frustum (step one), also facing the camera (step two); all
+    of them without a camera."""
     if camera is None:
         return np.arange(len(posed.points))
-    if step == 1:
-        uv, z = camera.project(posed.points)
-        return np.flatnonzero(in_view(uv, z, camera.intr))
-    return np.flatnonzero(visible(posed.points, posed.normals, camera, opts.visibility_tolerance))
+    uv, z = camera.project(posed.points)
+    ok = in_view(uv, z, camera.intr)
+    return np.flatnonzero(ok if step == 1 else ok & facing(posed.points, posed.normals, camera.centre))
 
 
 @dataclasses.dataclass
-class _State:
+class EMState:
+    """``pose`` (one frame), ``sigma2`` (m^2), EM ``iterations`` so far, posterior ``mass`` P of the last
+    E-step (Eq. 6.6)."""
     pose: Poses
     sigma2: float
     iterations: int = 0
@@ -145,12 +135,13 @@ def _m_step(body, posed, pose, rows, P1, PX, sigma2, opts, prior, predicted):
     return delta * (MAX_TURN / turn) if turn > MAX_TURN else delta
 
 
-def _em(body, x, camera, state: _State, opts, prior, predicted, step: int, max_iterations: int) -> _State:
-    """EM iterations of one step of Algorithm 3 until no active model point moves more than
-    ``gmm_converged_m`` (Algorithm 2)."""
+def em(body, x, camera, state: EMState, opts, prior, predicted, step: int, max_iterations: int) -> EMState:
+    """EM iterations (Algorithm 2) of step ``step`` (1 or 2) of Algorithm 3 on the observed points ``x``
+    (N, 3), from and into ``state``, until no active model point moves more than ``gmm_converged_m``;
+    the active points are chosen again every iteration."""
     posed = body.pose(state.pose)
     for _ in range(max_iterations):
-        rows = _active(posed, camera, opts, step)
+        rows = _active(posed, camera, step)
         if len(rows) < 10:
             break
         idx, p = posterior(x, posed.points[rows], state.sigma2, opts.gmm_outliers, opts.gmm_neighbours)
@@ -176,19 +167,19 @@ def sample(obs, count: int) -> np.ndarray:
 
 def fit_frame(body, obs, camera, pose, opts, prior=None, iterations=None, predicted=None) -> FrameFit:
     """Algorithm 3 from ``pose`` (one frame) on the observation ``obs``: step one on the model points in
-    view, step two on the visible ones, each at most ``iterations`` (default ``gmm_iterations``) EM
-    iterations.  ``predicted`` (one frame, e.g. :func:`extrapolate` of the last poses) is the target of
-    E_p; without it the start pose is (a zero-velocity prediction).  ``prior``: joint limits.  Without
-    a ``camera`` (complete data, e.g. a scan) one step with every model point.
+    view, step two on those facing the camera, each at most ``iterations`` (default ``gmm_iterations``) EM
+    iterations.  ``predicted`` (one frame, e.g. :func:`.motion.predict` of the last two poses, usually
+    also the start ``pose``) is the target of E_p; without it the start pose is.  ``prior``: joint limits.
+    Without a ``camera`` (complete data, e.g. a scan) one step with every model point.
     ``FrameFit.pairs`` is the posterior mass P (observed points the model explains), ``edges`` 0."""
     t0 = time.perf_counter()
     cap = iterations or opts.gmm_iterations
     predicted = pose if predicted is None else predicted
-    state = _State(pose, opts.gmm_sigma ** 2)
+    state = EMState(pose, opts.gmm_sigma ** 2)
     if not obs.empty:
         x = sample(obs, opts.gmm_points)
         for step in ((1, 2) if camera is not None else (1,)):
-            state = _em(body, x, camera, state, opts, prior, predicted, step, cap)
+            state = em(body, x, camera, state, opts, prior, predicted, step, cap)
     share, mean = coverage(body, body.pose(state.pose), obs, opts.near_m)
     return FrameFit(state.pose, state.iterations, int(round(state.mass)), 0, share, mean,
                     time.perf_counter() - t0)

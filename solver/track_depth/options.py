@@ -33,10 +33,10 @@ class DepthTrackOptions:
     gmm_outliers: float = 0.01        # u, uniform outlier weight (ch. 6)
     gmm_neighbours: int = 8           # model components evaluated per observed point (truncated E-step, ours)
     gmm_points: int = 1000            # observed points per frame for the GMM (a stride of the grid sample; ch. 6 ~1000)
-    gmm_iterations: int = 15          # EM iterations per step of Algorithm 3 (ch. 6: < 15)
+    gmm_iterations: int = 5           # EM iterations per step of Algorithm 3 (ch. 6: < 15 per frame)
     gmm_converged_m: float = 0.001    # EM stops when no model point moves more than this (ch. 6: 1 mm)
     gmm_lambda_r: float = 1000.0      # lambda_r, small-update term (Table 6.2)
-    gmm_lambda_p: float = 500.0       # lambda_p, pull of the joint rotations to the prediction (Table 6.2)
+    gmm_lambda_p: float = 100.0       # lambda_p, pull of the joint rotations to the prediction (Table 6.2: 500; ours)
     smooth: bool = True               # centred 3-frame smoothing of the tracked poses at the end (ours)
     limb_share: float = 0.96          # below this share the limbs are searched again (a limb was lost, ours)
     lost_share: float = 0.35          # a frame is lost when fewer observed points than this lie near the model
