@@ -12,7 +12,7 @@ TRACKERS = ("icp", "gmm")
 
 @dataclasses.dataclass
 class DepthTrackOptions:
-    tracker: str = "icp"              # "icp" (ch. 5) or "gmm" (ch. 6)
+    tracker: str = "gmm"              # "gmm" (ch. 6; the better on ./run bench track_depth) or "icp" (ch. 5)
     model_points: int = 1000          # model vertices used for correspondences (fixed subset)
     data_points: int = 2500           # observed points per frame, sampled on the image grid
     max_iterations: int = 12          # per frame

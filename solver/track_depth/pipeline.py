@@ -19,6 +19,7 @@ from .adapt import TemplateAdaptation
 from .body import TrackingBody
 from .initialise import cut_edges, initialise
 from .limb_search import place_limbs
+from .motion import predict
 from .limits import JointLimits
 from .options import DepthTrackOptions
 from .smoothing import smooth
@@ -67,6 +68,7 @@ def _entry(k, name, status, fit=None, ms=0.0):
 
 RECENT = 15       # frames whose typical explained share sets the limb-search threshold
 LIMB_DROP = 0.03  # share below the typical one at which the limbs are searched again
+PREDICTION_GAIN = 0.5   # share of the last frame-to-frame change carried into the GMM tracker's prediction
 LOST_DROP = 0.25  # share below the typical one at which the frame is lost (and started anew)
 
 
@@ -114,7 +116,11 @@ class _Sequence:
     def _track(self, obs):
         """The frame tracked from the last pose; limbs searched when points are left unexplained, a new
         start when the fit explains far less than the recent frames did."""
-        fit = self.fit(self.body, obs, self.rec.camera, self.pose, self.opts, self.limits)
+        pred = self._prediction()
+        if pred is None:
+            fit = self.fit(self.body, obs, self.rec.camera, self.pose, self.opts, self.limits)
+        else:
+            fit = self.fit(self.body, obs, self.rec.camera, pred, self.opts, self.limits, predicted=pred)
         status = "tracked"
         if not self._is_lost(fit) and fit.near_share < self._limb_threshold():
             fit, status = self._limbs(obs, fit)
@@ -123,6 +129,15 @@ class _Sequence:
             if again.near_share > fit.near_share:
                 fit, status = again, "initialised"
         return fit, status
+
+    def _prediction(self):
+        """The GMM tracker's predicted pose (its Eq. 6.13 term and start) from the last two frames when
+        both were tracked; the ICP tracker starts from the last pose (prediction measured worse there)."""
+        if self.opts.tracker != "gmm" or len(self.poses) < 2 or self.poses[-2] is None or self.poses[-1] is None:
+            return None
+        if not all(f["status"] in ("tracked", "limbs searched", "initialised") for f in self.frames[-2:]):
+            return None
+        return predict(self.poses[-2], self.poses[-1], PREDICTION_GAIN)
 
     def _typical_share(self):
         """The median explained share of the recent frames (None while there are few)."""
