@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from articula.sample_scenes.depth_bench import bench_recording
+from articula.solver.track_depth.options import DepthTrackOptions
 from ..rig_helpers import key_frames
 
 pytestmark = pytest.mark.usefixtures("cache_home")   # a fresh ARTICULA_HOME per test
@@ -102,7 +103,7 @@ def test_rig_tracks_the_recording_and_plays_over_it(pkg, bench):
                          - true_joints_in_blender(bench, ob), axis=-1)
     assert np.median(err) < 0.04 and np.mean(err < 0.06) > 0.75, np.round(100 * err, 1)
     report = json.loads(rig["articula_track_report"])
-    assert report["format"] == "articula-depth-track-report/1" and report["tracker"] == "icp"
+    assert report["format"] == "articula-depth-track-report/1" and report["tracker"] == DepthTrackOptions().tracker
     assert report["template"] is False and report["model"]["source"] == "rig 'Subject'"
     assert report["input"]["frames"] == N and len(report["per_frame"]) == N
     assert bpy.context.scene.camera == ob.parent                  # seen through the recording's camera

@@ -20,6 +20,7 @@ from articula.sample_scenes.depth_bench import bench_recording
 from articula.solver.formats.bundle import load_bundle
 from articula.solver.formats.png16 import write_png16
 from articula.solver.rig.kinematics import forward_kinematics
+from articula.solver.track_depth.options import DepthTrackOptions
 from articula.solver.track_depth.pipeline import track_recording
 from articula.solver.track_depth.source import DepthRecording
 from ...conftest import SHARED_DATA
@@ -69,7 +70,7 @@ def test_track_depth_writes_the_solvers_poses_in_the_world_and_a_blend(pkg, benc
     assert np.median(err) < 0.04, np.round(100 * err, 1)                  # intrinsics.json's world frame
     prov = bundle.provenance
     assert prov["first_frame"] == 1 and prov["frame_names"] == [f"depth_{k:04d}.png" for k in (1, 2, 3)]
-    assert prov["coordinates"].startswith("world") and prov["tracker"] == "depth icp"
+    assert prov["coordinates"].startswith("world") and prov["tracker"] == f"depth {DepthTrackOptions().tracker}"
     doc = json.load(open(rep))
     assert doc["input"]["first_frame"] == 1 and len(doc["per_frame"]) == 3 and doc["template"] is False
     # the .blend: the recording imported in the floor's world, the rig standing over its points
