@@ -15,7 +15,7 @@ from ..geometry.rotations import matrix_to_quat, quat_mul, rotation_between
 from ..rig.model import Poses
 from ..track.initialise import body_poses
 from .limb_search import place_limbs
-from .trackers import frame_fitter
+from . import icp
 
 YAW_RANGE = 45.0
 YAW_STEP = 15.0
@@ -125,7 +125,7 @@ def initialise(body, obs, camera, up, options, limits=None, scale: float = 1.0) 
     centre = body_centre(obs, camera, up, height)
     towards = camera.centre - centre
     best, tried = None, 0
-    fitter = frame_fitter(options)
+    fitter = icp.fit_frame        # closest points reach farther than the GMM's 2 cm posteriors
     for pose in hypotheses(body.model, up, towards, centre, scale):
         fit = fitter(body, obs, camera, pose, options, limits, iterations=SCREEN_ITERATIONS)
         s = score(body, fit, obs, camera)
