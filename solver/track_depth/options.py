@@ -28,7 +28,6 @@ class DepthTrackOptions:
     floor_weight: float = 1.0         # model points below the floor plane (ours)
     visibility_tolerance: float = 0.03  # model points up to this behind the rendered model depth count as visible
     damping: float = 0.05             # lambda_r of the small-update regulariser (metres^2 per radian^2)
-    motion_weight: float = 0.0        # pull of joints without data towards the predicted pose (ours)
     gmm_sigma: float = 0.02           # initial sigma of the GMM tracker (Table 6.2: 0.02 m), reset every frame
     gmm_outliers: float = 0.01        # u, uniform outlier weight (ch. 6)
     gmm_neighbours: int = 8           # model components evaluated per observed point (truncated E-step, ours)
@@ -55,7 +54,7 @@ class DepthTrackOptions:
                   ("edge_normal_angle", self.edge_normal_angle, 1, 180), ("edge_candidates", self.edge_candidates, 1, 64),
                   ("edge_weight", self.edge_weight, 0, 100),
                   ("floor_weight", self.floor_weight, 0, 1e4), ("visibility_tolerance", self.visibility_tolerance, 0, 1),
-                  ("damping", self.damping, 0, 1e6), ("motion_weight", self.motion_weight, 0, 1e6),
+                  ("damping", self.damping, 0, 1e6),
                   ("gmm_sigma", self.gmm_sigma, 1e-3, 1.0), ("gmm_outliers", self.gmm_outliers, 0, 0.99),
                   ("gmm_neighbours", self.gmm_neighbours, 1, 64), ("gmm_points", self.gmm_points, 50, 100000),
                   ("gmm_iterations", self.gmm_iterations, 1, 200), ("gmm_converged_m", self.gmm_converged_m, 1e-6, 0.1),
