@@ -54,11 +54,13 @@ def summary_text(outcome) -> str:
         parts.append(f"mean distance to the model {np.nanmedian(dist):.1f} mm (median over frames; worst "
                      f"frame {np.nanmax(dist):.1f} mm)")
     status = [f["status"] for f in result.frames]
-    for kind, text in (("initialised", "started or re-initialised"), ("lost", "lost (last pose kept)"),
-                       ("no person", "with nobody in view (last pose kept)")):
+    for kind, text in (("initialised", "started anew"), ("limbs searched", "with the limbs searched again"),
+                       ("lost", "lost (last pose kept)"), ("no person", "with nobody in view (last pose kept)"),
+                       ("partly out of view", "partly out of view before a start (last pose kept)")):
         which = [first + k for k, s in enumerate(status) if s == kind]
         if which:
-            parts.append(f"{len(which)} {text}: {_frames(which)}")
+            parts.append(f"{len(which)} frame{'s' if len(which) != 1 else ''} {text} (input frame"
+                         f"{'s' if len(which) != 1 else ''} {_frames(which)})")
     model = outcome.model_input.label
     if result.template and (result.options.adapt_size or result.options.adapt_surface):
         model += " (adapted to the person)"
