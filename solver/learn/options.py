@@ -57,7 +57,7 @@ class LearnOptions:
     # stop when a round lowers E by at most this fraction of E
     tol: float = _setting(1e-4, min=0.0)
     # the most parts the automatic choice of k considers
-    k_max: int = _setting(20, min=2)
+    k_max: int = _setting(32, min=2)
     # rounds (warm start included) whose step (a) moves the poses only, the joints held at their
     # rotation-centre estimates
     joint_warmup_rounds: int = _setting(1, min=0)

@@ -48,7 +48,8 @@ from .rest_shape import ShapePreconditioner, solve_rest_vertices
 from .objective import RigObjective
 from ..geometry.rotations import quat_to_rotvec
 from .mirror_map import mirror_map
-from .segmentation import choose_num_parts, segment
+from .part_count import articulated_parts
+from .segmentation import centred, segment
 from .symmetry import continuing_pairs
 from .skeleton import build_skeleton
 from .options import MIN_SCANS, LearnOptions
@@ -202,9 +203,11 @@ def _start_from_segmentation(rest, scans, faces, options, progress, info):
         k = int(options.parts)
         info["k_curve_mm"] = None
     else:
-        k, curve = choose_num_parts(rest, scans, faces, k_max=options.k_max, seed=seed,
-                                    progress=_sub_progress(progress, 0.02, 0.3))
-        info["k_curve_mm"] = (curve * 1e3).tolist()
+        cl, count = articulated_parts(*centred(rest, scans), faces, k_max=options.k_max, seed=seed,
+                                      progress=_sub_progress(progress, 0.02, 0.3))
+        k, start = cl.k, (cl.R, cl.t)
+        info["k_curve_mm"] = count.pop("curve_mm")
+        info["part_count"] = count
     say(0.3, "finding the mesh's mirror map")
     mirror = mirror_map(rest, scans, faces) if symmetry and k > 1 else None
     labels, rms = segment(rest, scans, faces, k, seed=seed, mirror=False if mirror is None else mirror,

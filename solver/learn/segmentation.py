@@ -206,6 +206,10 @@ class Sample:
     def subset(self, mask):
         return Sample(self.phi[mask], self.w[mask], self.traj[mask], self.M)
 
+    def rest_points(self):
+        """The points' centred rest positions ``(P,3)`` (held in their moments)."""
+        return self.phi[:, 12 * self.M:12 * self.M + 3]
+
     def __len__(self):
         return len(self.w)
 
@@ -333,22 +337,38 @@ def kmeanspp_labels(features, k, rng, weights):
     return np.argmin(D, axis=1)
 
 
-def split_worst(cl, rng, iterations):
-    """k → k+1 parts in place: the part of ``cl`` (:class:`Clustering`) with the largest weighted error
-    is split by a rigid 2-clustering of its own points (k-means++ seeded), then all parts are refined."""
-    own = cl.err[np.arange(len(cl.labels)), cl.labels] * cl.points.w
-    sizes = np.bincount(cl.labels, minlength=cl.k)
-    worst = int(np.argmax(np.where(sizes >= 2, np.bincount(cl.labels, weights=own, minlength=cl.k), -1.0)))
-    mask = cl.labels == worst
+def two_motions(cl, mask, rng, iterations):
+    """The best of SPLIT_TRIES rigid 2-clusterings (k-means++ seeded) of the points ``mask`` of ``cl``
+    (:class:`Clustering`), as a :class:`Clustering` of those points alone."""
     sub = cl.points.subset(mask)
     tries = [Clustering(sub, kmeanspp_labels(sub.traj, 2, rng, sub.w), 2).refine(iterations)
              for _ in range(SPLIT_TRIES)]
-    two = min(tries, key=Clustering.total)
+    return min(tries, key=Clustering.total)
+
+
+def split_part(cl, mask, two, iterations):
+    """k → k+1 parts in place: the points ``mask`` that ``two`` (their 2-clustering) labels 1 become the
+    new part; then all parts are refined."""
     new = cl.labels.copy()
     new[np.flatnonzero(mask)[two.labels == 1]] = cl.k
     cl.add_part()
     cl.relabel(new)
     return cl.refine(iterations)
+
+
+def part_errors(cl):
+    """Weighted squared error of every part of ``cl`` ``(k,)`` (m², summed over its points and scans)."""
+    own = cl.err[np.arange(len(cl.labels)), cl.labels] * cl.points.w
+    return np.bincount(cl.labels, weights=own, minlength=cl.k)
+
+
+def split_worst(cl, rng, iterations):
+    """k → k+1 parts in place: the part of ``cl`` (:class:`Clustering`) with the largest weighted error
+    is split by a rigid 2-clustering of its own points, then all parts are refined."""
+    sizes = np.bincount(cl.labels, minlength=cl.k)
+    worst = int(np.argmax(np.where(sizes >= 2, part_errors(cl), -1.0)))
+    mask = cl.labels == worst
+    return split_part(cl, mask, two_motions(cl, mask, rng, iterations), iterations)
 
 
 def hierarchy(rest, scans, k_max, seed=0, iterations=50, samples=SAMPLES, progress=None,
@@ -476,7 +496,8 @@ def finish(rest, scans, faces, R, t, mirror=None, progress=None):
     return labels, float(np.sqrt(final.total() / (len(rest) * len(scans))))
 
 
-def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES, mirror=True, progress=None):
+def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES, mirror=True, progress=None,
+            start=None):
     """Segment into exactly ``k`` connected rigid parts (each with at least MIN_PART_VERTICES vertices).
 
     rest (V,3), scans (M,V,3) metres, faces (F,3); seed: k-means++ draws of the splits; iterations: at
@@ -486,7 +507,9 @@ def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES, mirro
     mirror: True finds the mesh's vertex mirror map (:func:`solver.learn.mirror_map.mirror_map`) and
     cuts mirror-image parts alike (:func:`finish`); False does not; or a map ``(V,)`` (-1: no mirror
     vertex) to use.  ``progress(fraction, stage, None)``: after each split (fraction to 0.7 at k), then
-    at each full-resolution step (may raise Cancelled)."""
+    at each full-resolution step (may raise Cancelled).  start: the sample's part transforms ``(R (M,k,3,3),
+    t (M,k,3))`` of the centred data (:func:`solver.learn.part_count.articulated_parts`) to finish from
+    instead of the hierarchy's k-part solution."""
     if mirror is True:
         mirror = mirror_map(rest, scans, faces) if k > 1 else None
     elif mirror is False:
@@ -497,16 +520,17 @@ def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES, mirro
     V = len(rest)
     if k < 1 or k > V:
         raise ArticulaInputError(f"parts: {k} parts requested for a mesh of {V} vertices")
-    cl = None
-    split = None if progress is None else (lambda f, text, _: progress(0.7 * f, text, None))
-    for kk, cl in hierarchy(rest, scans, k, seed, iterations, samples, split, f"segmenting into {k} parts"):
-        pass
-    if kk < k:
-        raise ArticulaInputError(f"parts: {k} parts requested for a mesh of {V} vertices; use fewer parts")
+    if start is None:
+        split = None if progress is None else (lambda f, text, _: progress(0.7 * f, text, None))
+        for kk, cl in hierarchy(rest, scans, k, seed, iterations, samples, split, f"segmenting into {k} parts"):
+            pass
+        if kk < k:
+            raise ArticulaInputError(f"parts: {k} parts requested for a mesh of {V} vertices; use fewer parts")
+        start = (cl.R, cl.t)
     steps = iter(np.linspace(0.7, 1.0, 2 * CONNECT_ROUNDS + 2))
     full = None if progress is None else (lambda text: progress(float(next(steps, 1.0)), f"segmentation: {text}",
                                                                 None))
-    return finish(rest, scans, faces, cl.R, cl.t, mirror, full)
+    return finish(rest, scans, faces, *start, mirror, full)
 
 
 def parts_from_curve(errors, floor=0.0):
