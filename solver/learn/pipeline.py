@@ -199,6 +199,7 @@ def _start_from_segmentation(rest, scans, faces, options, progress, info):
     """Segmentation into k parts (chosen from the motion unless ``options.parts``), the skeleton built on
     it and the parts' rigid fits in bone order: ``(skeleton, labels (V,), R, t, mirror pairs)``."""
     symmetry, seed, say = options.symmetry, options.seed, _say(progress)
+    start = None
     if options.parts:
         k = int(options.parts)
         info["k_curve_mm"] = None
@@ -211,7 +212,7 @@ def _start_from_segmentation(rest, scans, faces, options, progress, info):
     say(0.3, "finding the mesh's mirror map")
     mirror = mirror_map(rest, scans, faces) if symmetry and k > 1 else None
     labels, rms = segment(rest, scans, faces, k, seed=seed, mirror=False if mirror is None else mirror,
-                          progress=_sub_progress(progress, 0.35, 0.8))
+                          progress=_sub_progress(progress, 0.35, 0.8), start=start)
     info.update(parts=k, segmentation_rms_mm=rms * 1e3)
     say(0.8, f"building the skeleton of {k} parts")
     R, t = fit_parts(rest, scans, labels, k)
