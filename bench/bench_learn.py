@@ -353,7 +353,11 @@ def main(argv=None):
         line(f"machine: {machine()}")
         rev = subprocess.run(["git", "-C", REPO, "log", "-1", "--format=%h %cd", "--date=format:%H:%M"],
                              capture_output=True, text=True).stdout.strip()
-        line(f"code: commit {rev or '?'} (uncommitted changes, if any, included)")
+        dirty = subprocess.run(["git", "-C", REPO, "status", "--porcelain", "--", "solver"], capture_output=True,
+                               text=True).stdout.split("\n")
+        dirty = [ln[3:] for ln in dirty if ln.strip()]
+        line(f"code: commit {rev or '?'}" + (f"; uncommitted changes included in {len(dirty)} solver files: "
+                                             f"{', '.join(dirty)}" if dirty else "; no uncommitted solver changes"))
         have, why = learner_status()
         line(f"learner: {'solver.learn.pipeline.learn_rig' if have else 'MISSING (' + why + ')'}")
         db_py = None
