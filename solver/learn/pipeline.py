@@ -213,6 +213,9 @@ def _start_from_segmentation(rest, scans, faces, options, progress, info):
     mirror = mirror_map(rest, scans, faces) if symmetry and k > 1 else None
     labels, rms = segment(rest, scans, faces, k, seed=seed, mirror=False if mirror is None else mirror,
                           progress=_sub_progress(progress, 0.35, 0.8), start=start)
+    k = int(labels.max()) + 1               # a chosen count loses the parts too small at full resolution
+    if start is not None and k < len(start[1][0]):
+        info["part_count"].update(parts=k, dropped_at_full_resolution=len(start[1][0]) - k)
     info.update(parts=k, segmentation_rms_mm=rms * 1e3)
     say(0.8, f"building the skeleton of {k} parts")
     R, t = fit_parts(rest, scans, labels, k)

@@ -469,20 +469,28 @@ def connected_refinement(mesh, cl, A, mirror=None, compatible=None, progress=Non
     return labels
 
 
-def finish(rest, scans, faces, R, t, mirror=None, progress=None):
+def finish(rest, scans, faces, R, t, mirror=None, progress=None, drop_small=False):
     """Steps 2-5 at full resolution from the sample's part transforms ``R (M,k,3,3)``, ``t (M,k,3)``
     (centred ``rest``, ``scans``).  With a vertex ``mirror (V,)`` map, the parts that are mirror images
     of each other are then re-cut alike (step 6; :func:`solver.learn.symmetry.mirror_compatible` says
     which parts may hold a vertex and its image).  Returns ``(labels (V,), rms metres)``.
+    drop_small: parts left with fewer than MIN_PART_VERTICES vertices are dropped (their vertices go to
+    the parts that fit them best; the count was chosen, not asked for) instead of refused.
     ``progress(text)`` names each full-resolution step as it starts."""
     say = progress or (lambda text: None)
-    say("assigning every vertex to its best part")
-    mesh, k = Mesh(rest, scans), t.shape[1]
-    err = rigid_fit_errors(rest, scans, R, t)
-    labels = np.argmin(err, axis=1)
-    labels = _reseed_empty(labels, err[np.arange(len(labels)), labels], k)
-    cl, A = Clustering(mesh, labels, k), adjacency(faces, len(rest))
-    labels = connected_refinement(mesh, cl, A, progress=lambda r: say(f"connected parts, {r}"))
+    mesh, A = Mesh(rest, scans), adjacency(faces, len(rest))
+    while True:
+        say("assigning every vertex to its best part")
+        k = t.shape[1]
+        err = rigid_fit_errors(rest, scans, R, t)
+        labels = np.argmin(err, axis=1)
+        labels = _reseed_empty(labels, err[np.arange(len(labels)), labels], k)
+        cl = Clustering(mesh, labels, k)
+        labels = connected_refinement(mesh, cl, A, progress=lambda r: say(f"connected parts, {r}"))
+        small = np.bincount(labels, minlength=k) < MIN_PART_VERTICES
+        if not (drop_small and small.any() and k > 1):
+            break
+        R, t = cl.R[:, ~small], cl.t[:, ~small]
     compatible = mirror_compatible(labels, mirror, k) if mirror is not None else np.ones((k, k), dtype=bool)
     if not compatible.all():
         labels = connected_refinement(mesh, cl, A, mirror, compatible,
@@ -509,7 +517,8 @@ def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES, mirro
     vertex) to use.  ``progress(fraction, stage, None)``: after each split (fraction to 0.7 at k), then
     at each full-resolution step (may raise Cancelled).  start: the sample's part transforms ``(R (M,k,3,3),
     t (M,k,3))`` of the centred data (:func:`solver.learn.part_count.articulated_parts`) to finish from
-    instead of the hierarchy's k-part solution."""
+    instead of the hierarchy's k-part solution; parts too small at full resolution are then dropped
+    (fewer than k parts may come back: the count was chosen, not asked for)."""
     if mirror is True:
         mirror = mirror_map(rest, scans, faces) if k > 1 else None
     elif mirror is False:
@@ -520,6 +529,7 @@ def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES, mirro
     V = len(rest)
     if k < 1 or k > V:
         raise ArticulaInputError(f"parts: {k} parts requested for a mesh of {V} vertices")
+    given = start is not None
     if start is None:
         split = None if progress is None else (lambda f, text, _: progress(0.7 * f, text, None))
         for kk, cl in hierarchy(rest, scans, k, seed, iterations, samples, split, f"segmenting into {k} parts"):
@@ -530,7 +540,7 @@ def segment(rest, scans, faces, k, seed=0, iterations=50, samples=SAMPLES, mirro
     steps = iter(np.linspace(0.7, 1.0, 2 * CONNECT_ROUNDS + 2))
     full = None if progress is None else (lambda text: progress(float(next(steps, 1.0)), f"segmentation: {text}",
                                                                 None))
-    return finish(rest, scans, faces, *start, mirror, full)
+    return finish(rest, scans, faces, *start, mirror, full, drop_small=given)
 
 
 def parts_from_curve(errors, floor=0.0):

@@ -39,7 +39,8 @@ from ..geometry.mesh_graph import edges_of
 from ..geometry.neighbours import nearest
 from ..geometry.procrustes import fit_rigid
 from ..rig.model import Skeleton, frames_from_bones
-from .symmetry import MAX_SYMMETRY_SCANS, consistent_pairs, part_pair_votes, unequal_pairs
+from .chain_pairs import chain_votes
+from .symmetry import MAX_SYMMETRY_SCANS, consistent_pairs, map_covers, part_pair_votes, unequal_pairs
 
 
 def part_adjacency(labels, faces, k):
@@ -191,6 +192,11 @@ def build_skeleton(rest, labels, faces, k, part_R=None, part_t=None, symmetry=Tr
     pairs = []
     if symmetry and k > 1:
         votes = part_pair_votes(rest, labels, k, mirror, symmetry_scans, max_symmetry_scans)
+        if not map_covers(mirror):                     # no topological map: add the structural pairs
+            shapes = 1 + (0 if symmetry_scans is None else min(len(symmetry_scans), max_symmetry_scans))
+            for key, n in chain_votes(rest, labels, order, parent_part, heads[bone_of_part], sizes,
+                                      weight=shapes).items():
+                votes[key] = votes.get(key, 0) + n
         pairs = _equal_pairs(votes, rest, labels, tree, heads)
     tails = _tails(rest, labels, order, parents, heads, {x for pr in pairs for x in pr})
     names = _names(k, pairs)

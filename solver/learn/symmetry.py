@@ -252,15 +252,19 @@ def map_pair_votes(rest, labels, k, mirror, min_match=SKELETON_MIRROR_MATCH):
     return votes
 
 
+def map_covers(mirror):
+    """True when the vertex ``mirror (V,)`` map (or None) maps at least MAP_COVERAGE of the vertices."""
+    return mirror is not None and np.mean(np.asarray(mirror) >= 0) >= MAP_COVERAGE
+
+
 def part_pair_votes(rest, labels, k, mirror=None, scans=None, max_scans=MAX_SYMMETRY_SCANS):
     """Mirror-pair votes ``{(left, right): votes}`` for the parts ``labels (V,)`` of ``rest (V,3)``: from
     the vertex mirror map ``mirror (V,)`` when it maps at least MAP_COVERAGE of the vertices (a
     topological map, :func:`map_pair_votes`), else from the symmetry planes of the rest and up to
     ``max_scans`` evenly spaced ``scans (M,V,3)`` (:func:`pair_votes`; a posed rest scan is rarely
     symmetric, the pairing of parts holds in every scan)."""
-    mirror = None if mirror is None else np.asarray(mirror, dtype=np.int64)
-    if mirror is not None and np.mean(mirror >= 0) >= MAP_COVERAGE:
-        return map_pair_votes(rest, labels, k, mirror)
+    if map_covers(mirror):
+        return map_pair_votes(rest, labels, k, np.asarray(mirror, dtype=np.int64))
     shapes = [rest]
     if scans is not None:
         step = max(1, int(np.ceil(len(scans) / max_scans)))
