@@ -228,9 +228,10 @@ def run_case(name, status, db_py, tmp):
          f"({meas['wall_s'] - rep.get('timings_s', {}).get('report', 0.0):.1f} s learning + "
          f"{rep.get('timings_s', {}).get('report', 0.0):.1f} s error report), {meas['cpu_s']:.1f} s CPU, "
          f"RMSE {row['rmse'] * u:.4g} {case['unit_name']}")
-    line(f"   ours joints: worst {out[worst] * u:.4g} {case['unit_name']} outside the rest mesh "
-         f"({row['outside']:.4f} of the diagonal {diag * u:.4g}; {model.skeleton.names[worst + 1]}), "
-         f"{int(np.sum(out > 0))} of {k - 1} outside; parts without vertices: {len(row['empty'])}"
+    where = (f"{int(np.sum(out > 0))} of {k - 1} outside the rest mesh, the worst ({model.skeleton.names[worst + 1]}) "
+             f"{out[worst] * u:.4g} {case['unit_name']} = {row['outside']:.4f} of the diagonal {diag * u:.4g}"
+             if out[worst] > 0 else f"all {k - 1} inside the rest mesh")
+    line(f"   ours joints (non-root bone heads): {where}; parts without vertices: {len(row['empty'])}"
          f"{' (' + ', '.join(row['empty']) + ')' if row['empty'] else ''}")
     line(f"   ours mirror pairs ({len(pairs)}): {', '.join(f'{a}/{b}' for a, b in pairs) or 'none'}")
     if case["legs"] is not None:
