@@ -32,6 +32,7 @@ dense Jacobians (the tests compare them).
 import copy
 
 import numpy as np
+import scipy.sparse as sp
 
 from .. import parallel
 from ..errors import Cancelled  # noqa: F401  (raised by progress callbacks)
@@ -209,14 +210,19 @@ class _Structure:
         self.L = (root_alpha * objective.L).tocsr()[order][:, order].tocsr()
         self.scans = objective.scans[:, order]
         self.scan_lap = root_alpha * objective.scan_lap[:, order]
+        weights = getattr(objective, "data_weights", None)      # a vertex subset's (solver.learn.coarse)
+        self.sw = None if weights is None else np.sqrt(weights)[order]
+        # the data rows are scaled by √w in place, so the Laplacian products take L diag(1/√w)
+        L_cols = self.L if self.sw is None else (self.L @ sp.diags(1.0 / self.sw)).tocsr()
         bounds = np.array([g[2] for g in groups.groups] + [groups.num_vertices])
         self.interior, self.boundary = [], []
         for start, stop in zip(bounds[:-1], bounds[1:]):
-            rows = self.L[start:stop]
+            rows = L_cols[start:stop]
             outside = (rows.indices < start) | (rows.indices >= stop)
             nnz_row = np.repeat(np.arange(stop - start), np.diff(rows.indptr))
             touches = np.bincount(nnz_row[outside], minlength=stop - start) > 0
-            inner, edge = np.flatnonzero(~touches), np.flatnonzero(touches)
+            empty = np.diff(rows.indptr) == 0                   # a subset's non-seed rows
+            inner, edge = np.flatnonzero(~touches & ~empty), np.flatnonzero(touches)
             self.interior.append((rows[inner][:, start:stop], start + inner))
             if len(edge):
                 self.boundary.append(self._boundary(rows[edge], start + edge, bounds))
@@ -254,6 +260,8 @@ def _chunk_system(st, model, poses, sl, own_only):
     H = np.zeros((st.n + 1, st.n + 1, N))        # scans last: each scatter moves whole N-vectors
     for (R, T), group, index, (L_in, inner) in zip(RT, groups, st.index, st.interior):
         R[..., -1] = posed[:, group[2]:group[3]] - st.scans[sl, group[2]:group[3]]
+        if st.sw is not None:                            # weighted data rows (L_in carries 1/√w)
+            R *= st.sw[None, group[2]:group[3], None, None]
         G = gram(R)
         if len(inner):                                   # interior Laplacian rows of all N scans at once
             Vg, c = R.shape[1], R.shape[-1]

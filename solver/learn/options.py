@@ -37,9 +37,9 @@ class LearnOptions:
     alpha: float = _setting(100.0, min=0.0, soft_max=1000.0)
     # cut mirror-image parts alike, pair left/right bones and equalise their lengths (weight lam)
     symmetry: bool = True
-    # outer rounds of (a) joints + poses, (b) weights, (c) rest vertices after the warm start;
-    # 0: initialisation only (no warm start either)
-    max_iterations: int = _setting(4, min=0, max=1000)
+    # at most this many outer rounds of (a) joints + poses, (b) weights, (c) rest vertices after the warm
+    # start (the convergence test, tol, usually stops first); 0: initialisation only (no warm start either)
+    max_iterations: int = _setting(8, min=0, max=1000)
     # chooses the rest scan (unless rest_scan is given) and seeds the segmentation
     seed: int = _setting(0, min=0)
     # a solver.rig.model.Skeleton in the rest scan's coordinates to start from instead of segmenting
@@ -54,8 +54,9 @@ class LearnOptions:
     bcd_sweeps: int = _setting(3, min=0)
     # ... trying these weight steps δ (fractions of a unit weight, each > 0), largest first
     bcd_steps: tuple = (0.2, 0.1, 0.05, 0.02)
-    # stop when a round lowers E by at most this fraction of E
-    tol: float = _setting(1e-4, min=0.0)
+    # stop when a round lowers E by at most this fraction of the largest decrease of a round so far
+    # (the objective has flattened); 0: only a round that gains nothing stops early
+    tol: float = _setting(0.25, min=0.0, max=1.0)
     # the most parts the automatic choice of k considers
     k_max: int = _setting(32, min=2)
     # rounds (warm start included) whose step (a) moves the poses only, the joints held at their
@@ -75,6 +76,12 @@ class LearnOptions:
     other_scan_iterations: int = _setting(3, min=0)
     # ... stopping at this relative decrease
     other_scan_tol: float = _setting(1e-6, min=0.0)
+    # step (a) (joints + poses) on about this many well-spread vertices, weighted so that their objective
+    # estimates the full one (solver.learn.coarse); weights and rest shape use all; 0: all vertices
+    joint_vertices: int = _setting(4000, min=0)
+    # memory budget of a run in GB; 0: 80 % of the memory available when it starts (solver.learn.memory).
+    # A run whose key scans do not fit learns from fewer of them; refused only if 3 do not fit
+    memory_limit_gb: float = _setting(0.0, min=0.0)
     # solver threads; 0: one per CPU core, 1: serial (the result depends on it only to rounding)
     workers: int = _setting(0, min=0)
 

@@ -35,6 +35,7 @@ from .. import parallel
 from ..errors import ArticulaInputError
 from ..parallel import single_blas_thread
 from .islands import carry_islands, split_islands
+from .coarse import vertex_subset
 from .key_scans import select_key_scans
 from .memory import check_sizes
 from ..fit.least_squares import GainRatioDamping
@@ -78,20 +79,21 @@ class LearnResult:
 def check_input(scans, faces, options):
     """Validate and convert ``scans (M,V,3)`` and ``faces (F,3)`` for a run with :class:`LearnOptions`
     ``options``; raises :class:`ArticulaInputError` naming the problem.  Returns ``(scans float64, faces
-    int32, islands)`` (:func:`solver.learn.islands.split_islands`).  The settings are checked against the
-    input (:meth:`LearnOptions.validate_for`) and the memory bound (:func:`solver.learn.memory.check_memory`:
-    the scans learned from, at most ``options.key_scans``, and all scans) before the scans are converted
-    or scanned for non-finite values."""
+    int32, islands, memory plan)`` (:func:`solver.learn.islands.split_islands`,
+    :class:`solver.learn.memory.MemoryPlan`).  The settings are checked against the input
+    (:meth:`LearnOptions.validate_for`) and the memory budget (:func:`solver.learn.memory.check_sizes`: how
+    many of the key scans fit, refused if not even 3) before the scans are converted or scanned for
+    non-finite values."""
     shape = np.shape(scans)
     if len(shape) != 3 or shape[2] != 3:
         raise ArticulaInputError(f"scans: expected shape (M, V, 3) (registered scans sharing one topology), got {shape}")
     M, V = shape[:2]
-    check_sizes(options, M, V)
+    memory = check_sizes(options, M, V)
     scans, faces = _check_arrays(scans, faces)
     islands = split_islands(faces, V)
     if islands.others:
         options.validate_for(M, len(islands.main))
-    return scans, faces.astype(np.int32), islands
+    return scans, faces.astype(np.int32), islands, memory
 
 
 def _check_arrays(scans, faces):
@@ -253,6 +255,8 @@ class Settings:
     options: LearnOptions
     graph: object               # the mesh's weights.colouring.TwoRing, built once
     states: dict = field(default_factory=dict)          # α -> AlphaState
+    subset: object = None       # step (a)'s solver.learn.coarse.VertexSubset; None: all vertices
+    coarse_rounds: int = 0      # rounds whose step (a) was kept from the subset
 
     def at(self, objective):
         """The :class:`AlphaState` of ``objective``'s α (made at the first use)."""
@@ -276,11 +280,8 @@ def alternation_round(model, poses, problem, scans, settings, fix_joints, timing
         progress(0.0, "starting the round", None)
     t0 = time.perf_counter()
     E = problem.value(model, poses) if E is None else E
-    model, poses, gn_log = optimise_joints_and_poses(
-        model, poses, problem, iterations=options.gn_iterations, progress=sub(0.0, 1 / 3),
-        fix_joints=fix_joints, damping=state.damping, value=E, gain_tol=options.gn_gain_tol)
+    model, poses, E = _joints_and_poses(model, poses, problem, settings, fix_joints, state, E, sub(0.0, 1 / 3))
     timings["joints_and_poses"] += time.perf_counter() - t0
-    E = gn_log[-1] if gn_log else E
     log.append(("joints_and_poses", float(E)))
     sym_term = problem.shared_value(model.skeleton)           # E − Q: the terms of the skeleton alone
     t0 = time.perf_counter()
@@ -300,6 +301,38 @@ def alternation_round(model, poses, problem, scans, settings, fix_joints, timing
     timings["rest_vertices"] += time.perf_counter() - t0
     log.append(("rest_vertices", float(E)))
     return model, poses, log
+
+
+def _joints_and_poses(model, poses, problem, settings, fix_joints, state, E, progress):
+    """Step (a) from E: on ``settings.subset`` (:mod:`solver.learn.coarse`), kept if the full E does not
+    increase; once the full E rejects it (the subset has done what it can: coarse to fine), on all
+    vertices from then on.  Returns ``(model, poses, E)``."""
+    options, subset = settings.options, settings.subset
+    if subset is not None:
+        trial, new_poses, E_trial = _joints_and_poses_on_subset(model, poses, problem, settings, fix_joints, state,
+                                                                progress)
+        if E_trial <= E:
+            settings.coarse_rounds += 1
+            return trial, new_poses, E_trial
+        settings.subset = None
+    model, poses, gn_log = optimise_joints_and_poses(
+        model, poses, problem, iterations=options.gn_iterations, progress=progress, fix_joints=fix_joints,
+        damping=state.damping, value=E, gain_tol=options.gn_gain_tol)
+    return model, poses, (gn_log[-1] if gn_log else E)
+
+
+def _joints_and_poses_on_subset(model, poses, problem, settings, fix_joints, state, progress):
+    """Step (a) on ``settings.subset``: ``(model, poses, full E)`` after it (E infinite if no step was taken)."""
+    subset, options = settings.subset, settings.options
+    quiet = None if progress is None else (lambda f, stage, _obj: progress(f, stage, None))  # E_U is not E
+    sub, new_poses, gn_log = optimise_joints_and_poses(
+        subset.model(model), poses, subset.problem(problem), iterations=options.gn_iterations, progress=quiet,
+        fix_joints=fix_joints, damping=state.damping, gain_tol=options.gn_gain_tol)
+    if not gn_log:
+        return model, poses, np.inf
+    trial = copy.copy(model)
+    trial.skeleton = sub.skeleton
+    return trial, new_poses, problem.value(trial, new_poses)
 
 
 def poses_of_other_scans(model, key_poses, scans, keys, options, progress=None):
@@ -360,13 +393,14 @@ def _learn_rig(scans, faces, options, progress):
     largest island of the mesh; the other islands are then carried rigidly (:mod:`solver.learn.islands`)."""
     t_all = time.perf_counter()
     timings = {key: 0.0 for key in ("initialisation", "joints_and_poses", "weights", "rest_vertices")}
-    all_scans, faces, islands = check_input(scans, faces, options)
+    all_scans, faces, islands, memory = check_input(scans, faces, options)
     main_scans = all_scans[:, islands.main] if islands.others else all_scans
-    rest_index, keys, scans = _scans_to_learn_from(main_scans, options)
+    rest_index, keys, scans = _scans_to_learn_from(main_scans, options, memory.learned)
     end = REPORT_START if len(keys) == len(all_scans) else REPORT_START - 0.1   # then the other scans' poses
     if progress is not None:
         progress(0.0, f"learning from {len(keys)} scans x {len(islands.main)} vertices"
-                      + (f" ({len(islands.others)} islands carried)" if islands.others else ""), None)
+                      + (f" ({len(islands.others)} islands carried)" if islands.others else "")
+                      + (f" ({memory.note()})" if memory.reduced else ""), None)
 
     t0 = time.perf_counter()
     model, poses, info, pairs = initialise(scans, islands.main_faces, options, _sub_progress(progress, 0.0, 0.1),
@@ -375,14 +409,16 @@ def _learn_rig(scans, faces, options, progress):
     timings["initialisation"] = time.perf_counter() - t0
     L = uniform_laplacian(islands.main_faces, len(scans[0]))
     sym = continuing_pairs(model.skeleton, pairs) if options.symmetry else []
-    alternation = Alternation(scans, options, Settings(options, TwoRing(L)),
-                              _problems(model, poses, scans, L, sym, options), timings, progress, end)
+    subset = vertex_subset(model.rest_vertices, L, options.joint_vertices)
+    info["joint_vertices"] = len(L.indptr) - 1 if subset is None else len(subset.vertices)
+    alternation = Alternation(scans, options, Settings(options, TwoRing(L), subset=subset),
+                              _problems(model, poses, scans, L, sym, options, subset), timings, progress, end)
     problem = alternation.problem_for(options.alpha)
     E_initial = problem.value(model, poses)
     if progress is not None:
         progress(0.1, "initialised", E_initial)
     model, poses, E, warm_log = alternation.warm_start(model, poses, problem, E_initial)
-    model, poses, log, rounds, converged = alternation.main_rounds(model, poses, problem, E)
+    model, poses, log, rounds, converged, stopped = alternation.main_rounds(model, poses, problem, E)
 
     info["key_scans"] = keys.tolist()
     if len(keys) < len(all_scans):
@@ -395,6 +431,7 @@ def _learn_rig(scans, faces, options, progress):
                  RigObjective(all_scans, uniform_laplacian(faces, all_scans.shape[1]), options.alpha))
     info.update(objective_log=log, warm_start_log=warm_log, initial_objective=float(E_initial),
                 iterations=rounds, converged=converged, timings_s=timings, alpha=options.alpha,
+                coarse_rounds=alternation.settings.coarse_rounds, stopped=stopped, memory=memory.report(),
                 symmetry_lambda=problem.lam, joint_prior=options.joint_prior)
     t0 = time.perf_counter()
     if progress is not None:
@@ -409,21 +446,27 @@ def _learn_rig(scans, faces, options, progress):
     return LearnResult(model, poses, report, distances)
 
 
-def _scans_to_learn_from(all_scans, options):
+def _scans_to_learn_from(all_scans, options, count=None):
     """``(rest scan index, key scan indices (sorted), the key scans (K,V,3))`` of ``all_scans (M,V,3)``:
-    every scan unless there are more than ``options.key_scans``."""
+    every scan unless there are more than ``count`` (default ``options.key_scans``; the memory plan's
+    count when fewer fit, :func:`solver.learn.memory.plan_memory`)."""
     rest_index = choose_rest_scan(len(all_scans), options.seed, options.rest_scan)
-    keys = (select_key_scans(all_scans, options.key_scans, first=rest_index) if options.key_scans
+    count = options.key_scans if count is None else count
+    keys = (select_key_scans(all_scans, count, first=rest_index) if 0 < count < len(all_scans)
             else np.arange(len(all_scans)))
     return rest_index, keys, (all_scans[keys] if len(keys) < len(all_scans) else all_scans)
 
 
-def _problems(model, poses, scans, L, sym, options):
+def _problems(model, poses, scans, L, sym, options, subset=None):
     """``α -> JointPoseProblem``: E of ``scans`` at Laplacian weight α with the mirror pairs ``sym``
     (weight ``options.lam``) and the joint-centre prior (centres: ``model``'s initial joints; κ from
-    ρ = ``options.joint_prior`` at ``options.alpha``, :func:`solver.learn.joints_poses.relative_joint_prior`)."""
+    ρ = ``options.joint_prior`` at ``options.alpha``, :func:`solver.learn.joints_poses.relative_joint_prior`,
+    on step (a)'s vertex ``subset`` if there is one: its Q estimates the full Q)."""
     prior_heads = model.skeleton.heads.copy()          # the initial rotation-centre estimates
-    kappa = (relative_joint_prior(model, poses, RigObjective(scans, L, options.alpha), options.joint_prior)
+    objective = RigObjective(scans, L, options.alpha)
+    if subset is not None:
+        model, objective = subset.model(model), subset.objective(objective)
+    kappa = (relative_joint_prior(model, poses, objective, options.joint_prior)
              if options.joint_prior > 0 else 0.0)
     lam = options.lam if sym else 0.0
     return lambda a: JointPoseProblem(RigObjective(scans, L, a), sym, lam, prior_heads=prior_heads, kappa=kappa)
@@ -473,21 +516,43 @@ class Alternation:
         return model, poses, E, log
 
     def main_rounds(self, model, poses, problem, E):
-        """Rounds at α from E until one lowers E by at most ``tol`` × E (after the joint warm-up) or
-        ``max_iterations`` are done.  Returns ``(model, poses, log, rounds done, converged)``."""
+        """Rounds at α from E until the objective has flattened (:func:`flattened`, after the joint
+        warm-up) or ``max_iterations`` are done.  Returns ``(model, poses, log, rounds done, converged,
+        stopped)``, stopped: why, in words (with the numbers of the last round)."""
         o, first = self.options, len(self.warm_alphas)
-        log, converged, it = [("initial", float(E))], False, -1
+        log, converged, it, gains = [("initial", float(E))], False, -1, []
+        stopped = "max_iterations is 0: initialisation only"
         for it in range(o.max_iterations):
             E_round, r = E, first + it
             model, poses, steps = self._round(model, poses, problem, r, _sub_progress(self.progress, *self.span(r)), E)
             log += steps
             E = steps[-1][1]
             if self.progress is not None:
-                self.progress(self.span(r)[1], f"round {it + 1} of {o.max_iterations}", E)
-            if r >= o.joint_warmup_rounds and E_round - E <= o.tol * E_round:
-                converged = True
+                self.progress(self.span(r)[1], f"round {it + 1} of at most {o.max_iterations}", E)
+            if r < o.joint_warmup_rounds:
+                stopped = f"max_iterations ({o.max_iterations}) reached in the joint warm-up"
+                continue
+            gains.append(E_round - E)
+            converged, stopped = flattened(gains, E_round, o.tol, it + 1, o.max_iterations)
+            if converged:
                 break
-        return model, poses, log, it + 1, converged
+        return model, poses, log, it + 1, converged, stopped
+
+
+def flattened(gains, E_before, tol, round_number, max_rounds):
+    """The convergence test of the main rounds: ``(converged, reason)``.  Converged when the last round's
+    decrease of E ``gains[-1]`` is at most ``tol`` times the largest decrease of a round so far (the
+    objective has flattened: later rounds gain ever less), or is not positive; ``E_before``: E before the
+    last round (for the reason's percentage)."""
+    gain, best = gains[-1], max(gains)
+    share = gain / best if best > 0 else 0.0
+    numbers = (f"round {round_number} lowered E by {100 * gain / max(E_before, 1e-300):.2g} %, "
+               f"{100 * share:.0f} % of the largest round decrease (tol {100 * tol:.0f} %)")
+    if gain <= 0 or (len(gains) > 1 and share <= tol):
+        return True, "objective flattened: " + numbers
+    if round_number >= max_rounds:
+        return False, f"max_iterations ({max_rounds}) reached: " + numbers
+    return False, numbers
 
 
 def _quiet(progress, lo, hi, stage):
