@@ -63,6 +63,10 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
         description="Learn the skeleton, weights and rest mesh from at most this many scans (the most "
                     "different poses) and fit the poses of the other scans with the learned rig: long "
                     "sequences learn in a fraction of the time. 0: learn from every scan")
+    memory_limit_gb: bpy.props.FloatProperty(
+        name="Memory Limit (GB)", **property_range("memory_limit_gb"),
+        description="Memory the run may use, in GB. 0: 80% of the memory available when it starts. If the key "
+                    "scans do not fit, it learns from fewer of them (and says so); it refuses only if 3 do not fit")
     joint_prior: bpy.props.FloatProperty(
         name="Joint Prior", **property_range("joint_prior"), precision=3,
         description="How strongly the joints stay near their first estimates where the motion hardly "
@@ -98,7 +102,8 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
 
     def draw(self, context):
         col = self.layout.column()
-        for prop in ("parts", "alpha", "joint_prior", "symmetry", "max_iterations", "key_scans", "seed"):
+        for prop in ("parts", "alpha", "joint_prior", "symmetry", "max_iterations", "key_scans", "memory_limit_gb",
+                     "seed"):
             col.prop(self, prop)
         col.prop_search(self, "initial_armature", bpy.data, "objects")
         col.prop(self, "output_bundle")
@@ -129,7 +134,8 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
     def _prepare(self, context):
         options = LearnOptions(parts=self.parts, alpha=self.alpha, symmetry=self.symmetry,
                                max_iterations=self.max_iterations, seed=self.seed, key_scans=self.key_scans,
-                               workers=preferences.threads(context), joint_prior=self.joint_prior)
+                               workers=preferences.threads(context), joint_prior=self.joint_prior,
+                               memory_limit_gb=self.memory_limit_gb)
         options.validate()
         arm = bpy.data.objects.get(self.initial_armature) if self.initial_armature else None
         if self.initial_armature and arm is None:

@@ -4,7 +4,8 @@ summary."""
 import numpy as np
 
 REPORT_PROPERTY = "articula_learn_report"       # armature ID property: the solver's report (JSON)
-REPORTED_OPTIONS = ("parts", "alpha", "symmetry", "max_iterations", "seed", "key_scans", "workers", "joint_prior")
+REPORTED_OPTIONS = ("parts", "alpha", "symmetry", "max_iterations", "seed", "key_scans", "workers", "joint_prior",
+                    "memory_limit_gb")
 
 
 def jsonable(x):
@@ -41,13 +42,13 @@ def error_summary(report: dict) -> dict:
 
 
 def summary_text(outcome) -> str:
-    """One line of the outcome's error statistics (mm): mean, median, max; and the islands carried
-    rigidly (:func:`islands_text`) if any."""
+    """One line of the outcome's error statistics (mm): mean, median, max; the islands carried rigidly
+    (:func:`islands_text`) and fewer key scans learned from to fit the memory budget, if any."""
     s = error_summary(outcome.report)
     parts = [f"{k} {s[k]:.2f}" for k in ("mean", "median", "max") if k in s]
     text = "error (mm) " + ", ".join(parts) if parts else "no error statistics"
-    islands = islands_text(outcome.report)
-    return f"{text}; {islands}" if islands else text
+    notes = [islands_text(outcome.report), (outcome.report.get("memory") or {}).get("note", "")]
+    return "; ".join([text] + [n for n in notes if n])
 
 
 def islands_text(report: dict) -> str:

@@ -162,7 +162,7 @@ def test_operator_and_batch_command_defaults_are_the_options(pkg):
     the operator's bounds are the fields' bounds."""
     opts = pkg("solver.learn.options").LearnOptions()
     props = bpy.ops.articula.learn_rig.get_rna_type().properties
-    for name in ("parts", "alpha", "symmetry", "max_iterations", "key_scans", "joint_prior", "seed"):
+    for name in ("parts", "alpha", "symmetry", "max_iterations", "key_scans", "joint_prior", "memory_limit_gb", "seed"):
         assert props[name].default == pytest.approx(getattr(opts, name), rel=1e-6), name
     # soft limits only (the slider): hard limits would clamp out-of-range values silently
     assert (props["parts"].soft_min, props["parts"].soft_max, props["parts"].hard_max) == (0, 64, 2 ** 31 - 1)
@@ -172,8 +172,9 @@ def test_operator_and_batch_command_defaults_are_the_options(pkg):
     pkg("addon.cli.learn").add_commands(parser.add_subparsers())
     args = parser.parse_args(["learn-rig", "--scans", "scans", "--out", "model.npz"])
     assert (args.parts, args.alpha, not args.no_symmetry, args.iterations, args.seed, args.key_scans,
-            args.threads, args.joint_prior) == (opts.parts, opts.alpha, opts.symmetry, opts.max_iterations,
-                                                opts.seed, opts.key_scans, opts.workers, opts.joint_prior)
+            args.threads, args.joint_prior, args.memory_limit) == (
+        opts.parts, opts.alpha, opts.symmetry, opts.max_iterations, opts.seed, opts.key_scans, opts.workers,
+        opts.joint_prior, opts.memory_limit_gb)
 
 
 # --------------------------------------------------------------------------- bad input
