@@ -314,7 +314,8 @@ def main(argv=None):
     p.add_argument("--no-dembones", action="store_true", help="skip the Dem Bones runs")
     p.add_argument("--out", default=None, help="results file (default bench/results/learn[-quick].txt, "
                                                  "learn-issue19[-quick].txt for --order issue19)")
-    p.add_argument("--parts", type=int, default=0, help="parts for the MakeHuman runs of section 1 (0: learn_rig chooses; section 0 always lets it)")
+    p.add_argument("--parts", type=int, default=0,
+                   help="parts for the MakeHuman runs of section 1 (0: learn_rig chooses; section 0 always lets it)")
     p.add_argument("--learn-timeout", type=float, default=None, help="seconds per learn_rig run (default none)")
     p.add_argument("--learn-iterations", type=int, default=0,
                    help="learn_rig max_iterations (outer rounds; 0: the learner's default)")
