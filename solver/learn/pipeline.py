@@ -50,6 +50,8 @@ from .objective import RigObjective
 from ..geometry.rotations import quat_to_rotvec
 from .mirror_map import mirror_map
 from .part_count import articulated_parts
+from .prune import drop_bones, empty_leaves, remap_pairs
+from .seams import Seams
 from .segmentation import centred, segment
 from .symmetry import continuing_pairs
 from .skeleton import build_skeleton
@@ -383,9 +385,26 @@ def learn_rig(scans, faces, options=None, progress=None, **settings):
     options = replace(options or LearnOptions(), **settings)
     options.validate()
     with parallel.using(options.workers) as threads:
-        result = _learn_rig(scans, faces, options, progress)
+        result = _learn_welded(scans, faces, options, progress)
     result.report["workers"] = threads
     return result
+
+
+def _learn_welded(scans, faces, options, progress):
+    """:func:`_learn_rig` on the mesh with the vertex copies at its seams welded
+    (:mod:`solver.learn.seams`), the result given back for every input vertex.  Input that
+    :func:`check_input` would refuse is passed on as it is, so that its message names the input's
+    scan and vertex."""
+    arr = np.asarray(scans)
+    f = np.asarray(faces)
+    if (arr.ndim != 3 or arr.shape[2] != 3 or arr.shape[0] < MIN_SCANS or f.ndim != 2 or f.shape[1:] != (3,)
+            or not np.issubdtype(f.dtype, np.integer) or not np.issubdtype(arr.dtype, np.number)
+            or not np.isfinite(arr).all()):
+        return _learn_rig(scans, faces, options, progress)
+    seams = Seams.of(np.asarray(arr, dtype=np.float64))
+    if seams is None:
+        return _learn_rig(arr, f, options, progress)
+    return seams.expand(_learn_rig(*seams.weld(arr, f), options, progress), f)
 
 
 def _learn_rig(scans, faces, options, progress):
@@ -419,6 +438,7 @@ def _learn_rig(scans, faces, options, progress):
         progress(0.1, "initialised", E_initial)
     model, poses, E, warm_log = alternation.warm_start(model, poses, problem, E_initial)
     model, poses, log, rounds, converged, stopped = alternation.main_rounds(model, poses, problem, E)
+    model, poses, sym = _without_empty_leaves(model, poses, sym, info)
 
     info["key_scans"] = keys.tolist()
     if len(keys) < len(all_scans):
@@ -444,6 +464,20 @@ def _learn_rig(scans, faces, options, progress):
     model.validate()
     poses.validate(model.skeleton.num_bones)
     return LearnResult(model, poses, report, distances)
+
+
+def _without_empty_leaves(model, poses, sym, info):
+    """``(model, poses, sym)`` less the leaf bones that hold no vertex (:mod:`solver.learn.prune`), the
+    symmetry terms renumbered; ``info["empty_parts_removed"]`` names them, mirror pairs losing one go."""
+    drop = empty_leaves(model)
+    info["empty_parts_removed"] = [model.skeleton.names[b] for b in drop]
+    if len(drop) == 0:
+        return model, poses, sym
+    model, poses, new_index = drop_bones(model, poses, drop)
+    info["parts"] = model.skeleton.num_bones
+    names = set(model.skeleton.names)
+    info["mirror_pairs"] = [pr for pr in info.get("mirror_pairs", []) if set(pr) <= names]
+    return model, poses, remap_pairs(sym, new_index)
 
 
 def _scans_to_learn_from(all_scans, options, count=None):

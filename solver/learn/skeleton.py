@@ -40,6 +40,7 @@ from ..geometry.neighbours import nearest
 from ..geometry.procrustes import fit_rigid
 from ..rig.model import Skeleton, frames_from_bones
 from .chain_pairs import chain_votes
+from .shape_pairs import shape_votes
 from .symmetry import MAX_SYMMETRY_SCANS, consistent_pairs, map_covers, part_pair_votes, unequal_pairs
 
 
@@ -89,6 +90,7 @@ def boundary_centroid(rest, labels, faces, p, c):
 JOINT_REACH = 2.0               # joint-local fits: weight exp(−d / (JOINT_REACH ρ)), ρ = boundary-ring radius
 ROBUST_SCALE = 0.5              # Cauchy scale of the residual weights, times the weighted RMS residual
 ROBUST_ITERATIONS = 5           # reweighted fits
+JOINT_INSIDE_FRACTION = 1.0      # initial joints within this fraction of their cross-section's radius
 MIN_RING_FRACTION = 0.1         # ρ at least this fraction of the parts' RMS distance to the ring centre (a
                                 # ring of a few close vertices would leave too few weighted vertices;
                                 # MakeHuman rings are 0.13 of it or more)
@@ -139,17 +141,50 @@ def joint_fits(rest, scans, labels, edges, p, c):
     return out
 
 
-def rotation_centre(Rp, tp, Rc, tc, h0, mu=0.02):
-    """Least-squares common rotation centre of two parts (see module doc).
+def rotation_centre(Rp, tp, Rc, tc, h0, mu=0.02, radius=None):
+    """Least-squares common rotation centre of two parts (see module doc), within ``radius`` of h0.
 
     Rp, Rc ``(M,3,3)``, tp, tc ``(M,3)`` per-scan rigid maps of parent and child; h0 ``(3,)`` prior
     (boundary centroid).  ``mu²·M`` weighs the prior (dimensionless, relative to rotation angles² in
-    radians²)."""
+    radians²).  radius (metres, None: unbounded): the centre is kept inside the ball of that radius about
+    h0 (the joint's cross-section, :func:`ring_radius`) by raising the prior's weight just enough
+    (:func:`_bounded_solve`): directions the motion determines stay where the data put them, those it
+    leaves free (a hinge's axis) come to h0, the middle of the cross-section."""
     D = Rp - Rc
     r = tc - tp
-    H = np.einsum("mji,mjk->ik", D, D) + mu ** 2 * len(D) * np.eye(3)
-    g = np.einsum("mji,mj->i", D, r) + mu ** 2 * len(D) * h0
-    return np.linalg.solve(H, g)
+    A = np.einsum("mji,mjk->ik", D, D)
+    b = np.einsum("mji,mj->i", D, r)
+    h = np.linalg.solve(A + mu ** 2 * len(D) * np.eye(3), b + mu ** 2 * len(D) * h0)
+    if radius is None or np.linalg.norm(h - h0) <= radius:
+        return h
+    return _bounded_solve(A, b, h0, radius, mu ** 2 * len(D))
+
+
+def _bounded_solve(A, b, h0, radius, lam_min):
+    """``h = (A + λI)⁻¹ (b + λ h0)`` with the smallest λ ≥ lam_min for which ``‖h − h0‖ ≤ radius``
+    (``‖h − h0‖`` falls as λ grows; bisection on log λ in A's eigenbasis).  A ``(3,3)`` PSD, b, h0 ``(3,)``.
+    Directions with eigenvalues far above λ keep the data's solution, those far below it come to h0."""
+    lam_A, Q = np.linalg.eigh(A)
+    g = Q.T @ (b - A @ h0)
+
+    def offset(lam):
+        return Q @ (g / (lam_A + lam))
+
+    lo, hi = lam_min, max(lam_min, 1e-12) * 2.0
+    while np.linalg.norm(offset(hi)) > radius and hi < 1e300:
+        lo, hi = hi, hi * 4.0
+    for _ in range(60):
+        mid = np.sqrt(lo * hi)
+        lo, hi = (mid, hi) if np.linalg.norm(offset(mid)) > radius else (lo, mid)
+    return h0 + offset(hi)
+
+
+def ring_radius(ring):
+    """The radius (metres) of a joint's cross-section from its boundary-ring vertices ``(n,3)``: the
+    median distance of the ring to its centroid, times JOINT_INSIDE_FRACTION (a joint within it lies
+    inside the limb for a roughly round cross-section)."""
+    centre = ring.mean(axis=0)
+    return JOINT_INSIDE_FRACTION * float(np.median(np.linalg.norm(ring - centre, axis=1)))
 
 
 def _main_child(b, kids, heads, parents, paired, subtree_size):
@@ -189,15 +224,18 @@ def build_skeleton(rest, labels, faces, k, part_R=None, part_t=None, symmetry=Tr
         scans = symmetry_scans
     heads = joint_heads(rest, labels, faces, order, parent_part, part_R, part_t, scans)
     tree = (order, bone_of_part, parent_part, parents, sizes)
-    pairs = []
+    pairs, trusted = [], set()
     if symmetry and k > 1:
         votes = part_pair_votes(rest, labels, k, mirror, symmetry_scans, max_symmetry_scans)
         if not map_covers(mirror):                     # no topological map: add the structural pairs
             shapes = 1 + (0 if symmetry_scans is None else min(len(symmetry_scans), max_symmetry_scans))
-            for key, n in chain_votes(rest, labels, order, parent_part, heads[bone_of_part], sizes,
-                                      weight=shapes).items():
+            shaped = shape_votes(rest, labels, order, heads[bone_of_part], weight=shapes)
+            trusted = {(min(key), max(key)) for key in shaped}
+            extra = [chain_votes(rest, labels, order, parent_part, heads[bone_of_part], sizes, weight=shapes),
+                     shaped]
+            for key, n in ((key, n) for more in extra for key, n in more.items()):
                 votes[key] = votes.get(key, 0) + n
-        pairs = _equal_pairs(votes, rest, labels, tree, heads)
+        pairs = _equal_pairs(votes, rest, labels, tree, heads, trusted)
     tails = _tails(rest, labels, order, parents, heads, {x for pr in pairs for x in pr})
     names = _names(k, pairs)
     frames = frames_from_bones(heads, tails)
@@ -218,18 +256,19 @@ def joint_heads(rest, labels, faces, order, parent_part, part_R=None, part_t=Non
     heads[0] = rest[labels == order[0]].mean(axis=0)
     for b in range(1, k):
         p, c = parent_part[order[b]], order[b]
-        h = rest[boundary_vertices(labels, edges, p, c)].mean(axis=0)
+        ring = rest[boundary_vertices(labels, edges, p, c)]
+        h = ring.mean(axis=0)
         if part_R is not None:
             if scans is not None:
                 fits = joint_fits(rest, scans, labels, edges, p, c)
             else:
                 fits = (part_R[:, p], part_t[:, p], part_R[:, c], part_t[:, c])
-            h = rotation_centre(*fits, h)
+            h = rotation_centre(*fits, h, radius=ring_radius(ring))
         heads[b] = h
     return heads
 
 
-def _equal_pairs(votes, rest, labels, tree, heads):
+def _equal_pairs(votes, rest, labels, tree, heads, trusted=()):
     """Mirror bone pairs ``[(l, r), ...]`` from part-pair ``votes``: the structurally consistent ones
     (:func:`solver.learn.symmetry.consistent_pairs`) less those whose bones differ in length
     (:func:`solver.learn.symmetry.unequal_pairs`; a dropped pair takes its children's pairs with it, as
@@ -237,7 +276,7 @@ def _equal_pairs(votes, rest, labels, tree, heads):
     :func:`build_skeleton`."""
     order, bone_of_part, parent_part, parents, sizes = tree
     while True:
-        part_pairs = consistent_pairs(votes, parent_part, sizes)
+        part_pairs = consistent_pairs(votes, parent_part, sizes, trusted=trusted)
         pairs = [(int(bone_of_part[a]), int(bone_of_part[b])) for a, b in part_pairs]
         tails = _tails(rest, labels, order, parents, heads, {x for pr in pairs for x in pr})
         bad = unequal_pairs(heads, tails, parents, pairs)

@@ -272,14 +272,17 @@ def part_pair_votes(rest, labels, k, mirror=None, scans=None, max_scans=MAX_SYMM
     return pair_votes(shapes, labels, k)
 
 
-def consistent_pairs(votes, parent_part, sizes, min_size_ratio=MIRROR_SIZE_RATIO):
+def consistent_pairs(votes, parent_part, sizes, min_size_ratio=MIRROR_SIZE_RATIO, trusted=()):
     """The mirror pairs to keep, ``[(left, right), ...]`` (part indices), from ``votes`` of
     :func:`pair_votes`.  A pair is kept only if it is structurally a mirror pair: neither part is the
     root, the two are of similar size (vertex counts within ``min_size_ratio``), and their parents are
     the same part or themselves a kept pair (with the left child under the left parent).  Candidates
     are taken by votes (both orders of a pair summed; the order with more votes names left/right) and
     revisited until nothing changes, so children are accepted after their parents.  A plane through a
-    posed scan can pair a neck with an arm; these rules reject that."""
+    posed scan can pair a neck with an arm; these rules reject that.  Two parents that no vote pairs with
+    another part (central parts, on the mirror plane) count as the same parent; the ``trusted`` keys
+    ``(min, max)`` (pairs of mirror-image shapes, :mod:`solver.learn.shape_pairs`) need no parent rule:
+    an asymmetric cut can hang a limb and its mirror image from different torso parts."""
     total, order = {}, {}
     for (l, r), n in votes.items():
         key = (min(l, r), max(l, r))
@@ -287,6 +290,8 @@ def consistent_pairs(votes, parent_part, sizes, min_size_ratio=MIRROR_SIZE_RATIO
         if n > order.get(key, (None, 0))[1]:
             order[key] = ((l, r), n)
     ranked = sorted(total, key=lambda key: (-total[key], key))
+    candidates = {p for key in total for p in key if key[0] != key[1]}
+    central = set(range(len(parent_part))) - candidates            # parts no vote pairs with another
     partner, left_of = {}, {}
     changed = True
     while changed:
@@ -298,7 +303,7 @@ def consistent_pairs(votes, parent_part, sizes, min_size_ratio=MIRROR_SIZE_RATIO
             if min(sizes[l], sizes[r]) < min_size_ratio * max(sizes[l], sizes[r]):
                 continue
             pl, pr = parent_part[l], parent_part[r]
-            if pl != pr:
+            if pl != pr and not (pl in central and pr in central) and key not in trusted:
                 if partner.get(pl) != pr:
                     continue
                 if not left_of[pl]:
