@@ -42,13 +42,34 @@ def error_summary(report: dict) -> dict:
 
 
 def summary_text(outcome) -> str:
-    """One line of the outcome's error statistics (mm): mean, median, max; the islands carried rigidly
-    (:func:`islands_text`) and fewer key scans learned from to fit the memory budget, if any."""
+    """One line of the outcome's error statistics (mm): mean, median, max; the parts (:func:`parts_text`),
+    the islands carried rigidly (:func:`islands_text`) and fewer key scans learned from to fit the memory budget, if any."""
     s = error_summary(outcome.report)
     parts = [f"{k} {s[k]:.2f}" for k in ("mean", "median", "max") if k in s]
     text = "error (mm) " + ", ".join(parts) if parts else "no error statistics"
-    notes = [islands_text(outcome.report), (outcome.report.get("memory") or {}).get("note", "")]
+    notes = [parts_text(outcome.report), islands_text(outcome.report),
+             (outcome.report.get("memory") or {}).get("note", "")]
     return "; ".join([text] + [n for n in notes if n])
+
+
+def parts_text(report: dict) -> str:
+    """How the rig's parts came about ("" if the report says nothing), e.g. "22 parts (14 from the error
+    curve + 8 segments moving on their own), 5 left/right pairs, 2 empty end bones removed, 310 seam
+    vertices welded"."""
+    out = []
+    count = report.get("part_count") or {}
+    if "parts" in report:
+        how = (f" ({count['curve_parts']} from the error curve + {len(count['splits'])} segments moving on their "
+               f"own)" if count.get("splits") else "")
+        out.append(f"{report['parts']} parts{how}")
+    if report.get("mirror_pairs"):
+        out.append(f"{len(report['mirror_pairs'])} left/right pairs")
+    removed = report.get("empty_parts_removed") or []
+    if removed:
+        out.append(f"{len(removed)} empty end bone{'s' if len(removed) != 1 else ''} removed")
+    if report.get("welded_vertices"):
+        out.append(f"{report['welded_vertices']} seam vertices welded")
+    return ", ".join(out)
 
 
 def islands_text(report: dict) -> str:

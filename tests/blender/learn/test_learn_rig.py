@@ -499,3 +499,15 @@ def test_operator_learns_with_a_separate_island(pkg, tmp_path):
     assert any(len(o.data.vertices) == truth.num_vertices for o in meshes)
     text = pkg("addon.learn.report").islands_text(report)
     assert text.startswith("1 separate island (8 vertices) carried rigidly by bone ")
+
+
+def test_summary_says_how_the_parts_came_about(pkg):
+    """The summary line's parts: the count and its two phases, the pairs, removed empty end bones, welded
+    seam vertices; nothing for a report without them."""
+    parts_text = pkg("addon.learn.report").parts_text
+    report = {"parts": 22, "part_count": {"curve_parts": 14, "splits": [{}] * 8}, "mirror_pairs": [["a.L", "a.R"]] * 5,
+              "empty_parts_removed": ["part_30"], "welded_vertices": 310}
+    assert parts_text(report) == ("22 parts (14 from the error curve + 8 segments moving on their own), "
+                                  "5 left/right pairs, 1 empty end bone removed, 310 seam vertices welded")
+    assert parts_text({"parts": 8, "part_count": {"curve_parts": 8, "splits": []}}) == "8 parts"
+    assert parts_text({}) == ""
