@@ -35,6 +35,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import minimum_spanning_tree, shortest_path
 
 from ..errors import ArticulaInputError
+from ..geometry.inside import winding_numbers
 from ..geometry.mesh_graph import edges_of
 from ..geometry.neighbours import nearest
 from ..geometry.procrustes import fit_rigid
@@ -247,24 +248,28 @@ def joint_heads(rest, labels, faces, order, parent_part, part_R=None, part_t=Non
     the root's at its part's mean vertex, every other at the centroid of its boundary ring with the
     parent part, refined to the parts' common rotation centre (:func:`rotation_centre`) when their
     rigid maps are given: joint-local fits (:func:`joint_fits`) with ``scans (M,V,3)``, else the
-    whole-part maps ``part_R (M,k,3,3)``, ``part_t (M,k,3)``."""
+    whole-part maps ``part_R (M,k,3,3)``, ``part_t (M,k,3)``.  A rotation centre outside the rest mesh
+    (winding number, :mod:`solver.geometry.inside`) is recomputed within its cross-section
+    (:func:`ring_radius`); centres inside keep the data's place."""
     if scans is not None:
         scans = np.asarray(scans, dtype=np.float64)
     edges = edges_of(faces)
     k = len(order)
     heads = np.empty((k, 3))
     heads[0] = rest[labels == order[0]].mean(axis=0)
+    fits, rings = {}, {}
     for b in range(1, k):
         p, c = parent_part[order[b]], order[b]
-        ring = rest[boundary_vertices(labels, edges, p, c)]
-        h = ring.mean(axis=0)
+        rings[b] = rest[boundary_vertices(labels, edges, p, c)]
+        heads[b] = rings[b].mean(axis=0)
         if part_R is not None:
-            if scans is not None:
-                fits = joint_fits(rest, scans, labels, edges, p, c)
-            else:
-                fits = (part_R[:, p], part_t[:, p], part_R[:, c], part_t[:, c])
-            h = rotation_centre(*fits, h, radius=ring_radius(ring))
-        heads[b] = h
+            fits[b] = (joint_fits(rest, scans, labels, edges, p, c) if scans is not None else
+                       (part_R[:, p], part_t[:, p], part_R[:, c], part_t[:, c]))
+            heads[b] = rotation_centre(*fits[b], heads[b])
+    if fits:
+        outside = np.abs(winding_numbers(heads[1:], rest, faces)) <= 0.5
+        for b in np.flatnonzero(outside) + 1:
+            heads[b] = rotation_centre(*fits[b], rings[b].mean(axis=0), radius=ring_radius(rings[b]))
     return heads
 
 

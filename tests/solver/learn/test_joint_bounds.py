@@ -64,3 +64,29 @@ def test_ring_radius_of_a_circle():
     t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
     ring = np.c_[0.08 * np.cos(t), 0.08 * np.sin(t), np.zeros_like(t)] + [1.0, 2.0, 3.0]
     assert abs(ring_radius(ring) - JOINT_INSIDE_FRACTION * 0.08) < 1e-12
+
+
+def test_only_centres_outside_the_mesh_are_bounded():
+    """The tube body, every part still but two: the forearm turning about its true elbow (inside: kept
+    exactly) and the head turning about a point 0.5 m beside the neck (outside: brought within the
+    neck's cross-section)."""
+    from articula.solver.geometry.inside import winding_numbers
+    from articula.solver.geometry.mesh_graph import edges_of
+    from articula.solver.learn.skeleton import boundary_vertices, joint_heads
+
+    from ..learn_data import JOINTS, PARENTS, body
+    rest, faces, labels = body()
+    M = 8
+    R = np.broadcast_to(np.eye(3), (M, 8, 3, 3)).copy()
+    t = np.zeros((M, 8, 3))
+    rng = np.random.default_rng(3)
+    far = JOINTS[1] + [0.5, 0.0, 0.0]
+    for part, centre in ((3, JOINTS[3]), (1, far)):
+        for m in range(M):
+            R[m, part] = _rot(rng.normal(size=3), rng.uniform(0.2, 0.8))
+            t[m, part] = centre - R[m, part] @ centre
+    heads = joint_heads(rest, labels, faces, np.arange(8), PARENTS, R, t)
+    assert np.allclose(heads[3], JOINTS[3], atol=1e-4)            # the weak μ prior only (0.02 mm)
+    ring = rest[boundary_vertices(labels, edges_of(faces), 0, 1)]
+    assert np.linalg.norm(heads[1] - ring.mean(axis=0)) <= ring_radius(ring) + 1e-9
+    assert abs(winding_numbers(far[None], rest, faces)[0]) < 0.5 < abs(winding_numbers(heads[1:2], rest, faces)[0])
