@@ -438,7 +438,8 @@ def _learn_rig(scans, faces, options, progress):
         progress(0.1, "initialised", E_initial)
     model, poses, E, warm_log = alternation.warm_start(model, poses, problem, E_initial)
     model, poses, log, rounds, converged, stopped = alternation.main_rounds(model, poses, problem, E)
-    model, poses, sym = _without_empty_leaves(model, poses, sym, info)
+    if options.initial_skeleton is None:                # a given skeleton keeps every bone it has
+        model, poses, sym = _without_empty_leaves(model, poses, sym, info)
 
     info["key_scans"] = keys.tolist()
     if len(keys) < len(all_scans):
