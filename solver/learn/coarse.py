@@ -20,7 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .joints_poses import JointPoseProblem
+from .joints_poses import JointPoseProblem, gradient_blocks
 from .objective import RigObjective
 from .segmentation import grid_sample
 
@@ -64,6 +64,15 @@ class VertexSubset:
                                                              problem.lam, prior_heads=problem.prior_heads,
                                                              kappa=problem.kappa))
         return self._problems[key][1]
+
+    def correction(self, model, poses, problem, fix_joints):
+        """``(c_s, c_o)``: the gradient of the full ``problem``'s Q at ``(model, poses)`` minus that of the
+        subset's (:func:`solver.learn.joints_poses.gradient_blocks`): with it the subset's LM takes the full
+        gradient and the subset's curvature (:func:`solver.learn.joints_poses.optimise_joints_and_poses`),
+        and stops where the full problem does instead of at the subset's own minimum."""
+        full = gradient_blocks(model, poses, problem.objective, own_only=fix_joints)
+        sub = gradient_blocks(self.model(model), poses, self.problem(problem).objective, own_only=fix_joints)
+        return full[0] - sub[0], full[1] - sub[1]
 
     def objective(self, objective):
         """The :class:`WeightedObjective` of the subset for the full :class:`RigObjective` ``objective``."""

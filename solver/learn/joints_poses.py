@@ -200,7 +200,7 @@ class _Structure:
     ("boundary") rows of group a use the union of the columns of the groups they touch.  Vertices are in
     :class:`AnchorGroups` order; ``L`` = √α L permuted to it, ``scans`` and ``scan_lap`` (= √α L s) too."""
 
-    def __init__(self, model, objective, own_only):
+    def __init__(self, model, objective, own_only, laplacian_blocks=True):
         self.groups = groups = AnchorGroups(model)
         sk, order = model.skeleton, groups.order
         cols, self.n_s = _columns(sk.num_bones, own_only)
@@ -216,7 +216,7 @@ class _Structure:
         L_cols = self.L if self.sw is None else (self.L @ sp.diags(1.0 / self.sw)).tocsr()
         bounds = np.array([g[2] for g in groups.groups] + [groups.num_vertices])
         self.interior, self.boundary = [], []
-        for start, stop in zip(bounds[:-1], bounds[1:]):
+        for start, stop in zip(bounds[:-1], bounds[1:]) if laplacian_blocks else ():
             rows = L_cols[start:stop]
             outside = (rows.indices < start) | (rows.indices >= stop)
             nnz_row = np.repeat(np.arange(stop - start), np.diff(rows.indptr))
@@ -328,6 +328,32 @@ def normal_equation_blocks(model, poses, objective, chunk=None, own_only=False, 
             H[:, :n_s, n].sum(axis=0), H[:, n_s:n, n].copy())
 
 
+def gradient_blocks(model, poses, objective, own_only=False):
+    """The gradient halves ``(g_s (n_s,), g_o (M, n_o))`` of :func:`normal_equation_blocks` (``Jᵀr`` over
+    the data and Laplacian rows, m²) without the Gram matrices: ``g = Σ_v J_vᵀ e_v`` with one residual per
+    vertex ``e = w (p − s) + α Lᵀ (L p − L s)``, per anchor group ``Tᵀ (Rᵀ e)``; about half the work of
+    the blocks (no products of Jacobian columns)."""
+    st = _Structure(model, objective, own_only, laplacian_blocks=False)
+    M, V = len(poses), model.num_vertices
+    posed = hybrid_skin(model, poses, st.groups)[:, st.groups.order]
+    rl = (st.L @ posed.transpose(1, 0, 2).reshape(V, -1)).reshape(V, M, 3).transpose(1, 0, 2) - st.scan_lap
+    e = posed - st.scans
+    if st.sw is not None:
+        e *= (st.sw ** 2)[None, :, None]
+    e += (st.L.T @ rl.transpose(1, 0, 2).reshape(V, -1)).reshape(V, M, 3).transpose(1, 0, 2)
+    g = np.zeros((M, st.n))
+    chunk = scan_chunk(V)
+    for m0 in range(0, M, chunk):
+        sl = slice(m0, min(M, m0 + chunk))
+        sub = Poses(poses.rotations[sl], poses.translations[sl], poses.scales[sl])
+        bt = jacobian_terms(model, sub, heads=not own_only, frame_basis=_frame_basis(model, own_only))
+        for group, local, index in zip(st.groups.groups, st.local, st.index):
+            _, R, T = group_jacobian(bt, st.groups, group, local, len(index) - 1)
+            gR = np.einsum("nvic,nvi->nc", R, e[sl, group[2]:group[3]])
+            g[sl, index[:-1]] += np.einsum("nrc,nr->nc", T, gR)
+    return g[:, :st.n_s].sum(axis=0), g[:, st.n_s:]
+
+
 class JointPoseProblem:
     """Objective ``Q + λ Q_sym + κ Q_prior`` as a function of (skeleton, poses) for a fixed model skin and
     rest mesh.  ``Q_sym`` = Σ squared left/right bone-length differences (m², :func:`symmetry_residuals`);
@@ -390,14 +416,25 @@ class _JointPoseLeastSquares:
     normal-equation blocks (:func:`normal_equation_blocks` plus the problem's shared terms), damping
     ``μ (diag H_data + 10⁻⁶ mean diag H_data)`` per block from the data part only (the symmetry weight
     λ ≈ 1e10 would otherwise freeze the joints it couples), steps by the Schur complement
-    (:func:`schur_solve`; per scan with fix_joints).  ``log``: E after every accepted step."""
+    (:func:`schur_solve`; per scan with fix_joints).  ``log``: E after every accepted step.
+    correction ``(c_s, c_o)``: a linear term ``2 cᵀ δ`` added to E, δ the sum of the accepted steps (the
+    coarse-grid correction of :func:`optimise_joints_and_poses`)."""
     size = 1
 
-    def __init__(self, model, poses, problem, fix_joints, value):
+    def __init__(self, model, poses, problem, fix_joints, value, correction=None):
         self.model, self.poses, self.problem, self.fix_joints = model, poses, problem, fix_joints
         self.structure = _Structure(model, problem.objective, fix_joints)      # anchors and weights stay fixed
         self.value = value
         self.log = []
+        self.correction = correction
+        self.moved = None if correction is None else (np.zeros_like(correction[0]), np.zeros_like(correction[1]))
+
+    def _linear(self, steps):
+        """``2 cᵀ (moved + steps)`` (0 without a correction)."""
+        if self.correction is None:
+            return 0.0
+        (c_s, c_o), (m_s, m_o) = self.correction, self.moved
+        return 2.0 * (float(c_s @ (m_s + steps[0][:len(c_s)])) + float(np.sum(c_o * (m_o + steps[1]))))
 
     def energy(self, idx):
         if self.value is None:
@@ -407,6 +444,8 @@ class _JointPoseLeastSquares:
     def build(self, idx):
         H_ss, self.H_so, self.H_oo, g_s, self.g_o = normal_equation_blocks(
             self.model, self.poses, self.problem.objective, own_only=self.fix_joints, structure=self.structure)
+        if self.correction is not None:
+            g_s, self.g_o = g_s + self.correction[0], self.g_o + self.correction[1]
         self.diag_s = np.diag(H_ss).copy()
         if not self.fix_joints:
             H_ss, g_s = self.problem.add_shared_terms(self.model.skeleton, H_ss, g_s)
@@ -428,13 +467,17 @@ class _JointPoseLeastSquares:
     def try_steps(self, idx, steps):
         skeleton, poses = apply_increment(self.model.skeleton, self.poses, *steps)
         self.trial = _with(self.model, skeleton), poses
-        self.trial_value = self.problem.value(*self.trial, self.structure.groups)
+        self.trial_steps = steps
+        self.trial_value = self.problem.value(*self.trial, self.structure.groups) + self._linear(steps)
         return np.array([self.trial_value], dtype=np.float64)
 
     def accept(self, which):
         if which[0]:
             self.model, self.poses = self.trial
             self.log.append(self.trial_value)
+            if self.correction is not None:
+                m_s, m_o = self.moved
+                self.moved = (m_s + self.trial_steps[0][:len(m_s)], m_o + self.trial_steps[1])
 
     def predicted_decrease(self, idx, steps):
         """Decrease of the Gauss–Newton model ``E + 2gᵀx + xᵀHx`` at the step (m²); the shared part is
@@ -453,7 +496,7 @@ class _JointPoseLeastSquares:
 
 
 def optimise_joints_and_poses(model, poses, problem, iterations=10, damping=None, step_tol=1e-9, progress=None,
-                              fix_joints=False, value=None, gain_tol=0.0):
+                              fix_joints=False, value=None, gain_tol=0.0, correction=None):
     """Levenberg–Marquardt on joints (centres + twist axes) and all per-scan poses (module docstring).
 
     model: current :class:`Model` (its skin and rest mesh are held fixed); poses: current poses;
@@ -464,11 +507,14 @@ def optimise_joints_and_poses(model, poses, problem, iterations=10, damping=None
     the caller knows it (else computed).  step_tol: stop after a step ``‖δ‖ ≤ step_tol``.  gain_tol (not in
     the dissertation): stop when the next iteration is expected to gain less than ``gain_tol · E``
     (:func:`solver.fit.least_squares.stalls`); 0: always run ``iterations``.
-    ``progress(fraction, stage, objective)`` after each iteration.
+    ``progress(fraction, stage, objective)`` after each iteration.  correction ``(c_s (n_s,), c_o (M, n_o))``
+    (on a vertex subset, :mod:`solver.learn.coarse`): minimise ``E + 2 cᵀ δ`` instead (δ: the steps taken),
+    with c = the full problem's gradient minus this one's at the start, so that the first step follows
+    the full gradient (the coarse-grid correction of multigrid's FAS); ``value`` then excludes the term.
     Returns ``(model, poses, log)`` with log the objective after every accepted step (never increasing).
     Runs with numpy's BLAS on one thread (:func:`solver.parallel.single_blas_thread`)."""
     damping = GainRatioDamping() if damping is None else damping
-    lsq = _JointPoseLeastSquares(model, poses, problem, fix_joints, value)
+    lsq = _JointPoseLeastSquares(model, poses, problem, fix_joints, value, correction)
     limits = Limits(steps=iterations, rejections=12, step_tol=step_tol, gain_tol=gain_tol)
     report = None
     if progress is not None:

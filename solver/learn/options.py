@@ -79,6 +79,9 @@ class LearnOptions:
     # step (a) (joints + poses) on about this many well-spread vertices, weighted so that their objective
     # estimates the full one (solver.learn.coarse); weights and rest shape use all; 0: all vertices
     joint_vertices: int = _setting(4000, min=0)
+    # ... with the full gradient at the start of each step (the coarse-grid correction, solver.learn.coarse;
+    # off: on the 53k-vertex MakeHuman it made the warm start worse, docs/learn_rig_solver.md)
+    joint_correction: bool = False
     # memory budget of a run in GB; 0: 80 % of the memory available when it starts (solver.learn.memory).
     # A run whose key scans do not fit learns from fewer of them; refused only if 3 do not fit
     memory_limit_gb: float = _setting(0.0, min=0.0)

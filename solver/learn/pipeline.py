@@ -329,7 +329,8 @@ def _joints_and_poses_on_subset(model, poses, problem, settings, fix_joints, sta
     quiet = None if progress is None else (lambda f, stage, _obj: progress(f, stage, None))  # E_U is not E
     sub, new_poses, gn_log = optimise_joints_and_poses(
         subset.model(model), poses, subset.problem(problem), iterations=options.gn_iterations, progress=quiet,
-        fix_joints=fix_joints, damping=state.damping, gain_tol=options.gn_gain_tol)
+        fix_joints=fix_joints, damping=state.damping, gain_tol=options.gn_gain_tol,
+        correction=subset.correction(model, poses, problem, fix_joints) if options.joint_correction else None)
     if not gn_log:
         return model, poses, np.inf
     trial = copy.copy(model)
