@@ -22,8 +22,10 @@ from .joints_poses import sizes
 from .options import MIN_SCANS
 
 BASE_BYTES = 0.30e9                 # imports, thread pools, BLAS buffers: measured 0.2-0.25 GB
-BYTES_PER_VERTEX = 20000            # per vertex, any scan count (grows with the mesh: 13k v ~6 kB, 54k-214k v ~20 kB)
-BYTES_PER_VERTEX_SCAN = 1000        # learned scans x vertices (posed copies, residuals, candidates)
+BYTES_PER_VERTEX = 30000            # per vertex, any scan count: the report's surface distances (53k v: 29.5 kB
+                                    # at 5 parts, 18 kB at 19) and the rounds' part that does not grow with M
+BYTES_PER_VERTEX_SCAN = 400         # learned scans x vertices (posed copies, residuals, candidates): 53k v, 5 -> 30
+                                    # scans: +280 B per vertex and scan in the rounds
 BYTES_PER_VERTEX_PART = 200         # vertices x parts (weight arrays, per-bone skin blocks; not measured apart)
 BYTES_PER_VERTEX_ALL_SCANS = 24     # every scan, float64 (x, y, z)
 MARGIN = 1.25                       # the bound over the largest measured peak of its kind
@@ -112,7 +114,7 @@ def plan_memory(num_scans, num_vertices, num_parts, requested, budget, why="the 
         least = working_memory_bytes(MIN_SCANS, num_vertices, num_parts, num_scans)
         raise ArticulaInputError(
             f"{source}: {num_scans} scans x {num_vertices} vertices with {num_parts} parts need up to "
-            f"{least / 1e9:.1f} GB of memory even when learning from only {MIN_SCANS} key scans, over {why}: "
+            f"{least / 1e9:.2f} GB of memory even when learning from only {MIN_SCANS} key scans, over {why}: "
             f"use fewer parts, decimate the meshes, free memory or raise the memory limit")
     k = fits[0]
     return MemoryPlan(k, requested, working_memory_bytes(k, num_vertices, num_parts, num_scans), budget, why)

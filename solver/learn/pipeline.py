@@ -4,16 +4,17 @@ of the rig-learning steps.
 ``learn_rig(scans, faces, options)`` →  :class:`LearnResult` ``(model, poses, report)``, the settings in
 :class:`solver.learn.options.LearnOptions`:
 
-1. input checks (shapes, ≥ 3 scans, parts for the vertex count, memory bound, finite values, islands
-   (the largest is learned from, the others carried rigidly), some non-rigid motion);
+1. input checks (shapes, ≥ 3 scans, parts for the vertex count, memory budget: fewer key scans if needed,
+   finite values, islands (the largest is learned from, the others carried rigidly), some non-rigid motion);
 2. rest mesh = one scan chosen by the seed; segmentation into k rigid parts by motion (§3.2,
    :mod:`solver.learn.segmentation`; k chosen from the motion unless given);
 3. skeleton (§3.2, :mod:`solver.learn.skeleton`): tree, joints (LS rotation centres), frames, mirror pairs;
    every joint must move (else the motion cannot separate that many parts);
 4. per-scan poses from per-part Procrustes (:mod:`solver.fit.pose_init`); binary (rigid) skin;
 5. alternating optimisation (§3.4) of ``E = Q + λ Q_sym + κ Q_prior`` (objective §3.3, bone-length
-   symmetry, a weak prior on the joint centres) until its relative decrease over one round is below
-   ``tol``: (a) joints + poses by Levenberg–Marquardt (:mod:`solver.learn.joints_poses`), (b) weights by BCD
+   symmetry, a weak prior on the joint centres) until a round lowers it by at most ``tol`` of the largest
+   round decrease (:func:`flattened`): (a) joints + poses by Levenberg–Marquardt (:mod:`solver.learn.joints_poses`;
+   on a weighted vertex subset while the full E accepts it, :mod:`solver.learn.coarse`), (b) weights by BCD
    (:mod:`solver.learn.weights`), (c) rest vertices by sparse least squares (:mod:`solver.learn.rest_shape`),
    each step accepted only if E does not increase; warm-start rounds at a smaller α come first;
 6. long sequences: steps 2-5 run on at most ``key_scans`` scans (:mod:`solver.learn.key_scans`: the most
