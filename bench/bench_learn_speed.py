@@ -4,6 +4,8 @@
     ./run bench learn_speed --frames 10 --iterations 3 --gn-iterations 3 --bcd-sweeps 3
     ./run bench learn_speed --rig game_engine --shape male,thin --skin lbs
     ./run bench learn_speed --bone-anim --parts 10 --threads 1     # Dem Bones' example, data-fit setting
+    ./run bench learn_speed --subdivide                            # 53,514 v x 30 scans (step (a) on a subset)
+    ./run bench learn_speed --subdivide --joint-vertices 0         # the same with step (a) on all vertices
 
 Data: ``sample_scenes.registered.posed_sequence(rig="cmu_mb", shape="female", n_poses=N, motion="rom",
 skin="hybrid", seed=0)`` (rig, shape and skin selectable: the cases of ``bench learn``).  Prints the time of every stage (``report["timings_s"]``), total wall and process
@@ -50,6 +52,10 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", type=int, default=None, help="learn_rig workers (default: one per core)")
     ap.add_argument("--key-scans", type=int, default=None, help="learn_rig key_scans (default: its own)")
     ap.add_argument("--no-warm-start", action="store_true", help="learn_rig warm_start=() (no warm-start rounds)")
+    ap.add_argument("--joint-vertices", type=int, default=None,
+                    help="learn_rig joint_vertices (step (a) on a vertex subset; 0: all vertices)")
+    ap.add_argument("--subdivide", action="store_true",
+                    help="midpoint-subdivide the MakeHuman meshes once (53,514 v), as bench learn_memory's subdiv1")
     args = ap.parse_args(argv)
 
     t0 = time.perf_counter()
@@ -60,12 +66,16 @@ def main(argv=None) -> int:
         from articula.sample_scenes.registered import posed_sequence
         verts, faces, _ = posed_sequence(rig=args.rig, shape=args.shape, n_poses=args.frames, motion="rom",
                                          skin=args.skin, seed=args.seed)
+        if args.subdivide:
+            from bench_learn_memory import subdivide
+            verts, faces = subdivide(np.asarray(verts, dtype=np.float64), np.asarray(faces, dtype=np.int32))
     verts = np.asarray(verts, dtype=np.float64)
     _common.report("data", f"{verts.shape[0]} scans x {verts.shape[1]} vertices", "",
                    f"loaded in {time.perf_counter() - t0:.1f}s; peak RSS so far {_peak_rss_gib():.2f} GiB")
     options = {k: v for k, v in (("max_iterations", args.iterations), ("gn_iterations", args.gn_iterations),
                                  ("bcd_sweeps", args.bcd_sweeps), ("workers", args.threads),
-                                 ("key_scans", args.key_scans)) if v is not None}
+                                 ("key_scans", args.key_scans), ("joint_vertices", args.joint_vertices))
+               if v is not None}
     if args.no_warm_start:
         options["warm_start"] = ()
     if args.bone_anim:
@@ -93,8 +103,9 @@ def main(argv=None) -> int:
         from articula.solver.fit.metrics import dem_bones_rmse
         _common.report("RMSE (Dem Bones' definition)", dem_bones_rmse(hybrid_skin(res.model, res.poses), verts), "",
                        f"learned from {len(rep['key_scans'])} of {len(verts)} scans")
-    _common.report("rounds", rep["iterations"], "", f"converged={rep['converged']}, objective "
-                   f"{rep['objective_log'][0][1]:.6g} -> {rep['objective_log'][-1][1]:.6g}")
+    _common.report("rounds", rep["iterations"], "", f"converged={rep['converged']} ({rep['stopped']}), objective "
+                   f"{rep['objective_log'][0][1]:.6g} -> {rep['objective_log'][-1][1]:.6g}; step (a) on "
+                   f"{rep['joint_vertices']} vertices in {rep['coarse_rounds']} rounds")
     return 0
 
 

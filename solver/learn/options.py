@@ -77,7 +77,8 @@ class LearnOptions:
     # ... stopping at this relative decrease
     other_scan_tol: float = _setting(1e-6, min=0.0)
     # step (a) (joints + poses) on about this many well-spread vertices, weighted so that their objective
-    # estimates the full one (solver.learn.coarse); weights and rest shape use all; 0: all vertices
+    # estimates the full one, on meshes of more than 4 x that (solver.learn.coarse); weights and rest shape
+    # use all; 0: all vertices
     joint_vertices: int = _setting(4000, min=0)
     # ... with the full gradient at the start of each step (the coarse-grid correction, solver.learn.coarse;
     # off: on the 53k-vertex MakeHuman it made the warm start worse, docs/learn_rig_solver.md)
