@@ -28,7 +28,8 @@ from .scans import add_axis_arguments, axis_props
 
 # LearnOptions field -> the flag that sets it (error messages name the flag the user typed)
 FLAGS = {"parts": "--parts", "alpha": "--alpha", "joint_prior": "--joint-prior", "max_iterations": "--iterations",
-         "seed": "--seed", "key_scans": "--key-scans", "workers": "--threads", "memory_limit_gb": "--memory-limit"}
+         "seed": "--seed", "key_scans": "--key-scans", "workers": "--threads", "memory_limit_gb": "--memory-limit",
+         "key_scan_budget": "--key-scan-budget"}
 
 
 def report_document(outcome) -> dict:
@@ -74,7 +75,8 @@ def _learn(args):
     """Read the scans and learn: ``(scan paths, solve.learn's outcome)``."""
     options = LearnOptions(parts=args.parts, alpha=args.alpha, symmetry=not args.no_symmetry,
                            max_iterations=args.iterations, seed=args.seed, key_scans=args.key_scans,
-                           workers=args.threads, joint_prior=args.joint_prior, memory_limit_gb=args.memory_limit)
+                           workers=args.threads, joint_prior=args.joint_prior, memory_limit_gb=args.memory_limit,
+                           key_scan_budget=args.key_scan_budget)
     options.validate()
     paths = _scan_paths(args.scans)
     matrix = inputs.files_matrix(paths, (args.forward, args.up))
@@ -124,6 +126,9 @@ def add_commands(sub):
     p.add_argument("--key-scans", type=int, default=default.key_scans,
                    help=f"learn the rig from at most this many scans (the most different poses) and fit the "
                         f"other scans' poses with it (default {default.key_scans}; 0: learn from every scan)")
+    p.add_argument("--key-scan-budget", type=int, default=default.key_scan_budget, metavar="N",
+                   help=f"on large meshes learn from at most N / vertices key scans, but at least 20 (default "
+                        f"{default.key_scan_budget}: 22 key scans for 13,380 vertices; 0: no such limit)")
     p.add_argument("--memory-limit", type=float, default=default.memory_limit_gb, metavar="GB",
                    help=f"memory budget of the run in GB (default {default.memory_limit_gb:g}: 80%% of the memory "
                         f"available when it starts); key scans that do not fit are left out (the run says so), "

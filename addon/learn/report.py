@@ -5,7 +5,7 @@ import numpy as np
 
 REPORT_PROPERTY = "articula_learn_report"       # armature ID property: the solver's report (JSON)
 REPORTED_OPTIONS = ("parts", "alpha", "symmetry", "max_iterations", "seed", "key_scans", "workers", "joint_prior",
-                    "memory_limit_gb")
+                    "memory_limit_gb", "key_scan_budget")
 
 
 def jsonable(x):
@@ -48,7 +48,7 @@ def summary_text(outcome) -> str:
     parts = [f"{k} {s[k]:.2f}" for k in ("mean", "median", "max") if k in s]
     text = "error (mm) " + ", ".join(parts) if parts else "no error statistics"
     notes = [parts_text(outcome.report), islands_text(outcome.report),
-             (outcome.report.get("memory") or {}).get("note", "")]
+             (outcome.report.get("memory") or {}).get("note", ""), outcome.report.get("key_scans_note", "")]
     return "; ".join([text] + [n for n in notes if n])
 
 

@@ -14,13 +14,16 @@ distance of the aligned subsample; starting from the first key, the scan farthes
 is added until there are K.  This picks the extreme poses first (the ones that pin joints and weights) and
 never two near-identical frames.  Deterministic; units are those of the input (metres).
 
-docs/learn_rig_solver.md has the accuracy and time measured with and without key scans.
+On large meshes the count is also held to a time budget, ``LearnOptions.key_scan_budget`` vertex-scans
+(:func:`time_budget_count`).  docs/learn_rig_solver.md has the accuracy and time measured with and
+without key scans.
 """
 import numpy as np
 
 from ..geometry.procrustes import fit_rigid
 
 SUBSAMPLE = 1000      # vertices compared per scan (evenly spaced indices)
+TIME_KEY_SCANS = 20   # the time budget never cuts the key scans below this many
 
 
 def aligned_features(scans, first=0, subsample=SUBSAMPLE):
@@ -54,3 +57,14 @@ def select_key_scans(scans, count, first=0):
         d = np.minimum(d, np.linalg.norm(f - f[j], axis=1))
         d[j] = -np.inf
     return np.sort(np.asarray(keys, dtype=np.int64))
+
+
+def time_budget_count(num_vertices, requested, budget):
+    """The key-scan count of a run on a mesh of ``num_vertices`` that asks for at most ``requested``: at
+    most ``budget`` vertex-scans, but never below TIME_KEY_SCANS nor above ``requested``.  ``requested``
+    0 (every scan, asked for) and ``budget`` 0 (no limit) leave ``requested`` as it is.  Every step of the
+    alternation costs about key scans x vertices, so this holds the learning time of a large mesh near
+    that of a 7,500-vertex one learned from 40 scans."""
+    if budget <= 0 or requested <= 0:
+        return requested
+    return min(requested, max(TIME_KEY_SCANS, int(budget // max(num_vertices, 1))))

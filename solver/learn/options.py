@@ -72,6 +72,9 @@ class LearnOptions:
     # learn from at most this many scans (the most different poses), then fit the others' poses;
     # 0: learn from every scan
     key_scans: int = _setting(40, min=0, max=100000)
+    # ... and, on large meshes, at most this many vertex-scans (key scans x vertices: the work of every
+    # step grows with it), but never fewer than TIME_KEY_SCANS; 0: no such limit
+    key_scan_budget: int = _setting(300000, min=0)
     # pose fit of each other scan (with key scans): at most this many LM iterations ...
     other_scan_iterations: int = _setting(3, min=0)
     # ... stopping at this relative decrease

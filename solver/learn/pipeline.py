@@ -37,7 +37,7 @@ from ..errors import ArticulaInputError
 from ..parallel import single_blas_thread
 from .islands import carry_islands, split_islands
 from .coarse import vertex_subset
-from .key_scans import select_key_scans
+from .key_scans import select_key_scans, time_budget_count
 from .memory import check_sizes
 from ..fit.least_squares import GainRatioDamping
 from .joints_poses import JointPoseProblem, optimise_joints_and_poses, relative_joint_prior
@@ -416,7 +416,9 @@ def _learn_rig(scans, faces, options, progress):
     timings = {key: 0.0 for key in ("initialisation", "joints_and_poses", "weights", "rest_vertices")}
     all_scans, faces, islands, memory = check_input(scans, faces, options)
     main_scans = all_scans[:, islands.main] if islands.others else all_scans
-    rest_index, keys, scans = _scans_to_learn_from(main_scans, options, memory.learned)
+    timed = time_budget_count(main_scans.shape[1], options.key_scans, options.key_scan_budget)
+    count = min(memory.learned, timed) if timed else memory.learned
+    rest_index, keys, scans = _scans_to_learn_from(main_scans, options, count)
     end = REPORT_START if len(keys) == len(all_scans) else REPORT_START - 0.1   # then the other scans' poses
     if progress is not None:
         progress(0.0, f"learning from {len(keys)} scans x {len(islands.main)} vertices"
@@ -444,6 +446,9 @@ def _learn_rig(scans, faces, options, progress):
         model, poses, sym = _without_empty_leaves(model, poses, sym, info)
 
     info["key_scans"] = keys.tolist()
+    if 0 < timed < min(options.key_scans, memory.learned, len(all_scans)):
+        info["key_scans_note"] = (f"learned from {timed} of {len(all_scans)} scans to hold the time of a "
+                                  f"{main_scans.shape[1]}-vertex mesh (key_scan_budget {options.key_scan_budget})")
     if len(keys) < len(all_scans):
         t0 = time.perf_counter()
         poses, info["other_scans"] = poses_of_other_scans(model, poses, main_scans, keys, options,

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from articula.solver.learn.key_scans import aligned_features, select_key_scans
+from articula.solver.learn.key_scans import TIME_KEY_SCANS, aligned_features, select_key_scans, time_budget_count
 from articula.solver.learn.pipeline import learn_rig
 from articula.solver.rig.model import Poses
 from articula.solver.fit.pose_fit import fit_poses
@@ -95,3 +95,24 @@ def test_other_scans_get_fitted_poses_as_good_as_the_keys(from_keys):
     assert np.all(np.sqrt(full.energy / scans.shape[1]) > 0.95 * rms[others])
     assert res.report["surface_error_mm"]["count"] == scans.shape[0] * scans.shape[1]
     assert "other_scans" in res.report["timings_s"]
+
+
+def test_time_budget_cuts_key_scans_of_large_meshes_only():
+    assert time_budget_count(5_000, 40, 300_000) == 40                 # small mesh: as asked
+    assert time_budget_count(13_380, 40, 300_000) == 22                # 300,000 / 13,380
+    assert time_budget_count(53_514, 40, 300_000) == TIME_KEY_SCANS    # never below the floor
+    assert time_budget_count(53_514, 12, 300_000) == 12                # never above the request
+    assert time_budget_count(53_514, 0, 300_000) == 0                  # every scan, asked for
+    assert time_budget_count(53_514, 40, 0) == 40                      # no budget
+
+
+def test_learning_under_a_time_budget_says_so():
+    """24 scans of the tube with a budget of 5 scans' worth: the floor of 20 key scans, the other 4 fitted,
+    and the report's note says why; without a budget all 24 are learned from."""
+    model, _, scans = hybrid_truth(M=24, seed=4)
+    V = scans.shape[1]
+    res = learn_rig(scans, model.faces, parts=8, max_iterations=0, key_scan_budget=V * 5)
+    assert len(res.report["key_scans"]) == TIME_KEY_SCANS and res.report["other_scans"]["scans"] == 4
+    assert "learned from 20 of 24 scans" in res.report["key_scans_note"]
+    res = learn_rig(scans, model.faces, parts=8, max_iterations=0, key_scan_budget=0)
+    assert len(res.report["key_scans"]) == 24 and "key_scans_note" not in res.report
