@@ -416,18 +416,19 @@ def _learn_rig(scans, faces, options, progress):
     timings = {key: 0.0 for key in ("initialisation", "joints_and_poses", "weights", "rest_vertices")}
     all_scans, faces, islands, memory = check_input(scans, faces, options)
     main_scans = all_scans[:, islands.main] if islands.others else all_scans
+    rest_index, keys, scans = _scans_to_learn_from(main_scans, options, memory.learned)
     timed = time_budget_count(main_scans.shape[1], options.key_scans, options.key_scan_budget)
-    count = min(memory.learned, timed) if timed else memory.learned
-    rest_index, keys, scans = _scans_to_learn_from(main_scans, options, count)
-    end = REPORT_START if len(keys) == len(all_scans) else REPORT_START - 0.1   # then the other scans' poses
+    learned = min(len(keys), timed) if timed else len(keys)
+    end = REPORT_START if learned == len(all_scans) else REPORT_START - 0.1   # then the other scans' poses
     if progress is not None:
-        progress(0.0, f"learning from {len(keys)} scans x {len(islands.main)} vertices"
+        progress(0.0, f"learning from {learned} scans x {len(islands.main)} vertices"
                       + (f" ({len(islands.others)} islands carried)" if islands.others else "")
                       + (f" ({memory.note()})" if memory.reduced else ""), None)
 
     t0 = time.perf_counter()
     model, poses, info, pairs = initialise(scans, islands.main_faces, options, _sub_progress(progress, 0.0, 0.1),
                                            int(np.searchsorted(keys, rest_index)))
+    keys, scans, poses = _within_time_budget(keys, scans, poses, learned, rest_index)
     info["rest_scan"] = rest_index
     timings["initialisation"] = time.perf_counter() - t0
     L = uniform_laplacian(islands.main_faces, len(scans[0]))
@@ -446,9 +447,10 @@ def _learn_rig(scans, faces, options, progress):
         model, poses, sym = _without_empty_leaves(model, poses, sym, info)
 
     info["key_scans"] = keys.tolist()
-    if 0 < timed < min(options.key_scans, memory.learned, len(all_scans)):
-        info["key_scans_note"] = (f"learned from {timed} of {len(all_scans)} scans to hold the time of a "
-                                  f"{main_scans.shape[1]}-vertex mesh (key_scan_budget {options.key_scan_budget})")
+    if 0 < timed < min(memory.learned, len(all_scans)):
+        info["key_scans_note"] = (f"learned from {timed} of {len(all_scans)} scans (the parts from "
+                                  f"{memory.learned}) to hold the time of a {main_scans.shape[1]}-vertex mesh "
+                                  f"(key_scan_budget {options.key_scan_budget})")
     if len(keys) < len(all_scans):
         t0 = time.perf_counter()
         poses, info["other_scans"] = poses_of_other_scans(model, poses, main_scans, keys, options,
@@ -486,6 +488,16 @@ def _without_empty_leaves(model, poses, sym, info):
     names = set(model.skeleton.names)
     info["mirror_pairs"] = [pr for pr in info.get("mirror_pairs", []) if set(pr) <= names]
     return model, poses, remap_pairs(sym, new_index)
+
+
+def _within_time_budget(keys, scans, poses, count, rest_index):
+    """``(keys, scans, poses)`` of the ``count`` most different of the key ``scans`` (rest scan included;
+    :func:`solver.learn.key_scans.select_key_scans`): the parts, skeleton and first poses come from all
+    key scans (a part count read from fewer poses misses segments), the alternation runs on these."""
+    if count >= len(keys):
+        return keys, scans, poses
+    sub = select_key_scans(scans, count, first=int(np.searchsorted(keys, rest_index)))
+    return keys[sub], scans[sub], Poses(poses.rotations[sub], poses.translations[sub], poses.scales[sub])
 
 
 def _scans_to_learn_from(all_scans, options, count=None):
