@@ -21,6 +21,7 @@ error (measured 0.3-0.65 on MakeHuman; docs/learn_rig_solver.md), while a segmen
 leaves rigid halves (0.8-0.96) that turn by tens of degrees.  Noise is never two rigid motions.
 """
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -50,7 +51,7 @@ class Trial:
         return (self.gain >= SPLIT_GAIN and self.angle_deg >= SPLIT_ANGLE_DEG
                 and min(self.halves) >= min_half and self.determined)
 
-    @property
+    @cached_property
     def determined(self):
         """Both halves have enough sample points, not on a line: their rotations are determined."""
         x = self.two.points.rest_points()
@@ -134,7 +135,8 @@ def articulated_parts(rest, scans, faces, k_max=20, seed=0, progress=None):
             reason = (f"no part's residual shows two rigid motions (a split removing >= {SPLIT_GAIN:.0%} of a "
                       f"part's error, halves turning >= {SPLIT_ANGLE_DEG:g} deg)")
             break
-        best = max(trials, key=lambda t: t.gain * part_errors(cl)[t.part])
+        errors = part_errors(cl)
+        best = max(trials, key=lambda t: t.gain * errors[t.part])
         splits.append(best.as_dict())
         split_part(cl, best.mask, best.two, ITERATIONS)
     info = dict(curve_mm=(np.asarray(curve) * 1e3).tolist(), curve_parts=int(k0), splits=splits,

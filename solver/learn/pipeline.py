@@ -218,9 +218,9 @@ def _start_from_segmentation(rest, scans, faces, options, progress, info):
     mirror = mirror_map(rest, scans, faces) if symmetry and k > 1 else None
     labels, rms = segment(rest, scans, faces, k, seed=seed, mirror=False if mirror is None else mirror,
                           progress=_sub_progress(progress, 0.35, 0.8), start=start)
-    k = int(labels.max()) + 1               # a chosen count loses the parts too small at full resolution
-    if start is not None and k < len(start[1][0]):
-        info["part_count"].update(parts=k, dropped_at_full_resolution=len(start[1][0]) - k)
+    chosen, k = k, int(labels.max()) + 1    # a chosen count loses the parts too small at full resolution
+    if k < chosen:
+        info["part_count"].update(parts=k, dropped_at_full_resolution=chosen - k)
     info.update(parts=k, segmentation_rms_mm=rms * 1e3)
     say(0.8, f"building the skeleton of {k} parts")
     R, t = fit_parts(rest, scans, labels, k)
@@ -403,7 +403,7 @@ def _learn_welded(scans, faces, options, progress):
             or not np.issubdtype(f.dtype, np.integer) or not np.issubdtype(arr.dtype, np.number)
             or not np.isfinite(arr).all()):
         return _learn_rig(scans, faces, options, progress)
-    seams = Seams.of(np.asarray(arr, dtype=np.float64))
+    seams = Seams.of(arr)
     if seams is None:
         return _learn_rig(arr, f, options, progress)
     return seams.expand(_learn_rig(*seams.weld(arr, f), options, progress), f)

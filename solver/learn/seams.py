@@ -28,13 +28,14 @@ class Seams:
 
     @classmethod
     def of(cls, scans, tol=WELD_TOL):
-        """The seams of finite ``scans (M,V,3)``, or None when no two vertices coincide in every scan."""
-        rest = scans[0]
+        """The seams of finite ``scans (M,V,3)`` (any float type; only the candidate pairs are converted),
+        or None when no two vertices coincide in every scan."""
+        rest = np.asarray(scans[0], dtype=np.float64)
         eps = tol * max(float(np.linalg.norm(np.ptp(rest, axis=0))), 1e-300)
         pairs = cKDTree(rest).query_pairs(eps, output_type="ndarray")
         if len(pairs):
-            gap = np.abs(scans[:, pairs[:, 0]] - scans[:, pairs[:, 1]]).max(axis=(0, 2))
-            pairs = pairs[gap <= eps]
+            a, b = (np.asarray(scans[:, pairs[:, i]], dtype=np.float64) for i in (0, 1))
+            pairs = pairs[np.abs(a - b).max(axis=(0, 2)) <= eps]
         if not len(pairs):
             return None
         V = rest.shape[0]

@@ -67,10 +67,10 @@ def shape_votes(rest, labels, order, head_of_part, weight=1):
     k = len(order)
     pts = [rest[labels == p] for p in range(k)]
     ext = [_principal(x)[2] if len(x) >= 4 else None for x in pts]
-    score = np.full((k, k), np.inf)
+    score, count = np.full((k, k), np.inf), [len(x) for x in pts]
     for a in range(k):
         for b in range(a + 1, k):
-            if ext[a] is None or ext[b] is None or min(len(pts[a]), len(pts[b])) < SIZE_RATIO * max(len(pts[a]), len(pts[b])):
+            if ext[a] is None or ext[b] is None or min(count[a], count[b]) < SIZE_RATIO * max(count[a], count[b]):
                 continue
             if np.any(np.abs(ext[a] - ext[b]) > EXTENT_TOL * np.maximum(ext[a], ext[b])):
                 continue

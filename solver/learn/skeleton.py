@@ -230,12 +230,12 @@ def build_skeleton(rest, labels, faces, k, part_R=None, part_t=None, symmetry=Tr
         votes = part_pair_votes(rest, labels, k, mirror, symmetry_scans, max_symmetry_scans)
         if not map_covers(mirror):                     # no topological map: add the structural pairs
             shapes = 1 + (0 if symmetry_scans is None else min(len(symmetry_scans), max_symmetry_scans))
-            shaped = shape_votes(rest, labels, order, heads[bone_of_part], weight=shapes)
+            head_of_part = heads[bone_of_part]
+            shaped = shape_votes(rest, labels, order, head_of_part, weight=shapes)
             trusted = {(min(key), max(key)) for key in shaped}
-            extra = [chain_votes(rest, labels, order, parent_part, heads[bone_of_part], sizes, weight=shapes),
-                     shaped]
-            for key, n in ((key, n) for more in extra for key, n in more.items()):
-                votes[key] = votes.get(key, 0) + n
+            for more in (chain_votes(rest, labels, order, parent_part, head_of_part, sizes, weight=shapes), shaped):
+                for key, n in more.items():
+                    votes[key] = votes.get(key, 0) + n
         pairs = _equal_pairs(votes, rest, labels, tree, heads, trusted)
     tails = _tails(rest, labels, order, parents, heads, {x for pr in pairs for x in pr})
     names = _names(k, pairs)
