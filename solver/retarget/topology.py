@@ -5,7 +5,7 @@ When a source and a target model share their mesh (same vertex count and faces, 
 vertex v of the other), the target's pose in frame n is fitted to the source's posed vertices through
 that one-to-one correspondence instead of copying joint angles:
 
-    θ_n = argmin_θ Σ_v ‖hybrid_skin(target, θ)_v − y_n,v‖²,   y_n = c_t + r (hybrid_skin(source, θ_src,n) − c_s)
+    θ_n = argmin_θ Σ_v ‖hybrid_skin(target, θ)_v − y_n,v‖²,   y_n = hybrid_skin(source, θ_src,n)
 
 over the target's root translation and bone rotations (its rest shape, skin and joints stay fixed), by
 the Levenberg–Marquardt pose fit :func:`solver.fit.pose_fit.fit_poses`.  By default ``y_n`` are the
@@ -14,7 +14,7 @@ target to overlap the source, root translation included, which is the point of t
 root translation is not copied.  When the bodies differ in size, an optional ratio ``r`` (target height
 / source height, or any number) maps them about the floor points ``c`` below each model's root joint
 (world Z up), so a bigger target need not crouch into the smaller source's silhouette and its root
-travels r times as far.
+travels r times as far: ``y_n = c_t + r (hybrid_skin(source, θ_src,n) − c_s)``.
 
 Copying parameters (:func:`copy_parameters`: bone rotations by name, root translation times r) is the
 naive baseline and the fit's first initial guess; each frame starts from the better (lower energy) of
@@ -171,7 +171,8 @@ def retarget_topology(source_model, source_poses, target_model, scale=None,
     rest = _mapped(source_model, target_model, scale, source_model.rest_vertices)
     report = dict(
         rms_fit=fit.rms, rms_copy=_rms(target_model, copied, y, groups), from_copy=from_copy,
-        iterations=fit.iterations, converged=fit.converged, root_offset=np.linalg.norm(fit.poses.translations - copied.translations, axis=1),
+        iterations=fit.iterations, converged=fit.converged,
+        root_offset=np.linalg.norm(fit.poses.translations - copied.translations, axis=1),
         rms_rest=float(np.sqrt(((rest - target_model.rest_vertices) ** 2).sum(axis=1).mean())), scale=r,
         bones_copied=int((bone_map(source_model.skeleton, target_model.skeleton) >= 0).sum()),
         frames=len(source_poses), seconds=time.perf_counter() - start)
