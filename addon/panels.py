@@ -98,6 +98,7 @@ class ARTICULA_PT_animate(_ArticulaPanel, bpy.types.Panel):
         col = self.layout.column(align=True)
         _button(col, "articula.bake_poses", "Bake Poses to Action…", 'ACTION')
         _button(col, "articula.read_action", "Read Action to Poses…", 'FILE_TICK')
+        _button(col, "articula.bind_scan", "Bind Scan to Rig", 'MOD_MESHDEFORM')
 
 
 class ARTICULA_PT_track(_ArticulaPanel, bpy.types.Panel):
