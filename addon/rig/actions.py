@@ -104,7 +104,7 @@ def _rig_objects(arm) -> list:
     return [arm, *arm.children_recursive, *widgets]
 
 
-def _fcurve_values(fc, frames) -> np.ndarray:
+def fcurve_values(fc, frames) -> np.ndarray:
     """Values of F-curve ``fc`` at integer ``frames`` (read straight from the keys when they match)."""
     n = len(fc.keyframe_points)
     if n == len(frames):
@@ -143,7 +143,7 @@ def read_action(arm, names, action=None, frame_start=None, frame_end=None) -> Po
 
     def values(bone, prop, index, rest):
         fc = curves.get((bone, prop, index))
-        return np.full(len(frames), rest) if fc is None else _fcurve_values(fc, frames)
+        return np.full(len(frames), rest) if fc is None else fcurve_values(fc, frames)
 
     rot = np.stack([np.stack([values(n, "rotation_quaternion", i, float(i == 0)) for i in range(4)], -1)
                     for n in names], axis=1)

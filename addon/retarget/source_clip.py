@@ -1,0 +1,162 @@
+"""The motion of a retargeting source as armature-space pose matrices ``(F, J, 4, 4)``.
+
+Fast path: the active action's F-curves are evaluated at every integer frame of its range (keys read
+directly when they sit on every frame) and chained with Blender's pose rule in numpy; channels without an
+F-curve hold the pose bone's current value; Euler (any order), quaternion and axis-angle rotations and
+location/scale on any bone are read.  When Blender's evaluation would differ from that rule (bone
+constraints, drivers, bones that do not inherit rotation or scale, NLA strips playing) the pose is read
+from the evaluated scene frame by frame instead, which is exact but slower; the scene's current frame
+is restored.
+"""
+import bpy
+import numpy as np
+
+from ...solver.errors import ArticulaInputError
+from ...solver.retarget.armature import forward
+from .. import compat
+from ..rig.actions import action_frame_range, fcurve_values
+from .armatures import constrained_bones, driven_bones
+
+_AXES = {"X": 0, "Y": 1, "Z": 2}
+
+
+def _axis_rotation(axis: int, angle: np.ndarray) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    R = np.zeros(angle.shape + (3, 3))
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    R[..., axis, axis] = 1.0
+    R[..., i, i], R[..., j, j], R[..., i, j], R[..., j, i] = c, c, -s, s
+    return R
+
+
+def euler_to_matrix(angles: np.ndarray, order: str) -> np.ndarray:
+    """(..., 3, 3) of Blender Euler angles ``(..., 3)`` (radians, X/Y/Z components) in rotation ``order``
+    (e.g. 'XYZ': X is applied first, R = Rz·Ry·Rx)."""
+    R = np.broadcast_to(np.eye(3), angles.shape[:-1] + (3, 3)).copy()
+    for letter in order:
+        a = _AXES[letter]
+        R = _axis_rotation(a, angles[..., a]) @ R
+    return R
+
+
+def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) of quaternions ``(..., 4)`` (w, x, y, z), normalised first (Blender does)."""
+    q = q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-12)
+    w, x, y, z = np.moveaxis(q, -1, 0)
+    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+                     np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+                     np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], -2)
+
+
+def axis_angle_to_matrix(v: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) of Blender axis-angle values ``(..., 4)`` (angle, x, y, z)."""
+    axis = v[..., 1:] / np.maximum(np.linalg.norm(v[..., 1:], axis=-1, keepdims=True), 1e-12)
+    half = v[..., :1] / 2
+    return quaternion_to_matrix(np.concatenate([np.cos(half), np.sin(half) * axis], -1))
+
+
+_ROTATION_PROP = {'QUATERNION': ("rotation_quaternion", 4), 'AXIS_ANGLE': ("rotation_axis_angle", 4)}
+
+
+def active_action(ob):
+    """The action ``ob`` plays, or a clear error when it has none."""
+    ad = ob.animation_data
+    if ad is None or ad.action is None:
+        strips = ad is not None and any(t.strips for t in ad.nla_tracks)
+        hint = " (it has NLA strips: make the one to retarget the active action)" if strips else \
+            " (import a BVH with Blender's importer, bake a pose, or pick an animated rig)"
+        raise ArticulaInputError(f"source {ob.name!r} has no active action{hint}")
+    return ad.action
+
+
+def needs_evaluation(ob) -> list:
+    """Why the source must be read from the evaluated scene ([] when the F-curves say it all)."""
+    why = []
+    if constrained_bones(ob):
+        why.append("bone constraints")
+    if driven_bones(ob):
+        why.append("drivers")
+    if any(not b.use_inherit_rotation or b.inherit_scale != 'FULL' for b in ob.data.bones):
+        why.append("bones that do not inherit rotation or scale")
+    ad = ob.animation_data
+    if ad and any(not t.mute and t.strips for t in ad.nla_tracks):
+        why.append("NLA strips")
+    return why
+
+
+def frame_range(ob, action):
+    """(first, last) integer frames of ``action`` on ``ob`` (its manual range if set, else its keys)."""
+    if getattr(action, "use_frame_range", False):
+        return int(round(action.frame_range[0])), int(round(action.frame_range[1]))
+    curves = compat.object_action_fcurves(ob, action)
+    if not curves:
+        raise ArticulaInputError(f"the action {action.name!r} of {ob.name!r} has no F-curves")
+    return action_frame_range(curves)
+
+
+def _channels(ob, action, frames):
+    """Per bone: ``(location (F,3), rotation matrices (F,3,3), scale (F,3))`` from F-curves or current values."""
+    curves = {}
+    for fc in compat.object_action_fcurves(ob, action):
+        curves[(fc.data_path, fc.array_index)] = fc
+    F = len(frames)
+
+    def read(pb, prop, n):
+        path = f'pose.bones["{bpy.utils.escape_identifier(pb.name)}"].{prop}'
+        now = list(getattr(pb, prop))
+        return np.stack([fcurve_values(curves[(path, i)], frames) if (path, i) in curves
+                         else np.full(F, float(now[i])) for i in range(n)], -1)
+    out = []
+    for pb in ob.pose.bones:
+        mode = pb.rotation_mode
+        if mode in _ROTATION_PROP:
+            prop, n = _ROTATION_PROP[mode]
+            values = read(pb, prop, n)
+            R = quaternion_to_matrix(values) if mode == 'QUATERNION' else axis_angle_to_matrix(values)
+        else:
+            R = euler_to_matrix(read(pb, "rotation_euler", 3), mode)
+        out.append((pb.name, read(pb, "location", 3), R, read(pb, "scale", 3)))
+    return {name: (loc, R, scale) for name, loc, R, scale in out}
+
+
+def pose_from_fcurves(ob, arm, action, frames) -> np.ndarray:
+    """(F, J, 4, 4) armature-space pose matrices of rest armature ``arm`` (bone order) at ``frames``."""
+    ch = _channels(ob, action, frames)
+    local = np.zeros((len(frames), len(arm.bones), 4, 4))
+    for b, name in enumerate(arm.bones):
+        loc, R, scale = ch[name]
+        local[:, b, :3, :3] = R * scale[:, None, :]
+        local[:, b, :3, 3] = loc
+        local[:, b, 3, 3] = 1.0
+    return forward(arm, local)
+
+
+def pose_from_scene(ob, arm, frames, progress=None) -> np.ndarray:
+    """(F, J, 4, 4) armature-space pose matrices read from the evaluated scene at ``frames``."""
+    scene = bpy.context.scene
+    keep = scene.frame_current
+    bones = [ob.pose.bones[n] for n in arm.bones]
+    out = np.empty((len(frames), len(bones), 4, 4))
+    try:
+        for k, f in enumerate(frames):
+            scene.frame_set(int(f))
+            for b, pb in enumerate(bones):
+                out[k, b] = np.array(pb.matrix, dtype=np.float64)
+            if progress is not None and k % 50 == 0:
+                progress(k / len(frames), f"reading the source's frame {f}")
+    finally:
+        scene.frame_set(keep)
+    return out
+
+
+def read_clip(ob, arm, progress=None):
+    """``(frames (F,), pose (F, J, 4, 4), how)`` of source object ``ob``'s active action."""
+    action = active_action(ob)
+    first, last = frame_range(ob, action)
+    if last < first:
+        raise ArticulaInputError(f"the action {action.name!r} has an empty frame range")
+    frames = np.arange(first, last + 1)
+    why = needs_evaluation(ob)
+    if why:
+        return frames, pose_from_scene(ob, arm, frames, progress), "evaluated (" + ", ".join(why) + ")"
+    return frames, pose_from_fcurves(ob, arm, action, frames), "F-curves"

@@ -1,0 +1,88 @@
+"""Rig presets: which bone of a known rig family plays which role (:mod:`.roles`).
+
+A preset is a JSON file ``{"format": "articula-rig-preset", "version": 1, "name", "label",
+"description", "roles": {role: bone name}}``; the built-in ones live in ``presets/`` beside this module
+(CMU BVH in both naming styles, Mixamo, Rigify deform and FK-control bones, MPFB/MakeHuman ``default``,
+the Unreal mannequin = MPFB ``game_engine``; MPFB ``cmu_mb`` uses the CMU names).  Articula's own rigs
+name their bones by role, which is the ``articula`` preset.
+
+Bone names are compared without a namespace prefix (``mixamorig:Hips``, ``mixamorig1:Hips`` and
+``Armature|Hips`` all read as ``Hips``).
+"""
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..errors import ArticulaInputError
+from .roles import CORE, ROLES
+
+FORMAT = "articula-rig-preset"
+_DIR = Path(__file__).with_name("presets")
+_NAMESPACE = re.compile(r"^.*[:|]")
+
+
+@dataclass(frozen=True)
+class RigPreset:
+    name: str
+    label: str
+    description: str
+    roles: dict            # role -> bone name (namespace-free)
+
+
+def strip_namespace(bone: str) -> str:
+    """``bone`` without an FBX/Mixamo namespace (``mixamorig:Hips`` → ``Hips``)."""
+    return _NAMESPACE.sub("", bone)
+
+
+def parse_preset(data: dict, where: str) -> RigPreset:
+    """A :class:`RigPreset` from a decoded JSON object; ``where`` names it in errors."""
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise ArticulaInputError(f"{where}: not an Articula rig preset (expected \"format\": \"{FORMAT}\")")
+    roles = data.get("roles")
+    if not isinstance(roles, dict) or not roles:
+        raise ArticulaInputError(f"{where}: the preset has no \"roles\" table")
+    unknown = sorted(set(roles) - set(ROLES))
+    if unknown:
+        raise ArticulaInputError(f"{where}: unknown roles {', '.join(unknown[:5])} (known: {', '.join(ROLES[:8])}, …)")
+    if not all(isinstance(b, str) and b for b in roles.values()):
+        raise ArticulaInputError(f"{where}: every role needs a bone name")
+    name = str(data.get("name") or Path(where).stem)
+    return RigPreset(name, str(data.get("label") or name), str(data.get("description", "")), dict(roles))
+
+
+def builtin_presets() -> list:
+    """The presets shipped with Articula, the ``articula`` role-name preset first."""
+    out = [RigPreset("articula", "Articula (role names)", "Rigs learned or built by Articula",
+                     {r: r for r in ROLES})]
+    for path in sorted(_DIR.glob("*.json")):
+        out.append(parse_preset(json.loads(path.read_text(encoding="utf-8")), path.name))
+    return out
+
+
+def match(preset: RigPreset, bones) -> dict:
+    """``{role: bone}`` of the roles of ``preset`` that armature ``bones`` (names) has."""
+    by_plain = {}
+    for b in bones:
+        by_plain.setdefault(strip_namespace(b), b)
+    return {role: by_plain[name] for role, name in preset.roles.items() if name in by_plain}
+
+
+def coverage(preset: RigPreset, found: dict) -> float:
+    """Share of the core roles the preset names that were found (0..1)."""
+    wanted = [r for r in CORE if r in preset.roles]
+    return sum(r in found for r in wanted) / max(len(wanted), 1)
+
+
+def best_preset(bones, minimum: float = 0.6):
+    """``(preset, {role: bone})`` of the built-in preset that fits ``bones`` best, or ``(None, {})``
+    when none covers at least ``minimum`` of its core roles."""
+    best, best_found, best_key = None, {}, (minimum - 1e-9, 0)
+    for preset in builtin_presets():
+        found = match(preset, bones)
+        key = (coverage(preset, found), len(found))
+        if key > best_key:
+            best, best_found, best_key = preset, found, key
+    return best, best_found
