@@ -112,4 +112,32 @@ class ARTICULA_PT_track(_ArticulaPanel, bpy.types.Panel):
         _button(col, "articula.track", "Track Captures…", 'CON_ARMATURE')
 
 
-classes = (ARTICULA_PT_main, ARTICULA_PT_import, ARTICULA_PT_rig, ARTICULA_PT_animate, ARTICULA_PT_track)
+class ARTICULA_PT_retarget(_ArticulaPanel, bpy.types.Panel):
+    bl_label = "Retarget"
+    bl_parent_id = "ARTICULA_PT_main"
+
+    def draw(self, context):
+        state = getattr(context.scene, "articula_retarget", None)
+        if state is None:
+            return
+        col = self.layout.column(align=True)
+        col.prop(state, "source")
+        col.prop(state, "target")
+        row = col.row(align=True)
+        _button(row, "articula.retarget_find_mapping", "Find Mapping", 'VIEWZOOM')
+        _button(row, "articula.retarget_load_mapping", "", 'FILEBROWSER')
+        _button(row, "articula.retarget_save_mapping", "", 'FILE_TICK')
+        if len(state.rows):
+            if state.found:
+                col.label(text=state.found, icon='INFO')
+            col.template_list("ARTICULA_UL_roles", "", state, "rows", state, "active_row", rows=6)
+        op = _button(col, "articula.retarget", "Retarget Action", 'ACTION_TWEAK')
+        if op is not None:
+            op.mapping = 'LIST' if len(state.rows) else 'AUTO'
+        op = _button(col, "articula.retarget", "Retarget by Shared Mesh", 'MOD_DATA_TRANSFER')
+        if op is not None:
+            op.mapping = 'TOPOLOGY'
+
+
+classes = (ARTICULA_PT_main, ARTICULA_PT_import, ARTICULA_PT_rig, ARTICULA_PT_animate, ARTICULA_PT_track,
+           ARTICULA_PT_retarget)

@@ -59,7 +59,7 @@ def retarget(context, source_ob, target_ob, mapping: Mapping | None = None, opti
     src, tgt = read_rest(source_ob), read_rest(target_ob)
     options = options or RetargetOptions()
     options.fps = context.scene.render.fps / context.scene.render.fps_base
-    frames, pose, how = read_clip(source_ob, src)
+    frames, pose, how = read_clip(source_ob, src, [s for s, _ in mapping.pairs().values()])
     result = retarget_clip(src, tgt, mapping, pose, options)
     with scene_guard():
         action = write_clip(target_ob, tgt, result, frames,

@@ -69,14 +69,27 @@ def active_action(ob):
     return ad.action
 
 
-def needs_evaluation(ob) -> list:
-    """Why the source must be read from the evaluated scene ([] when the F-curves say it all)."""
+def _chains(ob, bones) -> set:
+    """``bones`` and all their ancestors (the bones whose pose decides where ``bones`` are)."""
+    out = set()
+    for name in bones:
+        b = ob.data.bones.get(name)
+        while b is not None and b.name not in out:
+            out.add(b.name)
+            b = b.parent
+    return out
+
+
+def needs_evaluation(ob, bones=None) -> list:
+    """Why the source must be read from the evaluated scene ([] when the F-curves say it all); only the
+    ``bones`` that matter (the mapped ones and their ancestors; default: all) are looked at."""
+    relevant = _chains(ob, bones) if bones is not None else {b.name for b in ob.data.bones}
     why = []
-    if constrained_bones(ob):
+    if constrained_bones(ob, relevant):
         why.append("bone constraints")
-    if driven_bones(ob):
+    if set(driven_bones(ob)) & relevant:
         why.append("drivers")
-    if any(not b.use_inherit_rotation or b.inherit_scale != 'FULL' for b in ob.data.bones):
+    if any((not b.use_inherit_rotation or b.inherit_scale != 'FULL') and b.name in relevant for b in ob.data.bones):
         why.append("bones that do not inherit rotation or scale")
     ad = ob.animation_data
     if ad and any(not t.mute and t.strips for t in ad.nla_tracks):
@@ -149,14 +162,15 @@ def pose_from_scene(ob, arm, frames, progress=None) -> np.ndarray:
     return out
 
 
-def read_clip(ob, arm, progress=None):
-    """``(frames (F,), pose (F, J, 4, 4), how)`` of source object ``ob``'s active action."""
+def read_clip(ob, arm, bones=None, progress=None):
+    """``(frames (F,), pose (F, J, 4, 4), how)`` of source object ``ob``'s active action; ``bones``: the
+    mapped bones (constraints or drivers elsewhere do not force the slow evaluated path)."""
     action = active_action(ob)
     first, last = frame_range(ob, action)
     if last < first:
         raise ArticulaInputError(f"the action {action.name!r} has an empty frame range")
     frames = np.arange(first, last + 1)
-    why = needs_evaluation(ob)
+    why = needs_evaluation(ob, bones)
     if why:
         return frames, pose_from_scene(ob, arm, frames, progress), "evaluated (" + ", ".join(why) + ")"
     return frames, pose_from_fcurves(ob, arm, action, frames), "F-curves"

@@ -107,3 +107,19 @@ def rest_world(arm: ArmatureRest):
     """World rest rotations ``(J, 3, 3)`` and heads ``(J, 3)``."""
     R, h = world_pose(arm, arm.rest[None])
     return R[0], h[0]
+
+
+def subset(arm: ArmatureRest, keep) -> ArmatureRest:
+    """The armature of the bones where ``keep (J,)`` is true; a kept bone's parent becomes its nearest kept
+    ancestor (roles are then found on, e.g., a rig's control bones without its helper bones)."""
+    keep = np.asarray(keep, dtype=bool)
+    new_index = np.cumsum(keep) - 1
+    parents = []
+    for b in np.flatnonzero(keep):
+        p = arm.parents[b]
+        while p >= 0 and not keep[p]:
+            p = arm.parents[p]
+        parents.append(int(new_index[p]) if p >= 0 else -1)
+    idx = np.flatnonzero(keep)
+    return ArmatureRest(arm.name, [arm.bones[i] for i in idx], np.array(parents, dtype=np.int64), arm.rest[idx],
+                        arm.tails[idx], arm.connected[idx], arm.world)

@@ -12,9 +12,11 @@ from dataclasses import dataclass, field
 
 from ..errors import ArticulaInputError
 from . import humanoid, presets
+from .armature import subset
 from .roles import CORE, ROLES, ordered
 
 FORMAT = "articula-retarget-mapping"
+HELPER_PREFIXES = ("SW-", "TW-", "NEUTRAL", "MCH-", "ORG-", "VIS_", "WGT-")   # Articula and Rigify helpers
 
 
 @dataclass
@@ -28,9 +30,9 @@ class RoleFinding:
 
 def auto_roles(arm) -> RoleFinding:
     """Roles of armature ``arm`` (:class:`~.armature.ArmatureRest`): the best built-in preset, completed
-    (or replaced, for unknown rigs) by topology/geometry inference."""
+    (or replaced, for unknown rigs) by topology/geometry inference on the bones that are not helpers."""
     preset, found = presets.best_preset(arm.bones)
-    guessed = humanoid.infer_roles(arm)
+    guessed = humanoid.infer_roles(subset(arm, [not b.startswith(HELPER_PREFIXES) for b in arm.bones]))
     roles = dict(found)
     taken = set(roles.values())
     inferred = []

@@ -1,0 +1,102 @@
+"""Skeleton retargeting (solver.retarget.solve / directions / root_motion): exact segment directions
+under different rest poses, rolls, proportions, facings and twist splits; identical rigs reproduce the
+source's channels; the root travel scales with the leg ratio; refusals."""
+import numpy as np
+import pytest
+
+from articula.solver.errors import ArticulaInputError
+from articula.solver.retarget import directions, metrics
+from articula.solver.retarget.armature import forward, local_matrices, world_pose
+from articula.solver.geometry.rotations import quat_to_matrix
+from articula.solver.retarget.mapping import Mapping
+from articula.solver.retarget.solve import RetargetOptions, retarget_clip
+
+from .humanoids import humanoid, random_clip
+
+
+def _target_pose(target, result):
+    """The target's world rotations and heads from the result's channels (forward kinematics)."""
+    loc = np.zeros(result.quaternions.shape[:2] + (3,))
+    loc[:, result.root_bone] = result.root_locations
+    return world_pose(target, forward(target, local_matrices(quat_to_matrix(result.quaternions), loc)))
+
+
+def _run(source, src_roles, target, tgt_roles, frames=25, seed=0, **opts):
+    clip = random_clip(source, frames, seed=seed)
+    mapping = Mapping.from_roles(src_roles, tgt_roles)
+    result = retarget_clip(source, target, mapping, clip, RetargetOptions(**opts))
+    return clip, mapping, result
+
+
+def test_identical_rigs_reproduce_the_source_channels():
+    rng = np.random.default_rng(3)
+    source, roles = humanoid(rng=rng)
+    clip, _, result = _run(source, roles, source, roles)
+    _, heads_s = world_pose(source, clip)
+    R, heads_t = _target_pose(source, result)
+    assert np.abs(heads_t - heads_s).max() < 1e-9
+    R_s, _ = world_pose(source, clip)
+    assert np.abs(R - R_s).max() < 1e-9
+
+
+@pytest.mark.parametrize("twist,clavicle,girdle", [(False, True, False), (True, False, True), (True, True, True)])
+def test_segments_follow_the_source_across_rest_pose_roll_scale_and_facing(twist, clavicle, girdle):
+    """T-pose source, A-pose target (other rolls, proportions, bone splits, facing, units): every mapped
+    segment points exactly where the source's points."""
+    rng = np.random.default_rng(5)
+    source, src_roles = humanoid(1.0, 0.0, rng=rng, world_scale=17.0, name="bvh")
+    target, tgt_roles = humanoid(1.85, 45.0, twist, clavicle, girdle, rng=rng, yaw_deg=160.0, offset=(3, 1, 0),
+                                 names=lambda r: "tgt_" + r.replace(".", "_"))
+    clip, mapping, result = _run(source, src_roles, target, tgt_roles)
+    _, heads_s = world_pose(source, clip)
+    _, heads_t = _target_pose(target, result)
+    segs = directions.plan_segments(source, target, mapping.pairs())
+    angles = metrics.segment_angles(segs, heads_s, heads_t)
+    assert angles.shape[1] >= 14
+    assert angles.max() < 1e-5
+
+
+def test_twist_follows_the_source_bone():
+    """Same rest directions, other rolls: each mapped bone turns by the source bone's world rotation."""
+    source, roles = humanoid(rng=np.random.default_rng(1))
+    target, _ = humanoid(rng=np.random.default_rng(2))
+    clip, mapping, result = _run(source, roles, target, roles)
+    R_s, _ = world_pose(source, clip)
+    R_t, _ = _target_pose(target, result)
+    for role, (s, t) in mapping.pairs().items():
+        i, j = source.index[s], target.index[t]
+        delta_s = R_s[:, i] @ source.rest[i, :3, :3].T
+        delta_t = R_t[:, j] @ target.rest[j, :3, :3].T
+        assert np.abs(delta_s - delta_t).max() < 1e-9, role
+
+
+def test_root_travel_scales_with_the_leg_ratio_and_in_place_removes_it():
+    source, roles = humanoid(1.0)
+    target, _ = humanoid(1.6)
+    clip, mapping, result = _run(source, roles, target, roles, frames=60)
+    assert result.ratio == pytest.approx(1.6, rel=1e-9)
+    _, heads_s = world_pose(source, clip)
+    _, heads_t = _target_pose(target, result)
+    hips = source.index["hips"]
+    assert metrics.travel(heads_t[:, hips]) == pytest.approx(1.6 * metrics.travel(heads_s[:, hips]), rel=1e-9)
+    assert metrics.vertical_range(heads_t[:, hips]) == pytest.approx(1.6 * metrics.vertical_range(heads_s[:, hips]))
+    _, _, still = _run(source, roles, target, roles, frames=60, in_place=True)
+    _, heads_p = _target_pose(target, still)
+    assert metrics.travel(heads_p[:, hips]) < 0.3 * metrics.travel(heads_t[:, hips])
+
+
+def test_missing_roles_and_bad_clips_are_refused():
+    source, roles = humanoid()
+    target, tgt_roles = humanoid()
+    clip = random_clip(source, 3)
+    no_legs = {r: b for r, b in tgt_roles.items() if not r.startswith("shin")}
+    with pytest.raises(ArticulaInputError, match="shin.L, shin.R"):
+        retarget_clip(source, target, Mapping.from_roles(roles, no_legs), clip)
+    bad = clip.copy()
+    bad[1, 3, 0, 0] = np.nan
+    with pytest.raises(ArticulaInputError, match="NaN"):
+        retarget_clip(source, target, Mapping.from_roles(roles, tgt_roles), bad)
+    with pytest.raises(ArticulaInputError, match="frames"):
+        retarget_clip(source, target, Mapping.from_roles(roles, tgt_roles), clip[:, :4])
+    with pytest.raises(ArticulaInputError, match="does not have"):
+        retarget_clip(source, target, Mapping.from_roles(roles, {**tgt_roles, "head": "nope"}), clip)
