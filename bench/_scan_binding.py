@@ -10,7 +10,9 @@ interpolated normal) is known exactly.
 Lines printed (``scan_binding_lines``): bind time; time per frame of the depsgraph with and without
 the scan; error at the bind pose and under a rigid motion of the rig (relative to the scan's size);
 for offset shells d = -1 cm ... 10 cm the Surface Deform result against the glued reference after a
-second pose (median / 95th percentile / max in mm); and the tube body (19 separate tubes, touching at
+second pose (median / 95th percentile / max in mm), next to the same gluing done in numpy with the
+closest triangle and the face normal, and each shell's rigid-motion error; the bytes per scan vertex
+that the binding adds to a saved .blend; and the tube body (19 separate tubes, touching at
 the joints) bound at rest, where vertices near another piece follow it.
 
 Usage: ~/.cache/articula/venv-bpy52/bin/python bench/_scan_binding.py [--picture docs/images/scan_binding.png]
@@ -28,12 +30,16 @@ import _common  # noqa: E402
 import numpy as np  # noqa: E402
 
 
+PKG = []
+
+
 def _addon():
     os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="articula_bench_"))
     import bpy
     sys.path.insert(0, _common.REPO)
     import batch
-    return bpy, importlib.import_module(batch.enable_addon(bpy))
+    PKG[:] = [importlib.import_module(batch.enable_addon(bpy))]
+    return bpy, PKG[0]
 
 
 def _mod(pkg, name):
@@ -81,6 +87,43 @@ def glued(rig_v, rig_f, tri, bary, offset):
     n = np.einsum("vk,vkc->vc", bary, vertex_normals(rig_v, rig_f)[corners])
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     return np.einsum("vk,vkc->vc", bary, rig_v[corners]) + np.reshape(offset, (-1, 1)) * n
+
+
+def glue(points, rig_v, rig_f, k=12):
+    """The dissertation's gluing (ch. 4, Sec. 4.2.3): for each point the closest triangle among those of
+    its ``k`` nearest rig vertices, the barycentric coordinates of the projection and the signed offset
+    along the face normal.  Returns (tri, bary (N,3), offset (N,))."""
+    from scipy.spatial import cKDTree
+    cs = _mod(PKG[0], "solver.geometry.surface_distance").closest_points_on_triangles
+    incident = [[] for _ in range(len(rig_v))]
+    for t, face in enumerate(rig_f):
+        for v in face:
+            incident[v].append(t)
+    width = max(len(x) for x in incident)
+    table = np.array([x + [x[0]] * (width - len(x)) for x in incident])
+    _, near = cKDTree(rig_v).query(points, k=k)
+    cand = table[near].reshape(len(points), -1)                        # (N, k * width)
+    rows = np.repeat(np.arange(len(points)), cand.shape[1])
+    a, b, c = (rig_v[rig_f[cand.ravel(), i]] for i in range(3))
+    q = cs(points[rows], a, b, c)
+    d = np.linalg.norm(q - points[rows], axis=1).reshape(len(points), -1)
+    tri = cand[np.arange(len(points)), d.argmin(1)]
+    a, b, c = (rig_v[rig_f[tri, i]] for i in range(3))
+    n = np.cross(b - a, c - a)
+    area2 = np.einsum("ij,ij->i", n, n)
+    offset = np.einsum("ij,ij->i", points - a, n) / np.sqrt(area2)
+    foot = points - offset[:, None] * n / np.sqrt(area2)[:, None]
+    w1 = np.einsum("ij,ij->i", np.cross(foot - a, c - a), n) / area2
+    w2 = np.einsum("ij,ij->i", np.cross(b - a, foot - a), n) / area2
+    return tri, np.stack([1 - w1 - w2, w1, w2], 1), offset
+
+
+def unglue(rig_v, rig_f, tri, bary, offset):
+    """Points rebuilt from posed rig vertices: barycentric point + offset x unit face normal."""
+    a, b, c = (rig_v[rig_f[tri, i]] for i in range(3))
+    n = np.cross(b - a, c - a)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    return bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c + offset[:, None] * n
 
 
 def _procrustes(a, b):
@@ -176,13 +219,39 @@ def _shell_lines(sc, lines, offsets=(-0.01, 0.003, 0.02, 0.05, 0.10)):
     """Offset shells (one subdivision) bound at frame 1 and compared with the glued reference at frame 3."""
     rig1, rig3 = sc.evaluated(sc.rig.mesh, 1), sc.evaluated(sc.rig.mesh, 3)
     faces, tri, bary = subdivide_tracked(sc.model.faces, 1)
-    lines.append("offset shell d: Surface Deform vs glued reference after a second pose (median / 95% / max mm)")
+    lines.append("offset shell d, error after a second pose against the glued reference, median / 95% / max mm:")
+    lines.append("          Surface Deform       | closest-triangle gluing (numpy)")
     for d in offsets:
-        scan = sc.scan(f"Shell {d}", glued(rig1, sc.model.faces, tri, bary, d), faces)
+        points = glued(rig1, sc.model.faces, tri, bary, d)
+        scan = sc.scan(f"Shell {d}", points, faces)
         sc.bind(scan)
-        e = 1e3 * np.linalg.norm(sc.evaluated(scan, 3) - glued(rig3, sc.model.faces, tri, bary, d), axis=1)
-        lines.append(f"  d = {100 * d:+5.1f} cm: {np.median(e):.2f} / {np.percentile(e, 95):.2f} / {e.max():.1f}")
+        ref = glued(rig3, sc.model.faces, tri, bary, d)
+        e = 1e3 * np.linalg.norm(sc.evaluated(scan, 3) - ref, axis=1)
+        g = 1e3 * np.linalg.norm(unglue(rig3, sc.model.faces, *glue(points, rig1, sc.model.faces)) - ref, axis=1)
+        R, t = _procrustes(rig1, sc.evaluated(sc.rig.mesh, 2))
+        rigid = 1e3 * np.abs(sc.evaluated(scan, 2) - (points @ R.T + t)).max()
+        lines.append(f"  d = {100 * d:+5.1f} cm: {_stats(e)} | {_stats(g)}; rigid motion max {rigid:.4f} mm")
         sc.bpy.data.objects.remove(scan)
+
+
+def _stats(e):
+    return f"{np.median(e):5.2f} / {np.percentile(e, 95):5.2f} / {e.max():5.1f}"
+
+
+def _storage_line(sc) -> str:
+    """Bytes per scan vertex that the binding adds to a saved .blend."""
+    faces, tri, bary = subdivide_tracked(sc.model.faces, 1)
+    scan = sc.scan("Stored", glued(sc.evaluated(sc.rig.mesh, 1), sc.model.faces, tri, bary, 0.003), faces)
+    sizes = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for bound in (False, True):
+            if bound:
+                sc.bind(scan)
+            path = os.path.join(tmp, f"{bound}.blend")
+            sc.bpy.ops.wm.save_as_mainfile(filepath=path, copy=True, compress=False)
+            sizes.append(os.path.getsize(path))
+    sc.bpy.data.objects.remove(scan)
+    return f"saved binding: {(sizes[1] - sizes[0]) / len(tri):.0f} bytes per scan vertex (.blend uncompressed)"
 
 
 def _tube_lines(bpy, pkg, lines):
@@ -236,6 +305,7 @@ def scan_binding_lines(picture: str = "") -> list:
         return lines
     bpy.data.objects.remove(scan)
     _shell_lines(sc, lines)
+    lines.append(_storage_line(sc))
     _tube_lines(bpy, pkg, lines)
     return lines
 
