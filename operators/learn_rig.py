@@ -53,6 +53,11 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
     symmetry: bpy.props.BoolProperty(
         name="Symmetry", **property_range("symmetry"),
         description="Find the mirror plane, pair left/right parts (.L/.R names) and keep them symmetric")
+    name_roles: bpy.props.BoolProperty(
+        name="Role Names", **property_range("name_roles"),
+        description="Name the bones of a recognised humanoid by their roles (hips, spine, chest, neck, head, "
+                    "thigh.L, upper_arm.R, ...) so that retargeting maps them without a manual mapping; the "
+                    "others keep part names")
     max_iterations: bpy.props.IntProperty(
         name="Max Iterations", **property_range("max_iterations"),
         description="Outer rounds of the alternating optimisation (joints and poses, weights, rest mesh), after two "
@@ -102,8 +107,8 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
 
     def draw(self, context):
         col = self.layout.column()
-        for prop in ("parts", "alpha", "joint_prior", "symmetry", "max_iterations", "key_scans", "memory_limit_gb",
-                     "seed"):
+        for prop in ("parts", "alpha", "joint_prior", "symmetry", "name_roles", "max_iterations", "key_scans",
+                     "memory_limit_gb", "seed"):
             col.prop(self, prop)
         col.prop_search(self, "initial_armature", bpy.data, "objects")
         col.prop(self, "output_bundle")
@@ -135,7 +140,7 @@ class ARTICULA_OT_learn_rig(JobOperator, bpy.types.Operator):
         options = LearnOptions(parts=self.parts, alpha=self.alpha, symmetry=self.symmetry,
                                max_iterations=self.max_iterations, seed=self.seed, key_scans=self.key_scans,
                                workers=preferences.threads(context), joint_prior=self.joint_prior,
-                               memory_limit_gb=self.memory_limit_gb)
+                               memory_limit_gb=self.memory_limit_gb, name_roles=self.name_roles)
         options.validate()
         arm = bpy.data.objects.get(self.initial_armature) if self.initial_armature else None
         if self.initial_armature and arm is None:

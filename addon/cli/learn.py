@@ -76,7 +76,7 @@ def _learn(args):
     options = LearnOptions(parts=args.parts, alpha=args.alpha, symmetry=not args.no_symmetry,
                            max_iterations=args.iterations, seed=args.seed, key_scans=args.key_scans,
                            workers=args.threads, joint_prior=args.joint_prior, memory_limit_gb=args.memory_limit,
-                           key_scan_budget=args.key_scan_budget)
+                           key_scan_budget=args.key_scan_budget, name_roles=not args.no_role_names)
     options.validate()
     paths = _scan_paths(args.scans)
     matrix = inputs.files_matrix(paths, (args.forward, args.up))
@@ -119,6 +119,8 @@ def add_commands(sub):
                         f"hardly determines them, relative to the data's pull on each joint (default "
                         f"{default.joint_prior}; 0: none, which with a small --alpha fits the scans most closely)")
     p.add_argument("--no-symmetry", action="store_true", help="do not pair and symmetrise left/right parts")
+    p.add_argument("--no-role-names", action="store_true",
+                   help="keep part names (root, part_NN) even when the skeleton is recognised as a humanoid")
     p.add_argument("--iterations", type=int, default=default.max_iterations,
                    help=f"outer rounds of the alternating optimisation after {len(default.warm_start)} warm-start "
                         f"rounds (default {default.max_iterations}; 0: initialisation only)")

@@ -5,7 +5,7 @@ import numpy as np
 
 REPORT_PROPERTY = "articula_learn_report"       # armature ID property: the solver's report (JSON)
 REPORTED_OPTIONS = ("parts", "alpha", "symmetry", "max_iterations", "seed", "key_scans", "workers", "joint_prior",
-                    "memory_limit_gb", "key_scan_budget")
+                    "memory_limit_gb", "key_scan_budget", "name_roles")
 
 
 def jsonable(x):
@@ -64,6 +64,8 @@ def parts_text(report: dict) -> str:
         out.append(f"{report['parts']} parts{how}")
     if report.get("mirror_pairs"):
         out.append(f"{len(report['mirror_pairs'])} left/right pairs")
+    if (report.get("bone_names") or {}).get("scheme") == "roles":
+        out.append(f"humanoid: {report['bone_names']['roles']} bones named by role")
     removed = report.get("empty_parts_removed") or []
     if removed:
         out.append(f"{len(removed)} empty end bone{'s' if len(removed) != 1 else ''} removed")

@@ -89,6 +89,9 @@ class LearnOptions:
     # memory budget of a run in GB; 0: 80 % of the memory available when it starts (solver.learn.memory).
     # A run whose key scans do not fit learns from fewer of them; refused only if 3 do not fit
     memory_limit_gb: float = _setting(0.0, min=0.0)
+    # name the bones of a skeleton recognised as a humanoid by human roles (hips, thigh.L, ...;
+    # solver.learn.role_names) instead of root / part_NN; not with initial_skeleton
+    name_roles: bool = True
     # solver threads; 0: one per CPU core, 1: serial (the result depends on it only to rounding)
     workers: int = _setting(0, min=0)
 

@@ -52,6 +52,7 @@ from ..geometry.rotations import quat_to_rotvec
 from .mirror_map import mirror_map
 from .part_count import articulated_parts
 from .prune import drop_bones, empty_leaves, remap_pairs
+from .role_names import name_bones
 from .seams import Seams
 from .segmentation import centred, segment
 from .symmetry import continuing_pairs
@@ -445,6 +446,8 @@ def _learn_rig(scans, faces, options, progress):
     model, poses, log, rounds, converged, stopped = alternation.main_rounds(model, poses, problem, E)
     if options.initial_skeleton is None:                # a given skeleton keeps every bone it has
         model, poses, sym = _without_empty_leaves(model, poses, sym, info)
+        info["bone_names"] = (name_bones(model, info) if options.name_roles else
+                              dict(scheme="parts", roles=0, why="name_roles is off"))
 
     info["key_scans"] = keys.tolist()
     if 0 < timed < min(memory.learned, len(all_scans)):
