@@ -1,6 +1,8 @@
 """``articula.retarget`` and the mapping-list operators of the Retarget panel: copy the source's active
 action onto the target as a new action, by bone roles (automatic, the panel's list, or a JSON mapping)
 or through shared mesh topology."""
+import contextlib
+
 import bpy
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
@@ -32,6 +34,19 @@ def _pair(context, source: str, target: str):
         if active is not None and others:
             source, target = source or others[0].name, target or active.name
     return find_armature(source, "source"), find_armature(target, "target")
+
+
+@contextlib.contextmanager
+def _cursor_progress(context):
+    """``progress(fraction, text)`` shown as the window's progress cursor (no window: nothing shown)."""
+    wm = context.window_manager if context.window is not None else None
+    if wm is not None:
+        wm.progress_begin(0, 1000)
+    try:
+        yield (lambda fraction, text: wm.progress_update(int(1000 * fraction))) if wm else None
+    finally:
+        if wm is not None:
+            wm.progress_end()
 
 
 class ARTICULA_OT_retarget(bpy.types.Operator):
@@ -79,7 +94,9 @@ class ARTICULA_OT_retarget(bpy.types.Operator):
                 self.report({'INFO'}, f"Retargeted through shared topology into action {action.name!r}")
                 return {'FINISHED'}
             options = RetargetOptions(self.root_motion, self.in_place, self.foot_cleanup)
-            action, report = skeleton.retarget(context, source, target, self._mapping(context), options)
+            with _cursor_progress(context) as progress:
+                action, report = skeleton.retarget(context, source, target, self._mapping(context), options,
+                                                   progress=progress)
         except ArticulaInputError as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}

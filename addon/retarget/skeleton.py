@@ -7,6 +7,7 @@ from ...solver.errors import ArticulaInputError
 from ...solver.retarget.mapping import Mapping, auto_roles, describe_missing
 from ...solver.retarget.solve import NEEDED, RetargetOptions, retarget_clip
 from ..jobs import scene_guard
+from . import evaluated_target
 from .armatures import check_editable, check_scale, constrained_bones, driven_bones, read_rest
 from .clip_writer import write_clip
 from .source_clip import active_action, read_clip
@@ -48,8 +49,9 @@ def check_pair(source_ob, target_ob, mapping: Mapping) -> None:
 
 
 def retarget(context, source_ob, target_ob, mapping: Mapping | None = None, options: RetargetOptions | None = None,
-             action_name: str = ""):
-    """Retarget ``source_ob``'s active action onto ``target_ob``; returns ``(action, report dict)``."""
+             action_name: str = "", progress=None):
+    """Retarget ``source_ob``'s active action onto ``target_ob``; returns ``(action, report dict)``.
+    ``progress(fraction, text)`` hears about the slow evaluated paths (constrained rigs)."""
     t0 = time.perf_counter()
     found = None
     if mapping is None:
@@ -59,14 +61,19 @@ def retarget(context, source_ob, target_ob, mapping: Mapping | None = None, opti
     src, tgt = read_rest(source_ob), read_rest(target_ob)
     options = options or RetargetOptions()
     options.fps = context.scene.render.fps / context.scene.render.fps_base
-    frames, pose, how = read_clip(source_ob, src, [s for s, _ in mapping.pairs().values()])
+    frames, pose, how = read_clip(source_ob, src, [s for s, _ in mapping.pairs().values()], progress)
     result = retarget_clip(src, tgt, mapping, pose, options)
+    mapped = {t for _, t in mapping.pairs().values()}
+    through = evaluated_target.needs_evaluation(target_ob, mapped)
+    if through:
+        evaluated_target.solve(context, target_ob, tgt, result, frames, progress)
     with scene_guard():
         action = write_clip(target_ob, tgt, result, frames,
                             action_name or f"{src_action.name} on {target_ob.name}")
     report = dict(result.report, action=action.name, source_read=how, first=int(frames[0]),
                   last=int(frames[-1]), seconds=time.perf_counter() - t0, mapped=len(mapping.pairs()),
-                  root_bone=tgt.bones[result.root_bone])
+                  root_bone=tgt.bones[result.root_bone], target_solved="evaluated (" + ", ".join(through) + ")"
+                  if through else "directly")
     if found:
         report["source_preset"], report["target_preset"] = found[0].preset, found[1].preset
     return action, report

@@ -86,10 +86,10 @@ def _unit(v):
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
 
 
-def plant_feet(source: ArmatureRest, target: ArmatureRest, pairs: dict, src_heads, local, want, ratio, fps):
+def plant_feet(source: ArmatureRest, target: ArmatureRest, pairs: dict, src_heads, local, want, fps):
     """(local rotations ``(F, Jt, 3, 3)``, hips path ``(F, 3)``, report) with the feet planted."""
     hips = target.index[pairs["hips"][1]]
-    bone = root_motion.translation_bone(target, hips)
+    bone = root_motion.translation_bone(target, hips, [target.index[t] for _, t in pairs.values()])
     src_leg = root_motion.leg_length(source, {r: s for r, (s, _) in pairs.items()})
     local = local.copy()
     report = {}

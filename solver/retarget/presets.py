@@ -1,7 +1,7 @@
 """Rig presets: which bone of a known rig family plays which role (:mod:`.roles`).
 
 A preset is a JSON file ``{"format": "articula-rig-preset", "version": 1, "name", "label",
-"description", "roles": {role: bone name}}``; the built-in ones live in ``presets/`` beside this module
+"description", "priority" (optional), "roles": {role: bone name}}``; the built-in ones live in ``presets/`` beside this module
 (CMU BVH in both naming styles, Mixamo, Rigify deform and FK-control bones, MPFB/MakeHuman ``default``,
 the Unreal mannequin = MPFB ``game_engine``; MPFB ``cmu_mb`` uses the CMU names).  Articula's own rigs
 name their bones by role, which is the ``articula`` preset.
@@ -30,6 +30,7 @@ class RigPreset:
     label: str
     description: str
     roles: dict            # role -> bone name (namespace-free)
+    priority: int = 0      # wins ties of coverage (a rig holding two presets' bones, e.g. Rigify)
 
 
 def strip_namespace(bone: str) -> str:
@@ -50,7 +51,8 @@ def parse_preset(data: dict, where: str) -> RigPreset:
     if not all(isinstance(b, str) and b for b in roles.values()):
         raise ArticulaInputError(f"{where}: every role needs a bone name")
     name = str(data.get("name") or Path(where).stem)
-    return RigPreset(name, str(data.get("label") or name), str(data.get("description", "")), dict(roles))
+    return RigPreset(name, str(data.get("label") or name), str(data.get("description", "")), dict(roles),
+                     int(data.get("priority", 0)))
 
 
 def builtin_presets() -> list:
@@ -79,10 +81,10 @@ def coverage(preset: RigPreset, found: dict) -> float:
 def best_preset(bones, minimum: float = 0.6):
     """``(preset, {role: bone})`` of the built-in preset that fits ``bones`` best, or ``(None, {})``
     when none covers at least ``minimum`` of its core roles."""
-    best, best_found, best_key = None, {}, (minimum - 1e-9, 0)
+    best, best_found, best_key = None, {}, (minimum - 1e-9, 0, 0)
     for preset in builtin_presets():
         found = match(preset, bones)
-        key = (coverage(preset, found), len(found))
+        key = (coverage(preset, found), preset.priority if found else 0, len(found))
         if key > best_key:
             best, best_found, best_key = preset, found, key
     return best, best_found

@@ -32,6 +32,7 @@ class RetargetOptions:
 class RetargetResult:
     quaternions: np.ndarray        # (F, Jt, 4) pose-bone rotations (w, x, y, z), sign-continuous
     driven: list                   # indices of the target bones the clip keys
+    mapped: list                   # the mapped ones among them (the others are kept at rest)
     root_bone: int                 # index of the bone that carries the root location
     root_locations: np.ndarray     # (F, 3) its pose location
     ratio: float                   # target / source leg length
@@ -83,24 +84,24 @@ def retarget_clip(source: ArmatureRest, target: ArmatureRest, mapping: Mapping, 
     report = {"frames": len(source_pose), "segments": len(segs), "leg_ratio": ratio,
               "unit_mismatch": bool(ratio > UNIT_MISMATCH or ratio < 1.0 / UNIT_MISMATCH)}
     if options.foot_cleanup:
-        local, want, plant = foot_plant.plant_feet(source, target, pairs, src_heads, local, want, ratio,
-                                                   options.fps)
+        local, want, plant = foot_plant.plant_feet(source, target, pairs, src_heads, local, want, options.fps)
         report["foot_contacts"] = plant
-    bone = root_motion.translation_bone(target, hips_t)
+    bone = root_motion.translation_bone(target, hips_t, [seg.target for seg in segs])
     loc = root_motion.root_locations(target, local, hips_t, bone, want)
     driven = sorted({seg.target for seg in segs} | _path_bones(target, segs) | {bone})
     q = _continuous(matrix_to_quat(local))
-    return RetargetResult(q, driven, bone, loc, ratio, report)
+    return RetargetResult(q, driven, sorted({seg.target for seg in segs} | {bone}), bone, loc, ratio, report)
 
 
 def _path_bones(target: ArmatureRest, segs) -> set:
-    """Target bones between a segment's bone and its child's bone (kept at their rest pose)."""
+    """Target bones between a segment's bone and its child's bone (kept at their rest pose); none when the
+    child does not hang from the segment's bone (a rig whose bones follow each other by constraints)."""
     out = set()
     for seg in segs:
-        if seg.target_child < 0:
-            continue
-        b = target.parents[seg.target_child]
+        chain, b = [], target.parents[seg.target_child] if seg.target_child >= 0 else -1
         while b >= 0 and b != seg.target:
-            out.add(int(b))
+            chain.append(int(b))
             b = target.parents[b]
+        if b == seg.target:
+            out.update(chain)
     return out

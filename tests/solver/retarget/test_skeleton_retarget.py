@@ -100,3 +100,23 @@ def test_missing_roles_and_bad_clips_are_refused():
         retarget_clip(source, target, Mapping.from_roles(roles, tgt_roles), clip[:, :4])
     with pytest.raises(ArticulaInputError, match="does not have"):
         retarget_clip(source, target, Mapping.from_roles(roles, {**tgt_roles, "head": "nope"}), clip)
+
+
+def test_root_motion_goes_on_the_bone_that_carries_the_body():
+    """A learned rig whose root part is the chest (hips a child of it): the root moves, and the hips land
+    where they should; a rig with a floor root bone above the hips moves the hips."""
+    source, roles = humanoid(1.0)
+    target, _ = humanoid(1.0)
+    order = ["chest", "hips"] + [b for b in target.bones if b not in ("chest", "hips")]
+    idx = [target.index[b] for b in order]
+    parent_name = {b: (target.bones[p] if p >= 0 else None) for b, p in zip(target.bones, target.parents)}
+    parent_name["chest"], parent_name["hips"], parent_name["spine"] = None, "chest", "hips"
+    from articula.solver.retarget.armature import ArmatureRest
+    chest_root = ArmatureRest("learned", order, [order.index(parent_name[b]) if parent_name[b] else -1 for b in order],
+                              target.rest[idx], target.tails[idx], np.zeros(len(order), bool), target.world)
+    clip, mapping, result = _run(source, roles, chest_root, roles, frames=30)
+    assert chest_root.bones[result.root_bone] == "chest"
+    _, heads_s = world_pose(source, clip)
+    _, heads_t = _target_pose(chest_root, result)
+    i, j = source.index["hips"], chest_root.index["hips"]
+    assert np.abs((heads_t[:, j] - heads_t[0, j]) - (heads_s[:, i] - heads_s[0, i])).max() < 1e-9
