@@ -29,6 +29,8 @@ import _common  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from articula.solver.track.visibility import vertex_normals  # noqa: E402  (area-weighted)
+
 
 PKG = []
 
@@ -70,14 +72,6 @@ def subdivide_tracked(faces, levels):
     tri, bary = np.empty(nv, np.int64), np.empty((nv, 3))
     tri[f.ravel()], bary[f.ravel()] = np.repeat(ftri, 3), fb.reshape(-1, 3)
     return f, tri, bary
-
-
-def vertex_normals(v, f):
-    n = np.zeros_like(v)
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    for k in range(3):
-        np.add.at(n, f[:, k], fn)
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
 
 
 def glued(rig_v, rig_f, tri, bary, offset):

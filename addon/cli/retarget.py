@@ -47,7 +47,7 @@ def _pick(candidates, name: str, what: str, where: str):
                                      f"{', '.join(o.name for o in candidates) or 'none'})")
         return match[0]
     animated = [o for o in candidates if o.animation_data and o.animation_data.action] if what == "source" \
-        else [o for o in candidates if not o.name.startswith(("TW-", "SW-"))]
+        else [o for o in candidates if o.articula.kind != 'TWIST_ARMATURE']
     if len(animated) != 1:
         raise ArticulaInputError(f"{where} has {len(animated)} {'animated ' if what == 'source' else ''}armatures: "
                                  f"name the {what} with --{what}-object")

@@ -5,6 +5,7 @@ import numpy as np
 
 from ...solver.errors import ArticulaInputError
 from ...solver.retarget.armature import ArmatureRest
+from ..rig import reader as rig_reader
 
 
 def find_armature(name: str, what: str) -> bpy.types.Object:
@@ -12,6 +13,8 @@ def find_armature(name: str, what: str) -> bpy.types.Object:
     ob = bpy.data.objects.get(name) if name else None
     if ob is None:
         raise ArticulaInputError(f"no {what} object {name!r} in the file" if name else f"choose a {what} armature")
+    if ob.articula.kind in ('RIG_MESH', 'TWIST_ARMATURE'):          # a part of an Articula rig: its controls
+        return rig_reader.find_armature(ob.name)
     if ob.type == 'MESH':
         arm = ob.find_armature()
         if arm is None:

@@ -1,8 +1,8 @@
 """Foot-contact clean-up: feet that rest on the ground in the source stay planted on the target.
 
 Contacts are found on the source: the ankle (head of the ``foot`` role) is within ``HEIGHT`` leg lengths
-of its lowest height in the clip and moves slower than ``SPEED`` leg lengths per second, for at least
-``MIN_FRAMES`` frames.  Over a contact the target's ankle is pinned to its mean position during the
+of its lowest height in the clip and its horizontal speed (central differences of the path smoothed over
+0.05 s) is below ``SPEED`` leg lengths per second, for at least ``MIN_FRAMES`` frames.  Over a contact the target's ankle is pinned to its mean position during the
 contact (blended in and out over ``BLEND`` frames), and the thigh and shin are re-aimed by two-bone
 inverse kinematics that keeps the knee in its current bending plane; the foot keeps its world
 orientation.  Sliding is measured as the horizontal path length of the ankle during a contact.
@@ -13,11 +13,12 @@ import numpy as np
 
 from ..geometry.rotations import rotation_between
 from . import root_motion
+from .root_motion import moving_average
 from .armature import ArmatureRest, forward, local_matrices, world_pose
 from .roles import LEG_ROLES
 
-HEIGHT = 0.08
-SPEED = 0.6
+HEIGHT = 0.06
+SPEED = 0.25
 MIN_FRAMES = 3
 BLEND = 4
 
@@ -26,10 +27,9 @@ def contacts(ankle: np.ndarray, leg: float, fps: float) -> list:
     """``[(first, last)]`` frame ranges (inclusive) where ankle ``(F, 3)`` rests on the ground."""
     z = ankle[:, 2]
     speed = np.zeros(len(ankle))
-    if len(ankle) > 1:
-        v = np.linalg.norm(np.diff(ankle[:, :2], axis=0), axis=1) * fps
-        speed[1:] = v
-        speed[0] = v[0]
+    if len(ankle) > 2:
+        smooth = moving_average(ankle[:, :2], round(0.05 * fps))       # capture noise at high frame rates
+        speed = np.linalg.norm(np.gradient(smooth, axis=0), axis=1) * fps
     on = (z - np.percentile(z, 2) < HEIGHT * leg) & (speed < SPEED * leg)
     out, start = [], None
     for f, flag in enumerate(np.append(on, False)):

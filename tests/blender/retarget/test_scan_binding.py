@@ -6,6 +6,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 import bpy
+from articula.solver.track.visibility import vertex_normals
 
 from ..rig_helpers import bbox_diagonal, subject
 
@@ -26,20 +27,12 @@ def _subdivide(v, f):
     return np.vstack([v, v[uniq].mean(1)]), faces
 
 
-def _normals(v, f):
-    n = np.zeros_like(v)
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    for k in range(3):
-        np.add.at(n, f[:, k], fn)
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-
-
 def _scan_points(v, f, levels=2, depth=0.002):
     """A scan-like copy of a surface: subdivided ``levels`` times and displaced along its normals by a
     wavy pattern up to ``depth`` metres."""
     for _ in range(levels):
         v, f = _subdivide(v, f)
-    n = _normals(v, f)
+    n = vertex_normals(v, f)
     return v + depth * (np.sin(v[:, 0] * 300) * np.cos(v[:, 2] * 200))[:, None] * n, f
 
 

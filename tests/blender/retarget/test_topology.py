@@ -108,3 +108,15 @@ def test_refusals(pkg, rigs):
                                   "\\(the first is face 5\\)"):
         topo.retarget_topology_rigs(bpy.context, src.armature, swapped.armature)
     assert len(bpy.data.actions) == n_actions                      # nothing written
+
+
+def test_operator_runs_the_topology_fit(pkg, rigs):
+    """``articula.retarget(mapping='TOPOLOGY')`` (the panel's Retarget by Shared Mesh) writes the fit as a
+    new action on the target; the same rig twice is refused."""
+    src, tgt, *_ = rigs
+    old = tgt.armature.animation_data.action
+    assert bpy.ops.articula.retarget(source=src.armature.name, target=tgt.mesh.name, mapping='TOPOLOGY') \
+        == {'FINISHED'}
+    assert tgt.armature.animation_data.action not in (None, old)
+    with pytest.raises(RuntimeError):
+        bpy.ops.articula.retarget(source=src.armature.name, target=src.mesh.name, mapping='TOPOLOGY')

@@ -20,7 +20,7 @@ def test_contacts_are_the_slow_low_stretches():
     ankle[60:70, 1] = ankle[60, 1]
     ankle[60:70, 2] = 0.3                                        # still, but in the air
     (first, last), = foot_plant.contacts(ankle, leg=0.9, fps=50.0)
-    assert first in (20, 21) and last == 39            # frame 20 still carries the arriving speed
+    assert 20 <= first <= 22 and 37 <= last <= 39      # edges blurred by the speed's smoothing
 
 
 def test_two_bone_ik_reaches_the_goal_and_keeps_lengths_and_knee_plane():
