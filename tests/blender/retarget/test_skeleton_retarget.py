@@ -223,3 +223,16 @@ def test_rigify_fk_controls_under_constrained_parents(pkg):
     action_made, report = pkg("addon.retarget.skeleton").retarget(bpy.context, source, rig)
     assert report["target_solved"].startswith("evaluated")
     assert segment_angles(pkg, source, rig, np.arange(1, 13)).max() < 0.01
+
+
+def test_unit_mismatch_is_detected_and_handled(pkg):
+    """A BVH imported at scale 1 (CMU's units: ~17x a person): reported as a unit mismatch, the root motion
+    scaled by the leg ratio, the segments still exact."""
+    source = import_bvh(scale=1.0)
+    source.animation_data.action.use_frame_range = True
+    source.animation_data.action.frame_start, source.animation_data.action.frame_end = 1, 40
+    target = target_rig(pkg, "game_engine")
+    action, report = pkg("addon.retarget.skeleton").retarget(bpy.context, source, target)
+    assert report["unit_mismatch"] and 0.04 < report["leg_ratio"] < 0.08
+    assert "units differ" in pkg("addon.retarget.skeleton").summary(report)
+    assert segment_angles(pkg, source, target, np.arange(1, 41, 3)).max() < 0.01
