@@ -1,8 +1,9 @@
 """Bone rotations of a target rig that make every mapped segment point where the source's points.
 
 For a role r mapped on both rigs, its *segment* runs from r's joint to the joint of its first primary
-child mapped on both (:data:`.roles.NEXT`); end roles (no such child, or a segment of zero length on
-either rig, like a BVH hips joint that coincides with the spine's) use the bone itself.  With world
+child mapped on both (:data:`.roles.NEXT`); end roles (no such child, a segment of zero length on
+either rig, like a BVH hips joint that coincides with the spine's, or a target child that does not hang
+from the role's bone, like the chest that is the root of a learned rig) use the bone itself.  With world
 rest rotations ``S0`` (source bone r) and ``T0`` (target bone r), the target bone's world rotation in a
 frame where the source bone has ``S`` is
 
@@ -60,10 +61,19 @@ def plan_segments(source: ArmatureRest, target: ArmatureRest, pairs: dict) -> li
         if child is not None:
             cs, ct = source.index[pairs[child][0]], target.index[pairs[child][1]]
             if (np.linalg.norm(hs[cs] - hs[s]) > DEGENERATE * Hs
-                    and np.linalg.norm(ht[ct] - ht[t]) > DEGENERATE * Ht):
+                    and np.linalg.norm(ht[ct] - ht[t]) > DEGENERATE * Ht
+                    and _below(target, ct, t)):
                 seg.child, seg.source_child, seg.target_child = child, cs, ct
         out.append(seg)
     return out
+
+
+def _below(arm: ArmatureRest, b: int, a: int) -> bool:
+    """Bone ``b`` hangs from bone ``a`` (so turning ``a`` aims the segment from ``a`` to ``b``)."""
+    b = arm.parents[b]
+    while b >= 0 and b != a:
+        b = arm.parents[b]
+    return b == a
 
 
 def body_frame(heads: np.ndarray, segs, which: str) -> np.ndarray:
