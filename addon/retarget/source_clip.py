@@ -132,8 +132,9 @@ def _channels(ob, action, frames):
     return {name: (loc, R, scale) for name, loc, R, scale in out}
 
 
-def pose_from_fcurves(ob, arm, action, frames) -> np.ndarray:
-    """(F, J, 4, 4) armature-space pose matrices of rest armature ``arm`` (bone order) at ``frames``."""
+def local_from_fcurves(ob, arm, action, frames) -> np.ndarray:
+    """(F, J, 4, 4) pose-bone matrices of rest armature ``arm`` (bone order) at ``frames``, from
+    ``action``'s F-curves (channels without one: the pose bone's current value)."""
     ch = _channels(ob, action, frames)
     local = np.zeros((len(frames), len(arm.bones), 4, 4))
     for b, name in enumerate(arm.bones):
@@ -141,7 +142,12 @@ def pose_from_fcurves(ob, arm, action, frames) -> np.ndarray:
         local[:, b, :3, :3] = R * scale[:, None, :]
         local[:, b, :3, 3] = loc
         local[:, b, 3, 3] = 1.0
-    return forward(arm, local)
+    return local
+
+
+def pose_from_fcurves(ob, arm, action, frames) -> np.ndarray:
+    """(F, J, 4, 4) armature-space pose matrices of rest armature ``arm`` (bone order) at ``frames``."""
+    return forward(arm, local_from_fcurves(ob, arm, action, frames))
 
 
 def pose_from_scene(ob, arm, frames, progress=None) -> np.ndarray:

@@ -123,3 +123,14 @@ def subset(arm: ArmatureRest, keep) -> ArmatureRest:
     idx = np.flatnonzero(keep)
     return ArmatureRest(arm.name, [arm.bones[i] for i in idx], np.array(parents, dtype=np.int64), arm.rest[idx],
                         arm.tails[idx], arm.connected[idx], arm.world)
+
+
+def local_from_pose(arm: ArmatureRest, pose: np.ndarray) -> np.ndarray:
+    """(F, J, 4, 4) pose-bone matrices that give the armature-space ``pose (F, J, 4, 4)`` under plain
+    parenting (the inverse of :func:`forward`)."""
+    rel = arm.relative_rest()
+    out = np.empty_like(pose)
+    for b, p in enumerate(arm.parents):
+        base = rel[b][None] if p < 0 else pose[:, p] @ rel[b]
+        out[:, b] = np.linalg.solve(base, pose[:, b])
+    return out
