@@ -139,5 +139,35 @@ class ARTICULA_PT_retarget(_ArticulaPanel, bpy.types.Panel):
             op.mapping = 'TOPOLOGY'
 
 
+class ARTICULA_PT_gaze(_ArticulaPanel, bpy.types.Panel):
+    bl_label = "Gaze"
+    bl_parent_id = "ARTICULA_PT_main"
+
+    def draw(self, context):
+        state = getattr(context.scene, "articula_gaze", None)
+        if state is None:
+            return
+        col = self.layout.column(align=True)
+        col.label(text="Active armature looks at:")
+        col.prop(state, "target")
+        row = col.row(align=True)
+        row.prop(state, "frame_start")
+        row.prop(state, "frame_end")
+        col.prop(state, "fade")
+        col.prop(state, "shares")
+        ob = context.active_object
+        for name in ("chest", "neck", "head"):
+            if ob is not None and ob.type == 'ARMATURE':
+                col.prop_search(state, name, ob.data, "bones")
+            else:
+                col.prop(state, name)
+        op = _button(col, "articula.gaze", "Look at Target", 'HIDE_OFF')
+        if op is not None:
+            op.frame_start, op.frame_end, op.fade_frames = state.frame_start, state.frame_end, state.fade
+            op.shares = state.shares
+            op.chest, op.neck, op.head = state.chest, state.neck, state.head
+            op.target = state.target.name if state.target else ""
+
+
 classes = (ARTICULA_PT_main, ARTICULA_PT_import, ARTICULA_PT_rig, ARTICULA_PT_animate, ARTICULA_PT_track,
-           ARTICULA_PT_retarget)
+           ARTICULA_PT_retarget, ARTICULA_PT_gaze)

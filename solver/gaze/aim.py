@@ -101,3 +101,32 @@ def solve(arm: ArmatureRest, local: np.ndarray, chain: GazeChain, targets: np.nd
     report = {"turn_deg": np.degrees(angle), "limited": np.flatnonzero(limited & (w > 0)),
               "error_deg": err, "reach_deg": np.degrees(chain.reach)}
     return out, report
+
+
+def aim_eyes(arm: ArmatureRest, local: np.ndarray, eyes, targets: np.ndarray, weights: np.ndarray,
+             max_angle: float = np.radians(30.0)):
+    """Pose-bone matrices with each eye of ``eyes`` — ``[(bone, direction (3,) in its rest-local axes)]`` —
+    turned about its centre to look at ``targets (F, 3)`` (both eyes converge), by at most ``max_angle``,
+    scaled by ``weights (F,)``; returns ``(local', limited frames)``."""
+    out = local.copy()
+    limited = np.zeros(len(local), bool)
+    pose = forward(arm, local)
+    rel = arm.relative_rest()
+    w = np.asarray(weights, dtype=np.float64)
+    for bone, direction in eyes:
+        M = pose[:, bone]
+        d = M[:, :3, :3] @ direction
+        g = targets - M[:, :3, 3]
+        R = rotation_between(d / np.linalg.norm(d, axis=1, keepdims=True),
+                             g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12))
+        rv = quat_to_rotvec(matrix_to_quat(R))
+        angle = np.linalg.norm(rv, axis=1)
+        over = angle > max_angle
+        limited |= over & (w > 0)
+        rv[over] *= (max_angle / angle[over])[:, None]
+        p = arm.parents[bone]
+        P = rel[bone][None, :3, :3] if p < 0 else pose[:, p, :3, :3] @ rel[bone][:3, :3]
+        D = rotvec_to_matrix(rv * w[:, None])
+        out[:, bone, :3, :3] = np.swapaxes(P, 1, 2) @ D @ P @ local[:, bone, :3, :3]
+    out[w == 0] = local[w == 0]
+    return out, np.flatnonzero(limited)
