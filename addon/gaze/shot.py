@@ -80,10 +80,13 @@ def target_path(context, target_ob, frames) -> np.ndarray:
 
 
 def _input_pose(arm_ob, rest, frames):
-    """(F, J, 4, 4) pose-bone matrices the character has on ``frames`` before the shot."""
+    """(F, J, 4, 4) pose-bone matrices of ``rest``'s bones (the gaze carriers) on ``frames`` before the
+    shot: from the active action's F-curves, or from the evaluated scene when an NLA stack, constraints or
+    drivers on these bones decide them."""
     ad = arm_ob.animation_data
-    if ad is not None and ad.action is not None and not needs_evaluation(arm_ob):
-        return local_from_fcurves(arm_ob, rest, ad.action, frames)
+    plain = _plain_base(arm_ob, frames)
+    if plain is not None and not needs_evaluation(arm_ob, rest.bones, nla=False):
+        return local_from_fcurves(arm_ob, rest, plain, frames)
     if ad is None or (ad.action is None and not len(ad.nla_tracks)):
         basis = np.array([np.array(arm_ob.pose.bones[n].matrix_basis, dtype=np.float64) for n in rest.bones])
         return np.repeat(basis[None], len(frames), axis=0)
@@ -100,6 +103,23 @@ def carrier(rest, chain, eyes):
     new_index = {int(b): i for i, b in enumerate(np.flatnonzero(keep))}
     sub_chain = replace(chain, joints=[new_index[j] for j in chain.joints], head=new_index[chain.head])
     return subset(rest, keep), sub_chain, [(new_index[b], d) for b, d in eyes]
+
+
+def _plain_base(arm_ob, frames):
+    """The action that alone decides the pose on ``frames``: the active action with no NLA playing, or
+    the one plain NLA strip (replace, full influence, unscaled, unrepeated, unshifted: how a base is
+    pushed down) when no other unmuted strip reaches into ``frames``; else None."""
+    ad = arm_ob.animation_data
+    if ad is None:
+        return None
+    strips = [s for t in ad.nla_tracks if not t.mute for s in t.strips if not s.mute]
+    if ad.action is not None:
+        return ad.action if not strips else None
+    base = [s for s in strips if s.frame_start <= frames[0] and s.frame_end >= frames[-1]
+            and s.blend_type == 'REPLACE' and (not s.use_animated_influence or s.influence == 1.0) and s.scale == 1.0 and s.repeat == 1.0
+            and s.action_frame_start == s.frame_start and s.action is not None]
+    others = [s for s in strips if s not in base[:1] and s.frame_end >= frames[0] and s.frame_start <= frames[-1]]
+    return base[0].action if len(base) == 1 and not others else None
 
 
 def _rotations(local):
@@ -128,7 +148,7 @@ def apply_shot(context, arm_ob, target_ob, start: int, end: int, fade: int = 10,
         note = layer.push_down_active_action(arm_ob)
         strip = layer.add_shot(arm_ob, rest, bones, frames, _rotations(local), _rotations(new),
                                f"Gaze {target_ob.name} {start}-{end}")
-    full = weights == 1.0
+    full = (weights == 1.0) & ~np.isin(np.arange(len(frames)), report["limited"])
     return {"frames": len(frames), "first": start, "last": end, "strip": strip.name, "gaze_line": how,
             "bones": [rest.bones[b] for b in bones], "shares": [float(s) for s in chain.shares],
             "error_deg": float(report["error_deg"][full].max()) if full.any() else 0.0,

@@ -57,7 +57,9 @@ def _parents_first(bones) -> list:
 
 
 def read_rest(ob) -> ArmatureRest:
-    """The rest armature of object ``ob`` (bones ordered parents first)."""
+    """The rest armature of object ``ob`` (bones ordered parents first); its world matrix as evaluated
+    now (a script's pending transform edits are applied first, else ``matrix_world`` would be stale)."""
+    bpy.context.view_layer.update()
     bones = _parents_first(ob.data.bones)
     if not bones:
         raise ArticulaInputError(f"armature {ob.name!r} has no bones")

@@ -80,9 +80,10 @@ def _chains(ob, bones) -> set:
     return out
 
 
-def needs_evaluation(ob, bones=None) -> list:
+def needs_evaluation(ob, bones=None, nla: bool = True) -> list:
     """Why the source must be read from the evaluated scene ([] when the F-curves say it all); only the
-    ``bones`` that matter (the mapped ones and their ancestors; default: all) are looked at."""
+    ``bones`` that matter (the mapped ones and their ancestors; default: all) are looked at; ``nla``:
+    playing NLA strips count too."""
     relevant = _chains(ob, bones) if bones is not None else {b.name for b in ob.data.bones}
     why = []
     if constrained_bones(ob, relevant):
@@ -92,7 +93,7 @@ def needs_evaluation(ob, bones=None) -> list:
     if any((not b.use_inherit_rotation or b.inherit_scale != 'FULL') and b.name in relevant for b in ob.data.bones):
         why.append("bones that do not inherit rotation or scale")
     ad = ob.animation_data
-    if ad and any(not t.mute and t.strips for t in ad.nla_tracks):
+    if nla and ad and any(not t.mute and t.strips for t in ad.nla_tracks):
         why.append("NLA strips")
     return why
 

@@ -61,6 +61,7 @@ def keys(pkg, ob, action):
 
 def test_gaze_meets_a_moving_target_with_the_split_and_leaves_the_rest(pkg):
     ob = hero(pkg)
+    ob.location.x += 2.0                    # moved by a script just before: the gaze must see it moved
     target = moving_target()
     action = ob.animation_data.action
     before_keys = keys(pkg, ob, action)
