@@ -161,8 +161,10 @@ class ARTICULA_PT_gaze(_ArticulaPanel, bpy.types.Panel):
                 col.prop_search(state, name, ob.data, "bones")
             else:
                 col.prop(state, name)
+        col.prop(state, "facing")
         op = _button(col, "articula.gaze", "Look at Target", 'HIDE_OFF')
         if op is not None:
+            op.facing = state.facing
             op.frame_start, op.frame_end, op.fade_frames = state.frame_start, state.frame_end, state.fade
             op.shares = state.shares
             op.chest, op.neck, op.head = state.chest, state.neck, state.head

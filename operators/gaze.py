@@ -24,6 +24,13 @@ class ARTICULA_OT_gaze(bpy.types.Operator):
     chest: bpy.props.StringProperty(name="Chest Bone", description="Chest bone ('' = found by role)")
     neck: bpy.props.StringProperty(name="Neck Bone", description="Neck bone ('' = found by role)")
     head: bpy.props.StringProperty(name="Head Bone", description="Head bone ('' = found by role)")
+    facing: bpy.props.EnumProperty(
+        name="Facing", default='AUTO',
+        items=(('AUTO', "Automatic", "Annotated eyes on Articula MakeHuman-topology rigs, else the rest pose's facing"),
+               ('-Y', "-Y", "The face points along -Y of the armature's rest (Blender's front)"),
+               ('+Y', "+Y", "The face points along +Y of the armature's rest"),
+               ('-X', "-X", "The face points along -X of the armature's rest"),
+               ('+X', "+X", "The face points along +X of the armature's rest")))
 
     def execute(self, context):
         scene = context.scene
@@ -37,7 +44,8 @@ class ARTICULA_OT_gaze(bpy.types.Operator):
             start = scene.frame_start if self.frame_start < 0 else self.frame_start
             end = scene.frame_end if self.frame_end < 0 else self.frame_end
             overrides = {"chest": self.chest, "neck": self.neck, "head": self.head}
-            report = shot.apply_shot(context, arm, target, start, end, self.fade_frames, overrides, tuple(self.shares))
+            report = shot.apply_shot(context, arm, target, start, end, self.fade_frames, overrides, tuple(self.shares),
+                                     "" if self.facing == 'AUTO' else self.facing)
         except ArticulaInputError as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}

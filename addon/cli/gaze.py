@@ -44,7 +44,7 @@ def gaze(args) -> int:
         raise ArticulaInputError(f"{args.blend} has no object {args.armature!r}")
     call_operator(bpy.ops.articula.gaze, armature=args.armature, target=args.target, frame_start=first,
                   frame_end=last, fade_frames=args.fade, shares=shares, chest=args.chest, neck=args.neck,
-                  head=args.head)
+                  head=args.head, facing=args.facing)
     return finish(f"{args.armature!r} looks at {args.target!r} on frames {args.frames or 'of the scene'}", args.out)
 
 
@@ -58,5 +58,7 @@ def add_commands(sub):
     p.add_argument("--split", default="0.1,0.4,0.5", help="shares of the turn for chest,neck,head")
     for role in ("chest", "neck", "head"):
         p.add_argument(f"--{role}", default="", help=f"the {role} bone (default: found by role)")
+    p.add_argument("--facing", choices=("AUTO", "-Y", "+Y", "-X", "+X"), default="AUTO",
+                   help="where the face points in the rest pose (default: annotated eyes, else the body's facing)")
     p.add_argument("--out", required=True, help=".blend to save the result to")
     p.set_defaults(func=gaze)

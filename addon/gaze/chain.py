@@ -96,8 +96,12 @@ def _annotated_line(arm_ob, rest):
     return front, (front - back) / np.linalg.norm(front - back)
 
 
-def gaze_chain(arm_ob, rest, overrides=None, shares=SHARES, max_deg=MAX_DEG):
-    """``(GazeChain, eyes [(bone, direction)], how)`` of armature object ``arm_ob``."""
+FACINGS = {"-Y": (0.0, -1.0, 0.0), "+Y": (0.0, 1.0, 0.0), "-X": (-1.0, 0.0, 0.0), "+X": (1.0, 0.0, 0.0)}
+
+
+def gaze_chain(arm_ob, rest, overrides=None, shares=SHARES, max_deg=MAX_DEG, facing: str = ""):
+    """``(GazeChain, eyes [(bone, direction)], how)`` of armature object ``arm_ob``; ``facing`` ('-Y', '+Y',
+    '-X', '+X' in the armature's rest axes; '' = automatic) overrides where the face points."""
     roles = find_bones(arm_ob, rest, overrides)
     all_roles = {r: rest.index[b] for r, b in auto_roles(rest).roles.items()}
     all_roles.update(roles)
@@ -108,8 +112,14 @@ def gaze_chain(arm_ob, rest, overrides=None, shares=SHARES, max_deg=MAX_DEG):
     head = roles["head"]
     R = rest.rest[head, :3, :3]
     eyes = eye_bones(arm_ob, rest, head)
-    line = _annotated_line(arm_ob, rest)
-    if line is not None:
+    line = None if facing else _annotated_line(arm_ob, rest)
+    if facing:
+        if facing not in FACINGS:
+            raise ArticulaInputError(f"gaze: unknown facing {facing!r} (choose from {', '.join(FACINGS)})")
+        forward = np.array(FACINGS[facing])
+        origin = rest.rest[eyes, :3, 3].mean(axis=0) if eyes else (rest.rest[head, :3, 3] + rest.tails[head]) / 2
+        how = f"facing {facing} (set by hand)"
+    elif line is not None:
         origin, forward, how = line[0], line[1], "annotated MakeHuman eyes and back of head"
     else:
         forward = _facing(rest, all_roles)

@@ -14,6 +14,10 @@ class ArticulaGazeState(bpy.types.PropertyGroup):
     chest: bpy.props.StringProperty(name="Chest Bone", description="Override the chest bone found by role")
     neck: bpy.props.StringProperty(name="Neck Bone", description="Override the neck bone found by role")
     head: bpy.props.StringProperty(name="Head Bone", description="Override the head bone found by role")
+    facing: bpy.props.EnumProperty(
+        name="Facing", default='AUTO', description="Where the face points in the armature's rest pose",
+        items=(('AUTO', "Automatic", "Annotated eyes on Articula MakeHuman-topology rigs, else the rest facing"),
+               ('-Y', "-Y", ""), ('+Y', "+Y", ""), ('-X', "-X", ""), ('+X', "+X", "")))
 
 
 classes = (ArticulaGazeState,)

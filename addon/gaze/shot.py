@@ -128,14 +128,14 @@ def _rotations(local):
 
 
 def apply_shot(context, arm_ob, target_ob, start: int, end: int, fade: int = 10, overrides=None,
-               shares=chains.SHARES):
+               shares=chains.SHARES, facing: str = ""):
     """Make ``arm_ob`` look at ``target_ob`` from ``start`` to ``end`` with ``fade`` frames of fade; returns
     the report dict."""
     t0 = time.perf_counter()
     check_shot(arm_ob, target_ob, start, end)
     frames = np.arange(start, end + 1)
     weights = fades.shot_weights(frames, start, end, fade)
-    chain, eyes, how = chains.gaze_chain(arm_ob, read_rest(arm_ob), overrides, shares)
+    chain, eyes, how = chains.gaze_chain(arm_ob, read_rest(arm_ob), overrides, shares, facing=facing)
     rest, chain, eyes = carrier(read_rest(arm_ob), chain, eyes)
     local = _input_pose(arm_ob, rest, frames)
     targets = rest.armature_points(target_path(context, target_ob, frames))

@@ -114,6 +114,8 @@ def test_articula_rig_uses_the_annotated_gaze_line(pkg):
     rest = pkg("addon.retarget.armatures").read_rest(rig.armature)
     chain, eyes, how = pkg("addon.gaze.chain").gaze_chain(rig.armature, rest)
     assert how.startswith("annotated")
+    _, _, how = pkg("addon.gaze.chain").gaze_chain(rig.armature, rest, facing="+X")
+    assert how.startswith("facing +X")
     bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 40
     assert bpy.ops.articula.gaze(armature=rig.armature.name, target=target.name, fade_frames=5) == {'FINISHED'}
 
