@@ -29,6 +29,7 @@ import _common  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from articula.solver.geometry.procrustes import fit_rigid  # noqa: E402
 from articula.solver.track.visibility import vertex_normals  # noqa: E402  (area-weighted)
 
 
@@ -120,13 +121,6 @@ def unglue(rig_v, rig_f, tri, bary, offset):
     return bary[:, :1] * a + bary[:, 1:2] * b + bary[:, 2:] * c + offset[:, None] * n
 
 
-def _procrustes(a, b):
-    ca, cb = a.mean(0), b.mean(0)
-    U, _, Vt = np.linalg.svd((a - ca).T @ (b - cb))
-    d = np.sign(np.linalg.det(U @ Vt))
-    R = (U @ np.diag([1, 1, d]) @ Vt).T
-    return R, cb - R @ ca
-
 
 class _Scene:
     """The MakeHuman rig with frames 1 (pose A), 2 (pose A moved rigidly), 3 (pose B)."""
@@ -197,7 +191,7 @@ def _large_scan_lines(sc, lines):
     lines.append(f"frame change (depsgraph): {1000 * with_scan:.0f} ms with the scan, {1000 * without:.0f} ms "
                  f"without -> {1000 * (with_scan - without):.0f} ms per frame for the scan")
     err = np.abs(sc.evaluated(scan, 1) - points).max()
-    R, t = _procrustes(rig1, sc.evaluated(sc.rig.mesh, 2))
+    R, t = fit_rigid(rig1, sc.evaluated(sc.rig.mesh, 2))
     rigid = np.abs(sc.evaluated(scan, 2) - (points @ R.T + t)).max()
     lines.append(f"bind pose error {err / size:.2g}, rigid motion error {rigid / size:.2g} of the size "
                  f"({1e3 * err:.4f} / {1e3 * rigid:.4f} mm)")
@@ -222,7 +216,7 @@ def _shell_lines(sc, lines, offsets=(-0.01, 0.003, 0.02, 0.05, 0.10)):
         ref = glued(rig3, sc.model.faces, tri, bary, d)
         e = 1e3 * np.linalg.norm(sc.evaluated(scan, 3) - ref, axis=1)
         g = 1e3 * np.linalg.norm(unglue(rig3, sc.model.faces, *glue(points, rig1, sc.model.faces)) - ref, axis=1)
-        R, t = _procrustes(rig1, sc.evaluated(sc.rig.mesh, 2))
+        R, t = fit_rigid(rig1, sc.evaluated(sc.rig.mesh, 2))
         rigid = 1e3 * np.abs(sc.evaluated(scan, 2) - (points @ R.T + t)).max()
         lines.append(f"  d = {100 * d:+5.1f} cm: {_stats(e)} | {_stats(g)}; rigid motion max {rigid:.4f} mm")
         sc.bpy.data.objects.remove(scan)

@@ -6,6 +6,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 import bpy
+from articula.solver.geometry.procrustes import fit_rigid
 from articula.solver.track.visibility import vertex_normals
 
 from ..rig_helpers import bbox_diagonal, subject
@@ -47,14 +48,6 @@ def _evaluated(pkg, ob, frame):
     bpy.context.scene.frame_set(frame)
     return pkg("addon.scene.mesh_io").evaluated_positions(ob)
 
-
-def _procrustes(a, b):
-    """Rigid (R, t) taking points ``a`` to ``b`` (least squares)."""
-    ca, cb = a.mean(0), b.mean(0)
-    U, _, Vt = np.linalg.svd((a - ca).T @ (b - cb))
-    d = np.sign(np.linalg.det(U @ Vt))
-    R = (U @ np.diag([1, 1, d]) @ Vt).T
-    return R, cb - R @ ca
 
 
 def _rig(pkg, limb_deg=70.0):
@@ -110,7 +103,7 @@ def test_scan_follows_the_rig_exactly_at_the_bind_pose_and_rigidly_under_rigid_m
     size = bbox_diagonal(original)
     err = np.abs(_evaluated(pkg, scan, 1) - original).max() / size
     assert err < BIND_TOL, f"bind pose reproduced to {err:.3g}"
-    R, t = _procrustes(_evaluated(pkg, rig.mesh, 1), _evaluated(pkg, rig.mesh, 2))
+    R, t = fit_rigid(_evaluated(pkg, rig.mesh, 1), _evaluated(pkg, rig.mesh, 2))
     assert np.abs(_evaluated(pkg, rig.mesh, 1) @ R.T + t - _evaluated(pkg, rig.mesh, 2)).max() < 1e-5
     moved = _evaluated(pkg, scan, 2)
     assert np.abs(moved - original).max() > 0.1
@@ -126,7 +119,7 @@ def test_posed_limb_moves_the_scan_near_that_limb_only(pkg):
     limb = np.isin(model.anchor, [names.index("forearm.L"), names.index("hand.L")])
     rig1, rig3 = _evaluated(pkg, rig.mesh, 1), _evaluated(pkg, rig.mesh, 3)
     still = np.linalg.norm(rig3 - rig1, axis=1) < 1e-9
-    R, t = _procrustes(rig1[limb], rig3[limb])
+    R, t = fit_rigid(rig1[limb], rig3[limb])
     near = cKDTree(rig1).query_ball_point(original, r=0.06)
     on_limb = np.array([bool(ix) and limb[ix].all() for ix in near])
     off_limb = np.array([bool(ix) and still[ix].all() for ix in near])
