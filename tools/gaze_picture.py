@@ -4,6 +4,7 @@ CMU clip (the retargeted motion of ``./run bench gaze``) and on MakeHuman's defa
 layer.
 
     ~/.cache/articula/venv-bpy52/bin/python tools/gaze_picture.py docs/images/gaze.png [--frame 400]
+        [--tracked out/tracked_depth.blend]
 """
 import argparse
 import os
@@ -57,15 +58,24 @@ def main(argv=None):
     p = argparse.ArgumentParser()
     p.add_argument("out")
     p.add_argument("--frame", type=int, default=400)
+    p.add_argument("--tracked", default="", help="a tracked .blend (./run track --depth ... --blend FILE) whose "
+                                                 "rig is shown instead of the template body with a CMU clip")
     args = p.parse_args(argv)
     pkg = bench_gaze._addon()
-    bpy.ops.wm.read_homefile(use_empty=True)
-    body = bench_gaze.tracked_body(pkg)
+    if args.tracked:
+        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.tracked))
+        body = next(o for o in bpy.data.objects if o.type == 'ARMATURE' and o.articula.kind == 'RIG_ARMATURE')
+        first, last = pkg("addon.gaze.shot").animation_range(body)
+        args.frame = min(max(args.frame, first), last)
+        title = "tracked person"
+    else:
+        bpy.ops.wm.read_homefile(use_empty=True)
+        body = bench_gaze.tracked_body(pkg)
+        title = "template body"
     mesh = pkg("addon.rig.reader").find_mesh(body)
     idle = bench_gaze.idle_rig(pkg)
     shots = []
-    for arm, m, frame, title in ((body, mesh, args.frame, "template body"),
-                                 (idle, None, 100, "MakeHuman default, idle")):
+    for arm, m, frame, title in ((body, mesh, args.frame, title), (idle, None, 100, "MakeHuman default, idle")):
         target = _target_beside_head(arm, frame, title)
         first, last = pkg("addon.gaze.shot").animation_range(arm)
         before = _snapshot(pkg, arm, m, target, frame, f"{title}: before", 0.0)
