@@ -4,6 +4,7 @@ import re
 
 import bpy
 
+from .gaze.panel_state import SHOT_SETTINGS
 from .sequences import playback
 
 
@@ -153,7 +154,7 @@ class ARTICULA_PT_gaze(_ArticulaPanel, bpy.types.Panel):
         row = col.row(align=True)
         row.prop(state, "frame_start")
         row.prop(state, "frame_end")
-        col.prop(state, "fade")
+        col.prop(state, "fade_frames")
         col.prop(state, "shares")
         ob = context.active_object
         for name in ("chest", "neck", "head"):
@@ -164,10 +165,8 @@ class ARTICULA_PT_gaze(_ArticulaPanel, bpy.types.Panel):
         col.prop(state, "facing")
         op = _button(col, "articula.gaze", "Look at Target", 'HIDE_OFF')
         if op is not None:
-            op.facing = state.facing
-            op.frame_start, op.frame_end, op.fade_frames = state.frame_start, state.frame_end, state.fade
-            op.shares = state.shares
-            op.chest, op.neck, op.head = state.chest, state.neck, state.head
+            for key in SHOT_SETTINGS + ("frame_start", "frame_end"):
+                setattr(op, key, getattr(state, key))
             op.target = state.target.name if state.target else ""
 
 

@@ -3,11 +3,12 @@ head (and the eyes), faded in and out, as its own NLA layer on top of the existi
 import bpy
 
 from ..addon.gaze import shot
+from ..addon.gaze.panel_state import ShotSettings
 from ..addon.retarget.armatures import find_armature
 from ..solver.errors import ArticulaInputError
 
 
-class ARTICULA_OT_gaze(bpy.types.Operator):
+class ARTICULA_OT_gaze(ShotSettings, bpy.types.Operator):
     """Turn the character's chest, neck, head and eyes so its face points at the target over a shot,
     faded in and out; the correction is an NLA strip on top of the animation (mute or delete it to undo)"""
     bl_idname = "articula.gaze"
@@ -18,19 +19,6 @@ class ARTICULA_OT_gaze(bpy.types.Operator):
     target: bpy.props.StringProperty(name="Target", description="Object to look at (default: the panel's target)")
     frame_start: bpy.props.IntProperty(name="First Frame", default=-1, description="-1: the scene's first frame")
     frame_end: bpy.props.IntProperty(name="Last Frame", default=-1, description="-1: the scene's last frame")
-    fade_frames: bpy.props.IntProperty(name="Fade", default=10, min=0, description="Frames of fade in and out")
-    shares: bpy.props.FloatVectorProperty(name="Split", size=3, default=(0.1, 0.4, 0.5), min=0.0, max=1.0,
-                                          description="Shares of the turn for chest, neck and head")
-    chest: bpy.props.StringProperty(name="Chest Bone", description="Chest bone ('' = found by role)")
-    neck: bpy.props.StringProperty(name="Neck Bone", description="Neck bone ('' = found by role)")
-    head: bpy.props.StringProperty(name="Head Bone", description="Head bone ('' = found by role)")
-    facing: bpy.props.EnumProperty(
-        name="Facing", default='AUTO',
-        items=(('AUTO', "Automatic", "Annotated eyes on Articula MakeHuman-topology rigs, else the rest pose's facing"),
-               ('-Y', "-Y", "The face points along -Y of the armature's rest (Blender's front)"),
-               ('+Y', "+Y", "The face points along +Y of the armature's rest"),
-               ('-X', "-X", "The face points along -X of the armature's rest"),
-               ('+X', "+X", "The face points along +X of the armature's rest")))
 
     def execute(self, context):
         scene = context.scene

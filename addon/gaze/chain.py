@@ -29,10 +29,10 @@ _ANNOTATION = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.pa
 _EYE = re.compile(r"(^|[^a-z])eye([^a-z]|$)|eye[._ -]?[lr]$|^(left|right)eye", re.IGNORECASE)
 
 
-def find_bones(arm_ob, rest, overrides=None) -> dict:
-    """``{role: bone index}`` of chest, neck and head (``overrides``: ``{role: bone name}``, '' = auto)."""
+def find_bones(arm_ob, rest, found: dict, overrides=None) -> dict:
+    """``{role: bone index}`` of chest, neck and head from the roles ``found`` (``{role: bone name}``) and
+    ``overrides`` (``{role: bone name}``, '' = as found)."""
     overrides = overrides or {}
-    found = auto_roles(rest).roles
     out = {}
     for role in ROLES:
         name = overrides.get(role) or found.get(role)
@@ -52,13 +52,8 @@ def find_bones(arm_ob, rest, overrides=None) -> dict:
 
 def eye_bones(arm_ob, rest, head: int) -> list:
     """Indices of the eye bones below ``head`` that nothing else drives."""
-    below = []
-    for b, name in enumerate(rest.bones):
-        p = rest.parents[b]
-        while p >= 0 and p != head:
-            p = rest.parents[p]
-        if p == head and _EYE.search(name) and not name.startswith(("MCH-", "ORG-", "DEF-")):
-            below.append(b)
+    below = [b for b, name in enumerate(rest.bones) if b != head and rest.is_ancestor(head, b)
+             and _EYE.search(name) and not name.startswith(("MCH-", "ORG-", "DEF-"))]
     busy = set(constrained_bones(arm_ob, {rest.bones[b] for b in below})) | set(driven_bones(arm_ob))
     return [b for b in below if rest.bones[b] not in busy]
 
@@ -102,8 +97,9 @@ FACINGS = {"-Y": (0.0, -1.0, 0.0), "+Y": (0.0, 1.0, 0.0), "-X": (-1.0, 0.0, 0.0)
 def gaze_chain(arm_ob, rest, overrides=None, shares=SHARES, max_deg=MAX_DEG, facing: str = ""):
     """``(GazeChain, eyes [(bone, direction)], how)`` of armature object ``arm_ob``; ``facing`` ('-Y', '+Y',
     '-X', '+X' in the armature's rest axes; '' = automatic) overrides where the face points."""
-    roles = find_bones(arm_ob, rest, overrides)
-    all_roles = {r: rest.index[b] for r, b in auto_roles(rest).roles.items()}
+    found = auto_roles(rest).roles
+    roles = find_bones(arm_ob, rest, found, overrides)
+    all_roles = {r: rest.index[b] for r, b in found.items()}
     all_roles.update(roles)
     joints = [roles[r] for r in ROLES if r in roles]
     s = np.array([sh for r, sh in zip(ROLES, shares) if r in roles], dtype=np.float64)

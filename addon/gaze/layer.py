@@ -8,14 +8,13 @@ extrapolation: outside the shot nothing changes.  COMBINE post-multiplies quater
 strip) and adds Euler angles, so the strip holds ``q_belowᵀ q_new`` or ``e_new − e_below``.  Mute,
 tweak or delete the strip or track in the NLA editor to undo a shot.
 """
-import bpy
 import numpy as np
 
 from ...solver.errors import ArticulaInputError
 from ...solver.geometry.rotations import matrix_to_quat, quat_conj, quat_mul
 from .. import compat
 from ..retarget.clip_writer import matrix_to_euler
-from ..rig.actions import _linear
+from ..rig.actions import add_keys
 
 TRACK = "Articula Gaze"
 
@@ -69,19 +68,10 @@ def add_shot(arm_ob, rest, bones, frames, below, new, name: str):
     """New strip with the shot's correction of ``bones`` (indices into ``rest``): pose-bone rotations
     ``below``/``new`` ``(F, J, 3, 3)`` on ``frames``; returns the strip."""
     action, slot, bag = compat.new_object_action(name, arm_ob)
-    co = np.empty((len(frames), 2), dtype=np.float32)
-    co[:, 0] = frames
-    interp = np.full(len(frames), _linear(), dtype=np.int32)
     for b in bones:
         pb = arm_ob.pose.bones[rest.bones[b]]
         for prop, index, values in _channels(pb, below[:, b], new[:, b]):
-            fc = compat.fcurve_new(bag, f'pose.bones["{bpy.utils.escape_identifier(pb.name)}"].{prop}', index,
-                                   pb.name)
-            fc.keyframe_points.add(len(frames))
-            co[:, 1] = values
-            fc.keyframe_points.foreach_set("co", co.ravel())
-            fc.keyframe_points.foreach_set("interpolation", interp)
-            fc.update()
+            add_keys(bag, pb.name, prop, index, frames, values)
     ad = arm_ob.animation_data or arm_ob.animation_data_create()
     track = _free_track(ad, int(frames[0]), int(frames[-1]))
     strip = track.strips.new(action.name, int(frames[0]), action)

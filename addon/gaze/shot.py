@@ -10,7 +10,9 @@ import numpy as np
 from ...solver.errors import ArticulaInputError
 from ...solver.gaze import aim, fade as fades
 from ...solver.retarget.armature import local_from_pose, subset
+from .. import compat
 from ..jobs import scene_guard
+from ..rig.actions import fcurve_values
 from ..retarget.armatures import check_editable, check_scale, read_rest
 from ..retarget.source_clip import local_from_fcurves, needs_evaluation, pose_from_scene
 from . import chain as chains, layer
@@ -62,8 +64,6 @@ def target_path(context, target_ob, frames) -> np.ndarray:
         base = np.array(target_ob.location, dtype=np.float64) + np.array(target_ob.delta_location)
         out = np.tile(base, (len(frames), 1))
         if ad is not None and ad.action is not None:
-            from ..rig.actions import fcurve_values
-            from .. import compat
             for fc in compat.object_action_fcurves(target_ob, ad.action):
                 if fc.data_path == "location":
                     out[:, fc.array_index] = fcurve_values(fc, frames) + target_ob.delta_location[fc.array_index]
@@ -135,8 +135,9 @@ def apply_shot(context, arm_ob, target_ob, start: int, end: int, fade: int = 10,
     check_shot(arm_ob, target_ob, start, end)
     frames = np.arange(start, end + 1)
     weights = fades.shot_weights(frames, start, end, fade)
-    chain, eyes, how = chains.gaze_chain(arm_ob, read_rest(arm_ob), overrides, shares, facing=facing)
-    rest, chain, eyes = carrier(read_rest(arm_ob), chain, eyes)
+    whole = read_rest(arm_ob)
+    chain, eyes, how = chains.gaze_chain(arm_ob, whole, overrides, shares, facing=facing)
+    rest, chain, eyes = carrier(whole, chain, eyes)
     local = _input_pose(arm_ob, rest, frames)
     targets = rest.armature_points(target_path(context, target_ob, frames))
     new, report = aim.solve(rest, local, chain, targets, weights)

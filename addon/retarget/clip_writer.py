@@ -6,12 +6,11 @@ bone's order, unwrapped from frame to frame; axis-angle), LINEAR keys on the sou
 root bone its location.  The target's previous active action is kept (fake user when nothing else uses
 it); nothing is overwritten.
 """
-import bpy
 import numpy as np
 
 from ...solver.geometry.rotations import quat_to_matrix
 from .. import compat
-from ..rig.actions import _linear
+from ..rig.actions import add_keys
 
 _AXES = {"X": 0, "Y": 1, "Z": 2}
 
@@ -53,23 +52,13 @@ def write_clip(arm_ob, rest, result, frames, name: str):
     """Write ``result`` (:class:`solver.retarget.solve.RetargetResult`, bones in ``rest`` order) on
     ``frames`` to a new action named ``name`` on armature object ``arm_ob``; returns the action."""
     action, slot, bag = compat.new_object_action(name, arm_ob)
-    co = np.empty((len(frames), 2), dtype=np.float32)
-    co[:, 0] = frames
-    interp = np.full(len(frames), _linear(), dtype=np.int32)
     for b in result.driven:
         bone = rest.bones[b]
-        pb = arm_ob.pose.bones[bone]
-        curves = bone_channels(pb, result.quaternions[:, b])
+        curves = bone_channels(arm_ob.pose.bones[bone], result.quaternions[:, b])
         if b == result.root_bone:
             curves += [("location", i, result.root_locations[:, i]) for i in range(3)]
         for prop, index, values in curves:
-            path = f'pose.bones["{bpy.utils.escape_identifier(bone)}"].{prop}'
-            fc = compat.fcurve_new(bag, path, index, bone)
-            fc.keyframe_points.add(len(frames))
-            co[:, 1] = values
-            fc.keyframe_points.foreach_set("co", co.ravel())
-            fc.keyframe_points.foreach_set("interpolation", interp)
-            fc.update()
+            add_keys(bag, bone, prop, index, frames, values)
     old = arm_ob.animation_data.action if arm_ob.animation_data else None
     if old is not None and old.users == 1 and not old.use_fake_user:
         old.use_fake_user = True

@@ -12,16 +12,16 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ...solver.geometry.rotations import matrix_to_quat, quat_to_matrix
+from ...solver.geometry.rotations import matrix_to_quat, quat_sign_continuous, quat_to_matrix
 from ...solver.retarget.armature import forward, local_matrices
 from .armatures import constrained_bones, driven_bones
-from .source_clip import _chains
+from .source_clip import with_ancestors
 
 
 def needs_evaluation(ob, mapped) -> list:
     """Why the target's channels must come from the evaluated scene: bones above the ``mapped`` ones
     (not mapped themselves) that constraints, drivers or non-default inheritance move."""
-    above = _chains(ob, mapped) - set(mapped)
+    above = with_ancestors(ob, mapped) - set(mapped)
     why = []
     if constrained_bones(ob, above):
         why.append("constrained parents")
@@ -93,7 +93,4 @@ def solve(context, ob, rest, result, frames, progress=None) -> None:
         if ad is not None:
             ad.action = keep_action
         context.view_layer.update()
-    q = result.quaternions
-    for n in range(1, len(q)):
-        flip = np.einsum("bi,bi->b", q[n], q[n - 1]) < 0
-        q[n, flip] *= -1
+    result.quaternions[:] = quat_sign_continuous(result.quaternions)

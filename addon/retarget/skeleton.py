@@ -2,6 +2,7 @@
 clip, solve (:mod:`solver.retarget.solve`) and write a new action on the target.  Every check runs before
 the scene changes; a failure while writing removes what was made (:func:`addon.jobs.scene_guard`)."""
 import time
+from dataclasses import replace
 
 from ...solver.errors import ArticulaInputError
 from ...solver.retarget.mapping import Mapping, auto_roles, describe_missing
@@ -15,8 +16,13 @@ from .source_clip import active_action, read_clip
 
 def auto_mapping(source_ob, target_ob):
     """``(Mapping, source finding, target finding)`` found automatically (presets, then the skeletons)."""
-    src, tgt = auto_roles(read_rest(source_ob)), auto_roles(read_rest(target_ob))
-    return Mapping.from_roles(src.roles, tgt.roles), src, tgt
+    return _auto_mapping(read_rest(source_ob), read_rest(target_ob))
+
+
+def _auto_mapping(src, tgt):
+    """:func:`auto_mapping` of rest armatures already read."""
+    found_src, found_tgt = auto_roles(src), auto_roles(tgt)
+    return Mapping.from_roles(found_src.roles, found_tgt.roles), found_src, found_tgt
 
 
 def _missing_message(mapping: Mapping, source_ob, target_ob) -> str:
@@ -53,14 +59,13 @@ def retarget(context, source_ob, target_ob, mapping: Mapping | None = None, opti
     """Retarget ``source_ob``'s active action onto ``target_ob``; returns ``(action, report dict)``.
     ``progress(fraction, text)`` hears about the slow evaluated paths (constrained rigs)."""
     t0 = time.perf_counter()
+    src, tgt = read_rest(source_ob), read_rest(target_ob)
     found = None
     if mapping is None:
-        mapping, *found = auto_mapping(source_ob, target_ob)
+        mapping, *found = _auto_mapping(src, tgt)
     check_pair(source_ob, target_ob, mapping)
     src_action = active_action(source_ob)
-    src, tgt = read_rest(source_ob), read_rest(target_ob)
-    options = options or RetargetOptions()
-    options.fps = context.scene.render.fps / context.scene.render.fps_base
+    options = replace(options or RetargetOptions(), fps=context.scene.render.fps / context.scene.render.fps_base)
     frames, pose, how = read_clip(source_ob, src, [s for s, _ in mapping.pairs().values()], progress)
     result = retarget_clip(src, tgt, mapping, pose, options)
     mapped = {t for _, t in mapping.pairs().values()}

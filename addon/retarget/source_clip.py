@@ -12,6 +12,7 @@ import bpy
 import numpy as np
 
 from ...solver.errors import ArticulaInputError
+from ...solver.geometry.rotations import quat_normalize, quat_to_matrix, rotvec_to_matrix
 from ...solver.retarget.armature import forward
 from .. import compat
 from ..rig.actions import action_frame_range, fcurve_values
@@ -39,20 +40,10 @@ def euler_to_matrix(angles: np.ndarray, order: str) -> np.ndarray:
     return R
 
 
-def quaternion_to_matrix(q: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) of quaternions ``(..., 4)`` (w, x, y, z), normalised first (Blender does)."""
-    q = q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-12)
-    w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-                     np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-                     np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1)], -2)
-
-
 def axis_angle_to_matrix(v: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) of Blender axis-angle values ``(..., 4)`` (angle, x, y, z)."""
+    """(..., 3, 3) of Blender axis-angle values ``(..., 4)`` (angle, x, y, z; the axis normalised first)."""
     axis = v[..., 1:] / np.maximum(np.linalg.norm(v[..., 1:], axis=-1, keepdims=True), 1e-12)
-    half = v[..., :1] / 2
-    return quaternion_to_matrix(np.concatenate([np.cos(half), np.sin(half) * axis], -1))
+    return rotvec_to_matrix(v[..., :1] * axis)
 
 
 _ROTATION_PROP = {'QUATERNION': ("rotation_quaternion", 4), 'AXIS_ANGLE': ("rotation_axis_angle", 4)}
@@ -69,7 +60,7 @@ def active_action(ob):
     return ad.action
 
 
-def _chains(ob, bones) -> set:
+def with_ancestors(ob, bones) -> set:
     """``bones`` and all their ancestors (the bones whose pose decides where ``bones`` are)."""
     out = set()
     for name in bones:
@@ -84,7 +75,7 @@ def needs_evaluation(ob, bones=None, nla: bool = True) -> list:
     """Why the source must be read from the evaluated scene ([] when the F-curves say it all); only the
     ``bones`` that matter (the mapped ones and their ancestors; default: all) are looked at; ``nla``:
     playing NLA strips count too."""
-    relevant = _chains(ob, bones) if bones is not None else {b.name for b in ob.data.bones}
+    relevant = with_ancestors(ob, bones) if bones is not None else {b.name for b in ob.data.bones}
     why = []
     if constrained_bones(ob, relevant):
         why.append("bone constraints")
@@ -126,7 +117,7 @@ def _channels(ob, action, frames):
         if mode in _ROTATION_PROP:
             prop, n = _ROTATION_PROP[mode]
             values = read(pb, prop, n)
-            R = quaternion_to_matrix(values) if mode == 'QUATERNION' else axis_angle_to_matrix(values)
+            R = quat_to_matrix(quat_normalize(values)) if mode == 'QUATERNION' else axis_angle_to_matrix(values)
         else:
             R = euler_to_matrix(read(pb, "rotation_euler", 3), mode)
         out.append((pb.name, read(pb, "location", 3), R, read(pb, "scale", 3)))

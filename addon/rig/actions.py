@@ -19,6 +19,7 @@ import bpy
 import numpy as np
 
 from ...solver.errors import ArticulaInputError
+from ...solver.geometry.rotations import quat_sign_continuous
 from ...solver.rig.model import Poses
 from .. import compat
 from ..scene import frames
@@ -37,23 +38,26 @@ def _path(bone: str, prop: str) -> str:
     return f'pose.bones["{bpy.utils.escape_identifier(bone)}"].{prop}'
 
 
+def add_keys(channels, bone: str, prop: str, index: int, frames, values) -> None:
+    """A new F-curve of pose bone ``bone``'s ``prop[index]`` in ``channels`` (:func:`compat.new_object_action`)
+    with LINEAR keys ``values (N,)`` on ``frames (N,)``, written in one ``foreach_set``."""
+    co = np.empty((len(frames), 2), dtype=np.float32)
+    co[:, 0], co[:, 1] = frames, values
+    fc = compat.fcurve_new(channels, _path(bone, prop), index, bone)
+    fc.keyframe_points.add(len(frames))
+    fc.keyframe_points.foreach_set("co", co.ravel())
+    fc.keyframe_points.foreach_set("interpolation", np.full(len(frames), _linear(), dtype=np.int32))
+    fc.update()
+
+
 def root_rest_axes(arm, root: str) -> np.ndarray:
     """(3, 3) rest axes (columns) of bone ``root`` as Blender holds them (float32 values)."""
     return np.array(arm.data.bones[root].matrix_local, dtype=np.float64)[:3, :3]
 
 
-def sign_continuous(rotations) -> np.ndarray:
-    """Flip quaternions ``(N, B, 4)`` so each has a non-negative dot product with the previous frame."""
-    q = np.array(rotations, dtype=np.float64)
-    for n in range(1, len(q)):
-        flip = np.einsum("bi,bi->b", q[n], q[n - 1]) < 0
-        q[n, flip] *= -1
-    return q
-
-
 def channels(names, poses, root_axes):
     """``[(bone, prop, index, values (N,))]`` of every F-curve to write for ``poses``."""
-    q = sign_continuous(poses.rotations)
+    q = quat_sign_continuous(poses.rotations)
     loc = poses.translations @ root_axes                 # rows: F0ᵀ t
     out = [(name, "rotation_quaternion", i, q[:, b, i]) for b, name in enumerate(names) for i in range(4)]
     out += [(names[0], "location", i, loc[:, i]) for i in range(3)]
@@ -75,16 +79,9 @@ def write_action(arm, names, poses, name: str = "Articula Poses", frame_start: i
     N = len(poses)
     old = arm.animation_data.action if arm.animation_data else None
     action, slot, bag = compat.new_object_action(name, arm)
-    co = np.empty((N, 2), dtype=np.float32)
-    co[:, 0] = np.arange(frame_start, frame_start + N)
-    interp = np.full(N, _linear(), dtype=np.int32)
+    on = np.arange(frame_start, frame_start + N)
     for bone, prop, index, values in channels(names, poses, root_rest_axes(arm, names[0])):
-        fc = compat.fcurve_new(bag, _path(bone, prop), index, bone)
-        fc.keyframe_points.add(N)
-        co[:, 1] = values
-        fc.keyframe_points.foreach_set("co", co.ravel())
-        fc.keyframe_points.foreach_set("interpolation", interp)
-        fc.update()
+        add_keys(bag, bone, prop, index, on, values)
     if nla:
         compat.push_to_nla(arm, action, slot, frame_start)        # the active action stays as it is
     else:

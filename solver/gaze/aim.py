@@ -38,14 +38,9 @@ class GazeChain:
             raise ArticulaInputError("gaze: one share per turning joint is needed")
         if np.any(shares < 0) or abs(shares.sum() - 1.0) > 1e-6:
             raise ArticulaInputError(f"gaze: the shares must be >= 0 and sum to 1 (got {shares.tolist()})")
-        chain = [self.joints[0]]
-        for j in self.joints[1:]:
-            p = arm.parents[j]
-            while p >= 0 and p != chain[-1]:
-                p = arm.parents[p]
-            if p < 0:
-                raise ArticulaInputError(f"gaze: {arm.bones[j]!r} does not hang from {arm.bones[chain[-1]]!r}")
-            chain.append(j)
+        for upper, j in zip(self.joints, self.joints[1:]):
+            if upper == j or not arm.is_ancestor(upper, j):
+                raise ArticulaInputError(f"gaze: {arm.bones[j]!r} does not hang from {arm.bones[upper]!r}")
 
     @property
     def reach(self) -> float:

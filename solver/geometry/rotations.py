@@ -53,6 +53,16 @@ def quat_canonical(q):
     return np.where(q[..., :1] < 0, -q, q)
 
 
+def quat_sign_continuous(q):
+    """Quaternions ``(N, ..., 4)`` flipped so each has a non-negative dot product with the one before it
+    along axis 0 (frames), so keys interpolated between them take the short way."""
+    q = np.array(_as_quat(q), dtype=np.float64)
+    for n in range(1, len(q)):
+        flip = np.einsum("...i,...i->...", q[n], q[n - 1]) < 0
+        q[n][flip] *= -1
+    return q
+
+
 def quat_to_matrix(q):
     """Rotation matrices ``(..., 3, 3)`` of quaternions ``(..., 4)`` (normalised first)."""
     w, x, y, z = np.moveaxis(quat_normalize(q), -1, 0)

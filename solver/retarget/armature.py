@@ -66,6 +66,14 @@ class ArmatureRest:
         rel[has] = np.linalg.inv(self.rest[self.parents[has]]) @ self.rest[has]
         return rel
 
+    def is_ancestor(self, a: int, b: int) -> bool:
+        """Bone ``a`` is bone ``b`` or one of its ancestors."""
+        while b >= 0:
+            if b == a:
+                return True
+            b = self.parents[b]
+        return False
+
     def children(self) -> list:
         out = [[] for _ in self.bones]
         for b, p in enumerate(self.parents):

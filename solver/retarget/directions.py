@@ -62,18 +62,10 @@ def plan_segments(source: ArmatureRest, target: ArmatureRest, pairs: dict) -> li
             cs, ct = source.index[pairs[child][0]], target.index[pairs[child][1]]
             if (np.linalg.norm(hs[cs] - hs[s]) > DEGENERATE * Hs
                     and np.linalg.norm(ht[ct] - ht[t]) > DEGENERATE * Ht
-                    and _below(target, ct, t)):
+                    and target.is_ancestor(t, ct)):    # turning t aims the segment
                 seg.child, seg.source_child, seg.target_child = child, cs, ct
         out.append(seg)
     return out
-
-
-def _below(arm: ArmatureRest, b: int, a: int) -> bool:
-    """Bone ``b`` hangs from bone ``a`` (so turning ``a`` aims the segment from ``a`` to ``b``)."""
-    b = arm.parents[b]
-    while b >= 0 and b != a:
-        b = arm.parents[b]
-    return b == a
 
 
 def body_frame(heads: np.ndarray, segs, which: str) -> np.ndarray:
@@ -112,13 +104,14 @@ def rest_alignments(source: ArmatureRest, target: ArmatureRest, segs) -> np.ndar
                 parent = PARENT.get(parent)
             Q[seg.role] = Q[parent] if parent is not None else G
             continue
-        ds = _unit(hs[seg.source_child] - hs[seg.source])
-        dt = _unit(ht[seg.target_child] - ht[seg.target])
+        ds = unit(hs[seg.source_child] - hs[seg.source])
+        dt = unit(ht[seg.target_child] - ht[seg.target])
         Q[seg.role] = rotation_between(G @ ds, dt) @ G
     return np.stack([Q[seg.role] for seg in segs])
 
 
-def _unit(v):
+def unit(v):
+    """``v (..., 3)`` scaled to unit length (zero vectors stay zero)."""
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
 
 
@@ -132,9 +125,9 @@ def target_world_rotations(source: ArmatureRest, target: ArmatureRest, segs, src
     for k, seg in enumerate(segs):
         W = src_rot[:, seg.source] @ (S0[seg.source].T @ Q[k].T @ T0[seg.target])
         if seg.child is not None:
-            rest_dir = _unit(ht[seg.target_child] - ht[seg.target])
+            rest_dir = unit(ht[seg.target_child] - ht[seg.target])
             now = W @ (T0[seg.target].T @ rest_dir)
-            want = _unit(src_heads[:, seg.source_child] - src_heads[:, seg.source])
+            want = unit(src_heads[:, seg.source_child] - src_heads[:, seg.source])
             W = rotation_between(now, want) @ W
         out[:, k] = W
     return out

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..geometry.rotations import rotation_between
 from . import root_motion
+from .directions import unit
 from .root_motion import moving_average
 from .armature import ArmatureRest, forward, local_matrices, world_pose
 from .roles import LEG_ROLES
@@ -76,18 +77,15 @@ def _two_bone(hip, knee, ankle, goal):
     h = np.sqrt(np.maximum(l1 ** 2 - a ** 2, 0.0))
     new_knee = hip + a[:, None] * u + h[:, None] * v
     new_ankle = hip + d[:, None] * u
-    R1 = rotation_between(_unit(knee - hip), _unit(new_knee - hip))
+    R1 = rotation_between(unit(knee - hip), unit(new_knee - hip))
     moved = np.einsum("fij,fj->fi", R1, ankle - knee)
-    R2 = rotation_between(_unit(moved), _unit(new_ankle - new_knee))
+    R2 = rotation_between(unit(moved), unit(new_ankle - new_knee))
     return R1, R2
 
 
-def _unit(v):
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
-
-
 def plant_feet(source: ArmatureRest, target: ArmatureRest, pairs: dict, src_heads, local, want, fps):
-    """(local rotations ``(F, Jt, 3, 3)``, hips path ``(F, 3)``, report) with the feet planted."""
+    """(local rotations ``(F, Jt, 3, 3)``, report) with the feet planted; the hips keep the path
+    ``want (F, 3)``."""
     hips = target.index[pairs["hips"][1]]
     bone = root_motion.translation_bone(target, hips, [target.index[t] for _, t in pairs.values()])
     src_leg = root_motion.leg_length(source, {r: s for r, (s, _) in pairs.items()})
@@ -105,7 +103,7 @@ def plant_feet(source: ArmatureRest, target: ArmatureRest, pairs: dict, src_head
         _, P = _target_world(target, local, hips, bone, want)
         report[side] = {"contacts": len(ranges), "frames": int(sum(b - a + 1 for a, b in ranges)),
                         "sliding_before": before, "sliding_after": sliding(P[:, t_foot], ranges)}
-    return local, want, report
+    return local, report
 
 
 def _target_world(target, local, hips, bone, want):

@@ -65,18 +65,7 @@ def root_locations(target: ArmatureRest, local_rot: np.ndarray, hips: int, bone:
 def translation_bone(target: ArmatureRest, hips: int, mapped=()) -> int:
     """The bone whose location moves the whole body: the hips, or its nearest ancestor that carries every
     ``mapped`` bone (a learned rig whose root part is the chest), then up past connected bones."""
-    def carries(b):
-        return all(_is_ancestor(target, b, m) for m in mapped)
     b = hips
-    while target.parents[b] >= 0 and (not carries(b) or target.connected[b]):
+    while target.parents[b] >= 0 and (not all(target.is_ancestor(b, m) for m in mapped) or target.connected[b]):
         b = target.parents[b]
     return b
-
-
-def _is_ancestor(arm: ArmatureRest, a: int, b: int) -> bool:
-    """``a`` is ``b`` or one of its ancestors."""
-    while b >= 0:
-        if b == a:
-            return True
-        b = arm.parents[b]
-    return False

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import ArticulaInputError
-from ..geometry.rotations import matrix_to_quat
+from ..geometry.rotations import matrix_to_quat, quat_sign_continuous
 from . import directions, foot_plant, root_motion
 from .armature import ArmatureRest, rest_world, world_pose
 from .mapping import Mapping, describe_missing
@@ -48,14 +48,6 @@ def _check_needed(mapping: Mapping) -> dict:
     return pairs
 
 
-def _continuous(q: np.ndarray) -> np.ndarray:
-    q = q.copy()
-    for n in range(1, len(q)):
-        flip = np.einsum("bi,bi->b", q[n], q[n - 1]) < 0
-        q[n, flip] *= -1
-    return q
-
-
 def retarget_clip(source: ArmatureRest, target: ArmatureRest, mapping: Mapping, source_pose: np.ndarray,
                   options: RetargetOptions | None = None) -> RetargetResult:
     """Retarget the clip ``source_pose (F, Js, 4, 4)`` (armature-space pose matrices of the source)."""
@@ -84,13 +76,13 @@ def retarget_clip(source: ArmatureRest, target: ArmatureRest, mapping: Mapping, 
     report = {"frames": len(source_pose), "segments": len(segs), "leg_ratio": ratio,
               "unit_mismatch": bool(ratio > UNIT_MISMATCH or ratio < 1.0 / UNIT_MISMATCH)}
     if options.foot_cleanup:
-        local, want, plant = foot_plant.plant_feet(source, target, pairs, src_heads, local, want, options.fps)
+        local, plant = foot_plant.plant_feet(source, target, pairs, src_heads, local, want, options.fps)
         report["foot_contacts"] = plant
     bone = root_motion.translation_bone(target, hips_t, [seg.target for seg in segs])
     loc = root_motion.root_locations(target, local, hips_t, bone, want)
-    driven = sorted({seg.target for seg in segs} | _path_bones(target, segs) | {bone})
-    q = _continuous(matrix_to_quat(local))
-    return RetargetResult(q, driven, sorted({seg.target for seg in segs} | {bone}), bone, loc, ratio, report)
+    mapped = {seg.target for seg in segs} | {bone}
+    q = quat_sign_continuous(matrix_to_quat(local))
+    return RetargetResult(q, sorted(mapped | _path_bones(target, segs)), sorted(mapped), bone, loc, ratio, report)
 
 
 def _path_bones(target: ArmatureRest, segs) -> set:
