@@ -12,9 +12,9 @@ import bpy
 
 from ...sample_scenes import cli as samples
 from ...solver.errors import ArticulaInputError, Cancelled
-from . import bench, bind_scan, demo, depth, gaze, lbs, learn, retarget, rig, scans, track
+from . import bench, bind_scan, demo, depth, farm, gaze, lbs, learn, retarget, rig, scans, track
 
-COMMAND_MODULES = (bench, samples, rig, lbs, scans, depth, learn, track, retarget, bind_scan, gaze, demo)
+COMMAND_MODULES = (bench, samples, rig, lbs, scans, depth, learn, track, retarget, bind_scan, gaze, farm, demo)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -64,7 +64,7 @@ def provenance(outcome) -> dict:
                             cap.names, options_dict(outcome.options), bool(outcome.result.template),
                             report_document(outcome))
     prov.update(tracker=f"depth {outcome.options.tracker}", coordinates=cap.coordinates,
-                template=bool(outcome.result.template))
+                template=bool(outcome.result.template), look_ahead=1 if outcome.options.smooth else 0)
     return prov
 
 

@@ -128,6 +128,26 @@ def choose_frames(ranges, lo: int, hi: int) -> np.ndarray:
     return best
 
 
+def choose_frames_causal(ranges, lo: int, hi: int, look_ahead: int) -> np.ndarray:
+    """Chunk index per frame ``lo..hi-1`` for causal chunks sorted by start: a frame comes from the
+    earliest chunk covering it unless it is among that chunk's last ``look_ahead`` frames before the
+    next chunk's range (then from the next chunk)."""
+    f = np.arange(lo, hi)
+    best = np.full(len(f), -1)
+    for i, (a, b) in reversed(list(enumerate(ranges))):
+        last = i == len(ranges) - 1
+        usable = (f >= a) & (f < (b if last else max(b - look_ahead, ranges[i + 1][0])))
+        best[usable] = i
+    return best
+
+
+def _look_ahead(chunks):
+    """The chunks' common ``look_ahead`` (causal trackers), else None."""
+    values = {c.provenance.get("look_ahead") for c in chunks}
+    value = values.pop() if len(values) == 1 else None
+    return value if isinstance(value, int) and value >= 0 else None
+
+
 def _check_compatible(chunks) -> None:
     """Raise unless every chunk was tracked from the same model, input and options as the first."""
     ref = chunks[0]
@@ -205,7 +225,9 @@ def merge_chunks(chunks) -> MergedTrack:
     _check_compatible(chunks)
     _check_coverage(chunks)
     lo, hi = chunks[0].start, chunks[-1].end
-    chosen = choose_frames([(c.start, c.end) for c in chunks], lo, hi)
+    ranges, look_ahead = [(c.start, c.end) for c in chunks], _look_ahead(chunks)
+    chosen = (choose_frames(ranges, lo, hi) if look_ahead is None
+              else choose_frames_causal(ranges, lo, hi, look_ahead))
     idx = [lo + k - chunks[i].start for k, i in enumerate(chosen)]
     poses = Poses(np.stack([chunks[i].poses.rotations[j] for i, j in zip(chosen, idx)]),
                   np.stack([chunks[i].poses.translations[j] for i, j in zip(chosen, idx)]),
@@ -227,4 +249,5 @@ def merge_chunks(chunks) -> MergedTrack:
     ref = chunks[0].provenance
     prov = track_provenance(ref["model_sha256"], ref["input"]["source"], ref["input"]["frames"], lo, names,
                             ref["options"], ref["adapted"], {"merge": report})
+    prov.update({k: ref[k] for k in ("tracker", "coordinates", "template", "look_ahead") if k in ref})
     return MergedTrack(chunks[keep].model, poses, prov, report)

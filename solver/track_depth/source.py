@@ -36,13 +36,15 @@ def numbering_gaps(names) -> list:
 class DepthRecording:
     """``paths`` of the depth PNG frames; ``camera`` (:class:`.observation.ViewCamera`); ``world`` True
     when ``cam_to_world`` came from ``intrinsics.json``; ``options`` (:class:`solver.depth.frames.DepthOptions`);
-    ``notes`` for the report."""
+    ``notes`` for the report; ``setup_paths``: the frames the floor and background are fitted on (all
+    frames of the folder when ``paths`` is a range of them, so a chunk sees the floor a whole run sees)."""
     paths: list
     camera: ViewCamera
     world: bool
     options: dp.DepthOptions
     notes: list
     setup: object = None
+    setup_paths: list = None
 
     @classmethod
     def from_folder(cls, folder: str, preset: str | None = None, options: dp.DepthOptions | None = None,
@@ -51,9 +53,9 @@ class DepthRecording:
         from the folder, else the camera ``preset`` (e.g. ``kinect_v1``, noted in the report)."""
         opts = options or dp.DepthOptions()
         opts.validate()
-        paths = rec.list_frames(folder, (".png",))
+        paths = all_paths = rec.list_frames(folder, (".png",))
         if frames is not None:
-            paths = paths[frames]
+            paths = all_paths[frames]
             if not paths:
                 raise ArticulaInputError(f"{folder}: the frame range selects no frame")
         notes = []
@@ -72,7 +74,7 @@ class DepthRecording:
         camera = ViewCamera(intr, np.eye(4) if c2w is None else c2w)
         notes.append("poses in the world frame of intrinsics.json's cam_to_world" if c2w is not None
                      else "poses in the camera frame (OpenCV: +X right, +Y down, +Z forward)")
-        return cls(paths, camera, c2w is not None, opts, notes)
+        return cls(paths, camera, c2w is not None, opts, notes, setup_paths=all_paths)
 
     def __len__(self) -> int:
         return len(self.paths)
@@ -84,7 +86,7 @@ class DepthRecording:
     def prepare(self, progress=None) -> None:
         """Fit the floor (and background) once; rescales the intrinsics to the frames' size."""
         if self.setup is None:
-            frames = rec.png_frames(self.paths)
+            frames = rec.png_frames(self.setup_paths or self.paths)
             self.setup = rec.recording_setup(frames, self.camera.intr, self.options,
                                              progress=progress or (lambda f, t="": None))
             self.camera = ViewCamera(self.setup.intr, self.camera.cam_to_world)

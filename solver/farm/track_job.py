@@ -1,0 +1,82 @@
+"""A chunked tracking job for a Flamenco Manager (docs/farm.md): the work (model, recording, chunk plan,
+output paths) as the job of the ``articula-track`` job type (``addon/farm/job_types/articula_track.js``:
+one task per chunk, named ``chunk-NNNN ...``, then a task that merges and bakes), followed by
+:class:`.follow.FarmRun`."""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+from ..errors import ArticulaInputError
+from . import chunks as chunk_plan
+
+JOB_TYPE = "articula-track"
+KINDS = ("depth", "scans")
+
+
+@dataclass
+class TrackJob:
+    """``model``: model bundle; ``input``: recording folder (``kind`` "depth" or "scans"); ``ranges``: the
+    chunks' tracked ``(start, stop)``; ``work_dir``: shared folder for the chunk bundles; ``out``:
+    tracked bundle; ``blend``: optional .blend to bake into; ``options``: further ``track`` flags
+    (no paths); ``name``: the job's name.  Paths absolute, as this machine sees the shared storage."""
+    model: str
+    input: str
+    kind: str
+    ranges: list
+    work_dir: str
+    out: str
+    blend: str = ""
+    options: list = field(default_factory=list)
+    name: str = ""
+
+    def chunk_path(self, k: int) -> str:
+        """Where chunk ``k``'s tracked bundle lands (the output itself when there is one chunk)."""
+        if len(self.ranges) == 1:
+            return self.out
+        return os.path.join(self.work_dir, chunk_plan.file_name(k, self.ranges[k]))
+
+    job_type = JOB_TYPE
+    unit = "chunk"
+
+    @property
+    def count(self) -> int:
+        return len(self.ranges)
+
+    @property
+    def has_finish(self) -> bool:
+        """Whether the job ends with a merge/bake task after the chunks."""
+        return len(self.ranges) > 1 or bool(self.blend)
+
+    @property
+    def outputs(self) -> list:
+        return [self.out] + ([self.blend] if self.blend else [])
+
+    def unit_of(self, task_name: str):
+        """Chunk number of a task named ``chunk-0003 frames A:B``, else None (the merge task)."""
+        head = task_name.split(" ", 1)[0]
+        if head.startswith("chunk-") and head[6:].isdigit():
+            return int(head[6:])
+        return None
+
+    def prepare(self) -> None:
+        """Make the folder the tasks write into (on the shared storage)."""
+        try:
+            os.makedirs(self.work_dir, exist_ok=True)
+        except OSError as exc:
+            raise ArticulaInputError(f"{self.work_dir}: cannot make the folder ({exc.strerror or exc})") from None
+
+    def body(self, run) -> dict:
+        """The job to submit, tracking the chunks ``run`` (indices) and then merging all of them."""
+        if self.kind not in KINDS:
+            raise ArticulaInputError(f"input kind {self.kind!r}: expected one of {', '.join(KINDS)}")
+        settings = {"model": self.model, "input": self.input, "input_kind": self.kind,
+                    "chunks": chunk_plan.to_text(self.ranges), "run": ",".join(str(k) for k in run) or "none",
+                    "work_dir": self.work_dir, "out": self.out, "blend": self.blend or "",
+                    "options": " ".join(self.options)}
+        folder = os.path.basename(os.path.normpath(self.input))
+        name = self.name or f"Articula track {folder}"
+        return {"name": name, "type": JOB_TYPE, "settings": settings,
+                "metadata": {"articula.out": self.out}}
+
+
