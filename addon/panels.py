@@ -170,5 +170,50 @@ class ARTICULA_PT_gaze(_ArticulaPanel, bpy.types.Panel):
             op.target = state.target.name if state.target else ""
 
 
+# Icons of a farm task's status on the Manager (others: none).
+_TASK_ICONS = {"completed": 'CHECKMARK', "active": 'PLAY', "queued": 'TIME', "failed": 'ERROR',
+               "canceled": 'CANCEL'}
+
+
+class ARTICULA_PT_farm(_ArticulaPanel, bpy.types.Panel):
+    bl_label = "Farm"
+    bl_parent_id = "ARTICULA_PT_main"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        state = getattr(context.scene, "articula_farm", None)
+        if state is None:
+            return
+        col = self.layout.column(align=True)
+        for name in ("manager_url", "model", "input_dir", "kind") + (("camera",) if state.kind == 'DEPTH' else ()):
+            col.prop(state, name)
+        col.prop(state, "out")
+        col.prop(state, "blend")
+        row = col.row(align=True)
+        row.prop(state, "chunk")
+        row.prop(state, "overlap")
+        col.prop(state, "retries")
+        row = col.row(align=True)
+        _button(row, "articula.farm_submit", "Submit", 'EXPORT')
+        _button(row, "articula.farm_cancel", "Cancel", 'CANCEL')      # greyed out unless a job is followed
+        if state.job_id or state.status_text:
+            _draw_farm_status(self.layout.box(), state)
+
+
+def _draw_farm_status(box, state) -> None:
+    """The followed job: its id, status line, share of tasks done and one row per chunk (and merge)."""
+    if state.job_id:
+        box.label(text=f"Job {state.job_id}", icon='NETWORK_DRIVE')
+    for line in _wrap(state.status_text, 48):
+        box.label(text=line)
+    if state.job_id:
+        box.progress(factor=state.progress, type='BAR', text=f"{100 * state.progress:.0f}%")
+    col = box.column(align=True)
+    for item in state.chunks:
+        row = col.row(align=True)
+        row.label(text=item.name)
+        row.label(text=item.status, icon=_TASK_ICONS.get(item.status, 'NONE'))
+
+
 classes = (ARTICULA_PT_main, ARTICULA_PT_import, ARTICULA_PT_rig, ARTICULA_PT_animate, ARTICULA_PT_track,
-           ARTICULA_PT_retarget, ARTICULA_PT_gaze)
+           ARTICULA_PT_retarget, ARTICULA_PT_gaze, ARTICULA_PT_farm)

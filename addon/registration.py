@@ -8,6 +8,7 @@ import bpy
 from .. import operators
 from ..solver import parallel
 from . import panels, preferences, properties
+from .farm import panel_state as farm_state
 from .gaze import panel_state as gaze_state
 from .retarget import mapping_list
 from .sequences import points, scans
@@ -15,7 +16,8 @@ from .track import error_colors
 
 # Order matters: property groups before what uses them, operators before the panels that draw their buttons,
 # the players (scans, points) before the error colours drawn over what they show.
-MODULES = (preferences, properties, mapping_list, gaze_state, scans, points, error_colors, operators, panels)
+MODULES = (preferences, properties, mapping_list, gaze_state, farm_state, scans, points, error_colors, operators,
+           panels)
 
 
 def register():
