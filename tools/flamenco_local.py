@@ -23,7 +23,7 @@ import tempfile
 import time
 import urllib.request
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
 GO_MIN = (1, 26)
 BUILD_SECONDS = 900
 START_SECONDS = 60

@@ -72,7 +72,8 @@ PLATFORMS = {
 }
 # What an installed extension needs: the entry module, the manifest, its Python packages and the wheels.
 # Anything else in a zip (tests, tools, docs, dot-files ...) means ``[build] paths_exclude_pattern`` missed it.
-EXTENSION_FILES = {"__init__.py", MANIFEST, "batch.py"}  # batch.py: blender -b -P <installed>/batch.py
+EXTENSION_FILES = {"__init__.py", MANIFEST, "batch.py",  # batch.py: blender -b -P <installed>/batch.py
+                   "articula-batch", "articula-batch.cmd"}  # its wrappers (Flamenco's {articula}, docs/farm.md)
 EXTENSION_PACKAGES = {"addon", "operators", "solver", "sample_scenes"}
 WHEEL_DIR = "wheels"
 # Never copied into the staging tree (VCS data, the symlink farm used by tests, build outputs).

@@ -2,7 +2,7 @@
 
     ./run farm job-types --to /opt/flamenco/scripts          (then restart the Manager)
     ./run farm track --manager http://farm:8080 --model person.npz --depth rec/ --out tracked.npz \\
-                     [--blend tracked.blend] [--chunk 300] [--overlap 40] [--retries 2]
+                     [--blend tracked.blend] [--chunk 300] [--overlap 60] [--retries 2]
     ./run farm learn --manager URL --subjects captures/ --out-dir rigs/ [--names a,b] [--blend]
     ./run farm import --manager URL --subjects captures/ --out-dir blends/
     ./run farm status --manager URL JOB_ID      ./run farm cancel --manager URL JOB_ID
@@ -131,7 +131,7 @@ def add_commands(sub):
     q.add_argument("--chunk", type=int, default=0,
                    help="frames per chunk (default: 300 for --depth, 60 for --scans)")
     q.add_argument("--overlap", type=int, default=0,
-                   help="frames a chunk tracks before its own to settle (default: 40 for --depth, 10 for --scans)")
+                   help="frames a chunk tracks before its own to settle (default: 60 for --depth, 10 for --scans)")
     q.add_argument("--work-dir", help="shared folder for the chunk bundles (default: OUT.farm beside --out)")
     q.set_defaults(func=run_track)
     for name, what in (("learn", "learn a rig per subject folder (learn-rig)"),

@@ -14,7 +14,7 @@ from ..track.result import check_output_path
 from ..track_depth import inputs as depth_inputs
 
 # kind -> (chunk size, overlap) in frames (docs/farm.md "Chunk size and overlap")
-DEFAULT_CHUNK = {"depth": (300, 40), "scans": (60, 10)}
+DEFAULT_CHUNK = {"depth": (300, 60), "scans": (60, 10)}
 
 
 def frame_count(kind: str, folder: str, camera: str = "") -> int:

@@ -30,7 +30,7 @@ class ArticulaFarmState(bpy.types.PropertyGroup):
     chunk: bpy.props.IntProperty(name="Chunk", default=0, min=0,
                                  description="Frames per chunk (0: 300 for depth, 60 for scans)")
     overlap: bpy.props.IntProperty(name="Overlap", default=0, min=0,
-                                   description="Frames a chunk tracks before its own to settle (0: 40 / 10)")
+                                   description="Frames a chunk tracks before its own to settle (0: 60 for depth, 10 for scans)")
     retries: bpy.props.IntProperty(name="Retries", default=2, min=0, max=20,
                                    description="How many times the failed chunks of a job are submitted again")
     job_id: bpy.props.StringProperty(name="Job", description="The followed job's id on the Manager")

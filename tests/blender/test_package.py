@@ -79,10 +79,11 @@ def test_zip_holds_the_extension_and_this_platforms_wheels_only(built):
         manifest = tomllib.loads(zf.read("blender_manifest.toml").decode("utf-8"))
         contents = {n: zf.read(n) for n in names if not n.startswith("wheels/")}
     tops = {n.split("/")[0] for n in names}
-    assert tops <= {"__init__.py", "blender_manifest.toml", "batch.py", "wheels", "addon", "operators",
+    assert tops <= {"__init__.py", "blender_manifest.toml", "batch.py", "articula-batch", "articula-batch.cmd", "wheels", "addon", "operators",
                     "solver", "sample_scenes"}, sorted(tops)
     assert {"__init__.py", "blender_manifest.toml", "batch.py", "addon", "operators", "solver", "wheels"} <= tops
     assert not [n for n in names if "__pycache__" in n or n.endswith(".pyc") or "/." in "/" + n]
+    assert {"addon/farm/job_types/articula_track.js", "addon/farm/job_types/articula_subjects.js"} <= set(names)
 
     # Every file git tracks in the extension's packages is in the zip, unchanged (skipping files another
     # developer saved after the build started), and nothing git does not track is.
