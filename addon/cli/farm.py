@@ -83,7 +83,7 @@ def run_subjects(args) -> int:
     run = FarmRun(Manager(args.manager, args.timeout), work, args.retries)
     _follow(run, args)
     if not args.no_wait:
-        print(f"wrote {len(work.outputs)} results in {out_dir} (jobs {', '.join(run.jobs)})")
+        print(f"wrote the results of {work.count} subjects in {out_dir} (jobs {', '.join(run.jobs)})")
     return 0
 
 

@@ -4,7 +4,7 @@ bundled.  Every failure becomes a :class:`FarmError` that says what to check."""
 from __future__ import annotations
 
 import json
-import platform
+import platform as host
 import socket
 import urllib.error
 import urllib.parse
@@ -23,13 +23,14 @@ class FarmError(ArticulaInputError):
 def submitter_platform() -> str:
     """Flamenco's platform name of this machine ("linux", "windows", "darwin"): the Manager maps the
     job's paths through its two-way variables from this platform to each Worker's."""
-    return {"Windows": "windows", "Darwin": "darwin"}.get(platform.system(), "linux")
+    return {"Windows": "windows", "Darwin": "darwin"}.get(host.system(), "linux")
 
 
 class Manager:
-    """One Manager at ``url`` (e.g. ``http://farm:8080``)."""
+    """One Manager at ``url`` (e.g. ``http://farm:8080``); ``platform``: the submitter's platform name for
+    the two-way variables (default: this machine's, :func:`submitter_platform`)."""
 
-    def __init__(self, url: str, timeout: float = TIMEOUT):
+    def __init__(self, url: str, timeout: float = TIMEOUT, platform: str = ""):
         url = str(url or "").strip().rstrip("/")
         if not url:
             raise FarmError("no Flamenco Manager URL given (e.g. http://localhost:8080)")
@@ -39,6 +40,7 @@ class Manager:
         if parts.scheme not in ("http", "https") or not parts.hostname:
             raise FarmError(f"{url}: not a Manager URL (expected http://HOST:PORT)")
         self.url, self.timeout = url, float(timeout)
+        self.platform = platform or submitter_platform()
 
     def request(self, method: str, path: str, body=None):
         """The answer of ``method path``: decoded JSON, text for a text answer, None when empty."""
@@ -75,7 +77,7 @@ class Manager:
     def submit(self, job: dict) -> dict:
         """Submit ``job`` (name, type, settings, metadata, priority); returns the Manager's job record
         (``id``, ``status``...)."""
-        body = {"priority": 50, "metadata": {}, "submitter_platform": submitter_platform(), **job}
+        body = {"priority": 50, "metadata": {}, "submitter_platform": self.platform, **job}
         return self.request("POST", "/api/v3/jobs", body)
 
     def job(self, job_id: str) -> dict:

@@ -6,8 +6,8 @@ optionally a finishing task (the merge).  :class:`FarmRun` submits it and follow
 commands).  When the job fails -- with fewer than three Workers one failed task fails the whole job --
 only the units that did not complete are submitted again, a bounded number of times.  The work object
 (:class:`.track_job.TrackJob`, :class:`.subjects_job.SubjectsJob`) gives ``job_type``, ``unit``,
-``count``, ``has_finish``, ``outputs``, ``prepare()`` (makes its folders), ``unit_of(task_name)`` and
-``body(run)``."""
+``count``, ``has_finish``, ``outputs_pending(done)`` (the outputs of the units not in ``done`` and of the
+finishing task), ``prepare()`` (makes its folders), ``unit_of(task_name)`` and ``body(run)``."""
 from __future__ import annotations
 
 import os
@@ -104,11 +104,14 @@ class FarmRun:
             return ""
 
     def _outputs_state(self) -> str:
-        """Remove what a stopped task may have left half-written; say what the outputs are."""
-        for out in self.work.outputs:
+        """Remove what a stopped task may have left half-written beside the outputs it did not finish;
+        say how far the job got and what those outputs are."""
+        pending = self.work.outputs_pending(self.done)
+        for out in pending:
             remove_partial(out)
-        return "; ".join(f"{out} {'is as before' if os.path.exists(out) else 'was not written'}"
-                         for out in self.work.outputs)
+        state = "; ".join(f"{out} {'is as before' if os.path.exists(out) else 'was not written'}" for out in pending)
+        done = f"{len(self.done)} of {self.work.count} {self.work.unit}s done"
+        return f"{done}; {state}" if state else done
 
     def cancel(self) -> str:
         """Ask the Manager to cancel the current job (its running tasks are stopped); returns a line

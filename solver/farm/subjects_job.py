@@ -41,10 +41,10 @@ class SubjectsJob:
     def count(self) -> int:
         return len(self.subjects)
 
-    @property
-    def outputs(self) -> list:
+    def outputs_pending(self, done) -> list:
+        """The result files of the subjects not in ``done`` (indices)."""
         ext = ".npz" if self.command == "learn-rig" else ".blend"
-        return [os.path.join(self.out_dir, s + ext) for s in self.subjects]
+        return [os.path.join(self.out_dir, s + ext) for k, s in enumerate(self.subjects) if k not in done]
 
     def unit_of(self, task_name: str):
         """Subject number of a task named ``<command> <subject>``."""

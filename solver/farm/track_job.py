@@ -48,8 +48,8 @@ class TrackJob:
         """Whether the job ends with a merge/bake task after the chunks."""
         return len(self.ranges) > 1 or bool(self.blend)
 
-    @property
-    def outputs(self) -> list:
+    def outputs_pending(self, done) -> list:
+        """The tracked bundle and .blend: written by the last task, pending until the job completes."""
         return [self.out] + ([self.blend] if self.blend else [])
 
     def unit_of(self, task_name: str):

@@ -1,7 +1,8 @@
 """The Farm panel (docs/farm.md) without a Manager: its operators and scene state register with the
 add-on; a submit to a Manager nobody listens on, or with a missing model, is refused with one message
 naming the problem and changes nothing in the scene or on disk; the panel draws the followed job's
-status, progress and one row per chunk (a recorder stands in for the UI layout in background mode)."""
+status, progress and one row per chunk (a recorder stands in for the UI layout in background mode).
+Following a real job from the panel: tests/blender/farm/test_farm_track.py."""
 import bpy
 import pytest
 
@@ -37,7 +38,7 @@ def test_operators_and_scene_state_are_registered():
 def test_the_pip_module_reports_no_online_access_and_is_not_refused(pkg):
     """bpy as a Python module: online_access False without a user choice; only --offline-mode refuses."""
     assert not bpy.app.online_access and not bpy.app.online_access_override and not bpy.app.binary_path
-    assert pkg("operators.farm").online_refusal() == ""
+    assert pkg("addon.farm.panel_jobs").online_refusal() == ""
 
 
 def test_an_unreachable_manager_is_named_and_nothing_changes(pkg, bench, tmp_path):
@@ -50,7 +51,7 @@ def test_an_unreachable_manager_is_named_and_nothing_changes(pkg, bench, tmp_pat
     assert sorted(ob.name for ob in bpy.data.objects) == before
     assert not list(tmp_path.iterdir())                   # no output, no chunk folder
     assert "unreachable" in state.status_text and state.job_id == ""
-    assert scene.name not in pkg("operators.farm").RUNS
+    assert scene.name not in pkg("addon.farm.panel_jobs").RUNS
     assert not bpy.ops.articula.farm_cancel.poll()        # nothing followed: Cancel is greyed out
 
 
@@ -91,53 +92,3 @@ def test_the_panel_draws_the_job_and_its_chunks(pkg):
     assert "Job abc123" in labels and labels[-8:] == ["chunk 1", "completed", "chunk 2", "active", "chunk 3",
                                                       "queued", "merge", "queued"]
     assert [kw["factor"] for name, _, kw in calls if name == "progress"] == [pytest.approx(0.25)]
-
-
-class FakeRun:
-    """Stands in for a followed FarmRun: ``poll`` returns the given statuses in turn (or raises them)."""
-
-    def __init__(self, statuses):
-        self.statuses, self.job_id, self.cancelled, self.last = list(statuses), "abc123", False, None
-
-    def poll(self):
-        item = self.statuses.pop(0)
-        if isinstance(item, Exception):
-            raise item
-        self.last = item
-        return item
-
-    def cancel(self):
-        self.cancelled = True
-        return "/out.npz was not written"
-
-
-def test_following_writes_each_poll_and_ends_when_completed(pkg):
-    farm, Status = pkg("operators.farm"), pkg("solver.farm.follow").Status
-    scene = bpy.context.scene
-    run = FakeRun([Status("abc123", "active", ["active", "queued"], "queued", 1, "job abc123 active"),
-                   Status("abc123", "completed", ["completed"] * 2, "completed", 1, "job abc123 completed")])
-    farm.RUNS[scene.name] = run
-    assert farm.poll_once(scene.name, run) == (False, "")
-    assert scene.articula_farm.status_text == "job abc123 active" and len(scene.articula_farm.chunks) == 3
-    assert farm.poll_once(scene.name, run) == (True, "")
-    assert scene.articula_farm.progress == 1.0 and scene.name not in farm.RUNS
-
-
-def test_a_failed_job_ends_the_follow_with_its_message(pkg):
-    farm = pkg("operators.farm")
-    scene = bpy.context.scene
-    run = FakeRun([pkg("solver.farm.flamenco").FarmError("chunk-0001 failed in 3 submissions\nlog tail")])
-    farm.RUNS[scene.name] = run
-    assert farm.poll_once(scene.name, run) == (True, "chunk-0001 failed in 3 submissions\nlog tail")
-    assert scene.articula_farm.status_text == "chunk-0001 failed in 3 submissions" and scene.name not in farm.RUNS
-
-
-def test_cancel_stops_the_followed_job(pkg):
-    farm = pkg("operators.farm")
-    scene = bpy.context.scene
-    run = farm.RUNS[scene.name] = FakeRun([])
-    assert bpy.ops.articula.farm_cancel.poll()
-    assert bpy.ops.articula.farm_cancel() == {'FINISHED'}
-    assert run.cancelled and scene.name not in farm.RUNS
-    assert scene.articula_farm.status_text == "cancelled job abc123: /out.npz was not written"
-    assert farm.poll_once(scene.name, run) == (True, "")         # the follower stops without polling again

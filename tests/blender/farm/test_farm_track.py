@@ -32,9 +32,20 @@ def recording(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def farm(tmp_path_factory, addon):
+def views(tmp_path_factory):
+    """The shared storage as Linux Workers see it and as a macOS submitter would name it (two folders here,
+    so a path that reached a Worker unmapped would point at the empty one)."""
+    root = tmp_path_factory.mktemp("storage")
+    (root / "linux").mkdir()
+    (root / "mac").mkdir()
+    return {"linux": str(root / "linux"), "darwin": str(root / "mac")}
+
+
+@pytest.fixture(scope="module")
+def farm(tmp_path_factory, addon, views):
     from articula.addon.farm import job_types
-    with flamenco_local.LocalFarm(str(tmp_path_factory.mktemp("farm")), job_types.FOLDER, RUN) as f:
+    with flamenco_local.LocalFarm(str(tmp_path_factory.mktemp("farm")), job_types.FOLDER, RUN,
+                                  two_way={"storage": views}) as f:
         yield f
 
 
@@ -130,3 +141,94 @@ def test_the_batch_command_refuses_an_unreachable_manager(recording, tmp_path):
                        timeout=120)
     assert r.returncode == 2 and "unreachable" in r.stderr, r.stderr
     assert not out.exists()
+
+
+def _panel_inputs(scene, farm, recording, out, **kw):
+    state = scene.articula_farm
+    state.manager_url, state.model, state.input_dir = farm.url, recording["model_path"], recording["out_dir"]
+    state.kind, state.out, state.chunk, state.overlap = 'DEPTH', out, CHUNK, OVERLAP
+    for key, value in kw.items():
+        setattr(state, key, value)
+    return state
+
+
+def test_the_panel_submits_follows_and_bakes_into_a_blend(farm, recording, tmp_path, pkg):
+    import bpy
+    jobs = pkg("addon.farm.panel_jobs")
+    scene, out, blend = bpy.context.scene, str(tmp_path / "panel.npz"), str(tmp_path / "panel.blend")
+    state = _panel_inputs(scene, farm, recording, out, blend=blend)
+    assert bpy.ops.articula.farm_submit() == {'FINISHED'}
+    run = jobs.RUNS[scene.name]
+    seen, deadline = set(), time.monotonic() + JOB_SECONDS
+    while time.monotonic() < deadline:
+        ended, error = jobs.poll_once(scene.name, run)
+        seen.update(c.status for c in state.chunks)
+        if ended:
+            break
+        time.sleep(1.0)
+    assert (ended, error) == (True, "")
+    assert [(c.name, c.status) for c in state.chunks] == [("chunk 1", "completed"), ("chunk 2", "completed"),
+                                                         ("merge", "completed")]
+    assert state.progress == 1.0 and "completed" in state.status_text and scene.name not in jobs.RUNS
+    assert len(seen) > 1                                  # the rows went through other states on the way
+    with bpy.data.libraries.load(blend) as (data_from, _):
+        objects, actions = list(data_from.objects), list(data_from.actions)
+    assert any("panel" in n for n in objects) and actions, (objects, actions)
+    _, bundle = _vertices(out)
+    assert len(bundle.poses) == FRAMES
+
+
+def test_cancel_in_the_panel_stops_the_job_on_the_manager(farm, recording, tmp_path, pkg):
+    import bpy
+    from articula.solver.farm.flamenco import Manager
+    jobs = pkg("addon.farm.panel_jobs")
+    scene, out = bpy.context.scene, str(tmp_path / "panel_cancel.npz")
+    _panel_inputs(scene, farm, recording, out)
+    assert bpy.ops.articula.farm_submit() == {'FINISHED'}
+    job = jobs.RUNS[scene.name].job_id
+    assert bpy.ops.articula.farm_cancel() == {'FINISHED'}
+    assert scene.name not in jobs.RUNS and "was not written" in scene.articula_farm.status_text
+    deadline = time.monotonic() + 120
+    while Manager(farm.url).job(job)["status"] != "canceled" and time.monotonic() < deadline:
+        time.sleep(0.5)
+    assert Manager(farm.url).job(job)["status"] == "canceled"
+    assert not os.path.exists(out)
+
+
+def test_paths_from_another_platform_reach_the_workers_through_two_way_variables(farm, recording, views):
+    """A submitter on macOS names the storage /Volumes/...-like; the Manager maps it to {storage} and the
+    Linux Workers get their own path."""
+    from articula.solver.farm import chunks
+    from articula.solver.farm.flamenco import Manager
+    from articula.solver.farm.follow import FarmRun
+    from articula.solver.farm.track_job import TrackJob
+    os.symlink(recording["out_dir"], os.path.join(views["linux"], "rec"))
+    mac = views["darwin"]
+    job = TrackJob(os.path.join(mac, "rec", "model.npz"), os.path.join(mac, "rec"), "depth",
+                   chunks.plan(FRAMES, CHUNK, OVERLAP), os.path.join(mac, "work"), os.path.join(mac, "mac.npz"))
+    os.makedirs(os.path.join(views["linux"], "work"))
+    run = FarmRun(Manager(farm.url, platform="darwin"), job, retries=0)
+    run.start()
+    _follow(run)
+    assert os.path.isfile(os.path.join(views["linux"], "mac.npz"))          # written where Linux sees it
+    assert not os.path.exists(os.path.join(mac, "mac.npz"))
+    _, bundle = _vertices(os.path.join(views["linux"], "mac.npz"))
+    assert len(bundle.poses) == FRAMES
+
+
+def test_many_subjects_one_task_each_and_a_bad_one_is_named_with_its_log(farm, tmp_path):
+    root, out = tmp_path / "people", tmp_path / "blends"
+    for name, seed in (("alice", 0), ("bob", 3)):
+        subprocess.run([RUN, "samples", "registered", "--poses", "3", "--seed", str(seed), "--out",
+                        str(root / name)], check=True, capture_output=True, timeout=300)
+    (root / "carol").mkdir()                                  # no scans: her task fails every time
+    r = subprocess.run([RUN, "farm", "import", "--manager", farm.url, "--subjects", str(root), "--out-dir",
+                        str(out), "--retries", "1", "--poll", "1"], capture_output=True, text=True, timeout=JOB_SECONDS)
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert "import-scans carol failed in 2 submissions" in r.stderr and "2 of 3 subjects done" in r.stderr
+    assert "carol.blend was not written" in r.stderr and "alice.blend" not in r.stderr
+    assert "no scan files" in r.stderr.split("log:")[-1]            # the task's own error, from its log
+    assert (out / "alice.blend").is_file() and (out / "bob.blend").is_file() and not (out / "carol.blend").exists()
+    import bpy
+    with bpy.data.libraries.load(str(out / "alice.blend")) as (data_from, _):
+        assert "alice" in list(data_from.objects)
