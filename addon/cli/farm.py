@@ -54,6 +54,7 @@ def run_track(args) -> int:
         options += ["--tracker", args.tracker]
     job = inputs.track_job(args.model, args.depth or args.scans, kind, args.out, args.blend or "", args.chunk,
                            args.overlap, options, args.camera or "", args.work_dir or "")
+    job.agree_mm = args.agree
     print(f"{len(job.ranges)} chunks: {', '.join(f'{a}:{b}' for a, b in job.ranges)}; chunk bundles in {job.work_dir}")
     run = FarmRun(Manager(args.manager, args.timeout), job, args.retries)
     _follow(run, args)
@@ -133,6 +134,9 @@ def add_commands(sub):
     q.add_argument("--overlap", type=int, default=0,
                    help="frames a chunk tracks before its own to settle (default: 60 for --depth, 10 for --scans)")
     q.add_argument("--work-dir", help="shared folder for the chunk bundles (default: OUT.farm beside --out)")
+    q.add_argument("--agree", type=float, default=20.0, metavar="MM",
+                   help="chunks differing more than this (mm) where the merge switches started on another solution: "
+                        "with --scans the later one is tracked again from the earlier one's pose (default 20; 0: off)")
     q.set_defaults(func=run_track)
     for name, what in (("learn", "learn a rig per subject folder (learn-rig)"),
                        ("import", "import each subject's scan sequence into a .blend (import-scans)")):

@@ -113,7 +113,7 @@ def run(args) -> int:
 def run_merge(args) -> int:
     for path in (args.out, args.report):
         result.check_output_path(path or "")
-    merged = merge.merge_chunks(merge.load_chunks([os.path.abspath(p) for p in args.chunks]))
+    merged = merge.merge_chunks(merge.load_chunks([os.path.abspath(p) for p in args.chunks]), args.agree)
     try:
         save_bundle(args.out, merged.model, merged.poses, merged.provenance)
     except OSError as exc:
@@ -122,10 +122,11 @@ def run_merge(args) -> int:
     if args.report:
         write_json(args.report, rep)
     worst = max(o["max_rotation_deg"] for o in rep["overlaps"])
+    cut = max(c["max_vertex_mm"] for c in rep["cuts"]) if rep["cuts"] else 0.0
     used = ", ".join(f"{c['name']} {c['used']}" for c in rep["chunks"])
     return finish(f"wrote {args.out}: frames {rep['first_frame']}..{rep['first_frame'] + rep['frames'] - 1} "
                   f"from {len(rep['chunks'])} chunks (frames used: {used}); largest bone-rotation difference on "
-                  f"the overlaps {worst:.3f} deg" + (f"; wrote {args.report}" if args.report else ""), scene=False)
+                  f"the overlaps {worst:.3f} deg, largest vertex difference at a cut {cut:.2f} mm" + (f"; wrote {args.report}" if args.report else ""), scene=False)
 
 
 def add_commands(sub):
@@ -161,5 +162,8 @@ def add_commands(sub):
     m = sub.add_parser("merge-tracks", help="join tracked chunks (track --frames A:B, overlapping) into one")
     m.add_argument("chunks", nargs="+", metavar="CHUNK.npz", help="tracked bundles of one input, overlapping")
     m.add_argument("--out", required=True, help="merged tracked bundle to write (.npz)")
+    m.add_argument("--agree", type=float, metavar="MM",
+                   help="refuse (exit 2, nothing written) when two chunks' posed vertices differ by more than MM "
+                        "millimetres on the frame where the merge switches between them")
     m.add_argument("--report", help="write which chunk each frame came from and the overlaps' differences")
     m.set_defaults(func=run_merge)

@@ -7,7 +7,9 @@ commands).  When the job fails -- with fewer than three Workers one failed task 
 only the units that did not complete are submitted again, a bounded number of times.  The work object
 (:class:`.track_job.TrackJob`, :class:`.subjects_job.SubjectsJob`) gives ``job_type``, ``unit``,
 ``count``, ``has_finish``, ``outputs_pending(done)`` (the outputs of the units not in ``done`` and of the
-finishing task), ``prepare()`` (makes its folders), ``unit_of(task_name)`` and ``body(run)``."""
+finishing task), ``prepare()`` (makes its folders), ``unit_of(task_name)``, ``body(run)`` and
+``repair(done)`` (after a failed finish with every unit done: units to run again, removed from ``done``,
+and a line saying why; '' when none)."""
 from __future__ import annotations
 
 import os
@@ -90,12 +92,13 @@ class FarmRun:
     def _retry_or_raise(self, tasks) -> None:
         failed = [t for t in tasks if t["status"] == "failed"]
         names = ", ".join(t["name"] for t in failed) or "a task"
+        repaired = self.work.repair(self.done) if len(self.done) == self.work.count else ""
         if self.attempt > self.retries:
             tail = self._log_tail(failed[0]) if failed else ""
             raise FarmError(f"{names} failed in {self.attempt} submissions (last job {self.job_id}); "
                             f"{self._outputs_state()}" + (f"; the end of its log:\n{tail}" if tail else ""))
         self.start()
-        self.last.text += f"; {names} failed: submitted again as job {self.job_id}"
+        self.last.text += f"; {repaired or names + ' failed'}: submitted again as job {self.job_id}"
 
     def _log_tail(self, task) -> str:
         try:

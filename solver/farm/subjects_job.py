@@ -63,3 +63,7 @@ class SubjectsJob:
                     "out_dir": self.out_dir, "blend": bool(self.blend), "options": " ".join(self.options)}
         name = self.name or f"Articula {self.command} {os.path.basename(os.path.normpath(self.root))}"
         return {"name": name, "type": JOB_TYPE, "settings": settings, "metadata": {}}
+
+    def repair(self, done: set) -> str:
+        """Nothing to repair between subjects (they are independent)."""
+        return ""

@@ -8,10 +8,12 @@ import os
 from dataclasses import dataclass, field
 
 from ..errors import ArticulaInputError
+from ..track import merge
 from . import chunks as chunk_plan
 
 JOB_TYPE = "articula-track"
 KINDS = ("depth", "scans")
+AGREE_MM = 20.0      # chunks whose posed vertices differ more on a cut frame started on another solution
 
 
 @dataclass
@@ -19,7 +21,10 @@ class TrackJob:
     """``model``: model bundle; ``input``: recording folder (``kind`` "depth" or "scans"); ``ranges``: the
     chunks' tracked ``(start, stop)``; ``work_dir``: shared folder for the chunk bundles; ``out``:
     tracked bundle; ``blend``: optional .blend to bake into; ``options``: further ``track`` flags
-    (no paths); ``name``: the job's name.  Paths absolute, as this machine sees the shared storage."""
+    (no paths); ``name``: the job's name; ``agree_mm``: the merge refuses chunks that differ more than
+    this on the frame where it switches between them (0: no check); ``start_from``: ``{chunk: (earlier
+    chunk, pose index)}``, chunks to start from an earlier chunk's pose (``track --start-pose``).  Paths
+    absolute, as this machine sees the shared storage."""
     model: str
     input: str
     kind: str
@@ -29,6 +34,8 @@ class TrackJob:
     blend: str = ""
     options: list = field(default_factory=list)
     name: str = ""
+    agree_mm: float = AGREE_MM
+    start_from: dict = field(default_factory=dict)
 
     def chunk_path(self, k: int) -> str:
         """Where chunk ``k``'s tracked bundle lands (the output itself when there is one chunk)."""
@@ -73,10 +80,29 @@ class TrackJob:
         settings = {"model": self.model, "input": self.input, "input_kind": self.kind,
                     "chunks": chunk_plan.to_text(self.ranges), "run": ",".join(str(k) for k in run) or "none",
                     "work_dir": self.work_dir, "out": self.out, "blend": self.blend or "",
-                    "options": " ".join(self.options)}
+                    "options": " ".join(self.options), "agree_mm": float(self.agree_mm),
+                    "start_from": ",".join(f"{k}:{j}:{p}" for k, (j, p) in sorted(self.start_from.items()))}
         folder = os.path.basename(os.path.normpath(self.input))
         name = self.name or f"Articula track {folder}"
         return {"name": name, "type": JOB_TYPE, "settings": settings,
                 "metadata": {"articula.out": self.out}}
 
-
+    def repair(self, done: set) -> str:
+        """After a failed merge with every chunk tracked: when a chunk started on another solution than the
+        chunk before it (:func:`solver.track.merge.disagreements`), mark it to be tracked again from that
+        chunk's pose at its first frame (capture tracking only: ``track --start-pose``) and return a line
+        saying so; '' when there is nothing to repair."""
+        if self.kind != "scans" or not self.agree_mm or len(self.ranges) < 2:
+            return ""
+        chunks = merge.load_chunks([self.chunk_path(k) for k in range(len(self.ranges))])
+        order = sorted(range(len(chunks)), key=lambda k: (chunks[k].start, chunks[k].end))
+        bad = merge.disagreements(chunks, self.agree_mm)
+        if not bad:
+            return ""
+        i, j = (order[x] for x in bad[0]["indices"])
+        if j in self.start_from:
+            return ""                                  # already started from its neighbour: give up
+        self.start_from[j] = (i, self.ranges[j][0] - self.ranges[i][0])
+        done.discard(j)
+        return (f"chunk {j} disagreed with chunk {i} on frame {bad[0]['frame']} by {bad[0]['max_vertex_mm']:.0f} mm: "
+                f"tracked again from chunk {i}'s pose")

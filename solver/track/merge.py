@@ -24,6 +24,7 @@ import numpy as np
 from ..errors import ArticulaInputError
 from ..formats.bundle import load_bundle
 from ..rig.model import Model, Poses
+from ..rig.skinning import hybrid_skin
 
 SOURCE = "track"
 REQUIRED = ("model_sha256", "input", "first_frame", "frame_names", "options", "adapted")
@@ -215,19 +216,67 @@ def _merged_frame_rows(chunks, chosen, lo) -> list:
     return rows
 
 
-def merge_chunks(chunks) -> MergedTrack:
+def cut_differences(chunks, chosen, lo: int) -> list:
+    """At each cut (the first frame the merge takes from the next chunk) the largest distance (mm) between
+    the two chunks' posed vertices on that frame: a few mm when both settled on the same motion, far more
+    when one started on another solution of an ambiguous first frame.  ``chunks`` sorted by start."""
+    out = []
+    for k in range(1, len(chosen)):
+        i, j, f = int(chosen[k - 1]), int(chosen[k]), lo + k
+        if i == j:
+            continue
+        a, b = chunks[i], chunks[j]
+        if not (a.start <= f < a.end and b.start <= f < b.end):
+            continue
+        va = hybrid_skin(a.model, a.poses.take(f - a.start))[0]
+        vb = hybrid_skin(b.model, b.poses.take(f - b.start))[0]
+        out.append({"chunks": [a.name, b.name], "indices": [i, j], "frame": f,
+                    "max_vertex_mm": 1000 * float(np.linalg.norm(va - vb, axis=1).max())})
+    return out
+
+
+def _choose(chunks) -> np.ndarray:
+    """Chunk index per merged frame of ``chunks`` sorted by start (the causal rule when they have
+    ``look_ahead``, else the symmetric one)."""
+    lo, hi = chunks[0].start, chunks[-1].end
+    ranges, look_ahead = [(c.start, c.end) for c in chunks], _look_ahead(chunks)
+    if look_ahead is None:
+        return choose_frames(ranges, lo, hi)
+    return choose_frames_causal(ranges, lo, hi, look_ahead)
+
+
+def disagreements(chunks, agree_mm: float) -> list:
+    """The cuts (:func:`cut_differences`) where ``chunks`` (any order; sorted here) differ by more than
+    ``agree_mm``; their ``indices`` refer to the chunks sorted by start."""
+    chunks = sorted(chunks, key=lambda c: (c.start, c.end))
+    return [c for c in cut_differences(chunks, _choose(chunks), chunks[0].start) if c["max_vertex_mm"] > agree_mm]
+
+
+def disagreement_text(cut: dict, chunks) -> str:
+    """A message for a cut whose chunks disagree, with the command that repairs it."""
+    i, j = cut["indices"]
+    k = chunks[j].start - chunks[i].start
+    return (f"{cut['chunks'][0]} and {cut['chunks'][1]} disagree on frame {cut['frame']} by "
+            f"{cut['max_vertex_mm']:.0f} mm (the later chunk started on another solution); track "
+            f"{cut['chunks'][1]}'s frames again with --start-pose {cut['chunks'][0]}:{k}, or give more overlap")
+
+
+def merge_chunks(chunks, agree_mm: float = None) -> MergedTrack:
     """Join tracked chunks (any order) into one track over the union of their frames (module docstring).
     Raises :class:`ArticulaInputError` naming the chunks when they do not belong together, leave a gap,
-    do not overlap or disagree on a shared frame's name."""
+    do not overlap or disagree on a shared frame's name, or, with ``agree_mm``, when their posed vertices
+    differ by more than that at a cut (:func:`cut_differences`)."""
     if len(chunks) < 2:
         raise ArticulaInputError(f"{len(chunks)} chunk given; merging needs at least two tracked chunks")
     chunks = sorted(chunks, key=lambda c: (c.start, c.end))
     _check_compatible(chunks)
     _check_coverage(chunks)
     lo, hi = chunks[0].start, chunks[-1].end
-    ranges, look_ahead = [(c.start, c.end) for c in chunks], _look_ahead(chunks)
-    chosen = (choose_frames(ranges, lo, hi) if look_ahead is None
-              else choose_frames_causal(ranges, lo, hi, look_ahead))
+    chosen = _choose(chunks)
+    cuts = cut_differences(chunks, chosen, lo)
+    bad = [c for c in cuts if agree_mm is not None and c["max_vertex_mm"] > agree_mm]
+    if bad:
+        raise ArticulaInputError(disagreement_text(bad[0], chunks))
     idx = [lo + k - chunks[i].start for k, i in enumerate(chosen)]
     poses = Poses(np.stack([chunks[i].poses.rotations[j] for i, j in zip(chosen, idx)]),
                   np.stack([chunks[i].poses.translations[j] for i, j in zip(chosen, idx)]),
@@ -240,7 +289,7 @@ def merge_chunks(chunks) -> MergedTrack:
     report = {"chunks": [{"name": c.name, "frames": [c.start, c.end], "used": int(counts[i])}
                          for i, c in enumerate(chunks)],
               "frame_chunk": [int(i) for i in chosen], "first_frame": lo, "frames": hi - lo,
-              "overlaps": [_overlap_differences(p, c) for p, c in zip(chunks, chunks[1:])],
+              "overlaps": [_overlap_differences(p, c) for p, c in zip(chunks, chunks[1:])], "cuts": cuts,
               "model_from": chunks[keep].name, "model_spread_mm": 1000 * spread}
     if rows:
         report["frame_rows"] = rows

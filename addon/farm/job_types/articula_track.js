@@ -27,6 +27,10 @@ const JOB_TYPE = {
           description: "Optional .blend the merged action is baked into (added to the file when it exists)" },
         { key: "options", type: "string", default: "",
           description: "Further tracking flags, e.g. --tracker icp --camera kinect_v1" },
+        { key: "agree_mm", type: "float", default: 20.0,
+          description: "The merge refuses chunks whose posed vertices differ more (mm) where it switches (0: off)" },
+        { key: "start_from", type: "string", default: "",
+          description: "CHUNK:EARLIER:POSE,...: start a chunk from an earlier chunk's pose (scans; a repair)" },
     ]
 };
 
@@ -61,11 +65,26 @@ function selected(settings, count) {
     });
 }
 
+function startPoses(settings, chunks) {
+    const out = {};
+    for (const item of (settings.start_from || "").split(",")) {
+        const t = item.trim();
+        if (!t) continue;
+        const m = t.match(/^(\d+):(\d+):(\d+)$/);
+        if (!m || Number(m[1]) >= chunks.length || Number(m[2]) >= chunks.length)
+            throw `start_from "${t}": expected CHUNK:EARLIER_CHUNK:POSE with chunks 0..${chunks.length - 1}`;
+        const from = Number(m[2]);
+        out[Number(m[1])] = chunkFile(settings, from, chunks[from], chunks.length) + ":" + m[3];
+    }
+    return out;
+}
+
 function compileJob(job) {
     const settings = job.settings;
     const chunks = parseChunks(settings.chunks);
     const extra = (settings.options || "").split(/\s+/).filter((t) => t.length > 0);
     const kind = settings.input_kind == "scans" ? "--scans" : "--depth";
+    const starts = startPoses(settings, chunks);
     const chunkTasks = [];
     for (const k of selected(settings, chunks.length)) {
         const range = chunks[k];
@@ -73,7 +92,8 @@ function compileJob(job) {
         task.addCommand(author.Command("exec", {
             exe: "{articula}",
             args: ["track", "--model", settings.model, kind, settings.input, "--frames", `${range[0]}:${range[1]}`,
-                   "--out", chunkFile(settings, k, range, chunks.length)].concat(extra),
+                   "--out", chunkFile(settings, k, range, chunks.length)].concat(
+                       k in starts ? ["--start-pose", starts[k]] : [], extra),
         }));
         job.addTask(task);
         chunkTasks.push(task);
@@ -84,7 +104,8 @@ function compileJob(job) {
         finish.addCommand(author.Command("exec", {
             exe: "{articula}",
             args: ["merge-tracks"].concat(files, ["--out", settings.out,
-                                                  "--report", path.join(settings.work_dir, "merge.json")]),
+                                                  "--report", path.join(settings.work_dir, "merge.json")],
+                                          settings.agree_mm > 0 ? ["--agree", String(settings.agree_mm)] : []),
         }));
     }
     if (settings.blend) {

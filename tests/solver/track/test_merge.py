@@ -164,3 +164,20 @@ def test_every_split_of_identical_chunks_gives_the_whole(model):
     for cut, overlap in itertools.product(range(2, 10), range(1, 3)):
         got = merge.merge_chunks([chunk(model, gt, 0, cut + overlap, "a"), chunk(model, gt, cut, 12, "b")])
         np.testing.assert_array_equal(got.poses.rotations, gt.rotations)
+
+
+def test_cut_differences_are_the_posed_vertex_distance_where_the_merge_switches(model):
+    from articula.solver.rig.skinning import hybrid_skin
+    poses = truth_poses(model)
+    a, b = chunk(model, poses, 0, 12, "a.npz"), chunk(model, poses, 8, N, "b.npz", noise=0.05, seed=4)
+    merged = merge.merge_chunks([a, b])
+    (cut,) = merged.report["cuts"]
+    f = cut["frame"]
+    assert merged.report["frame_chunk"][f - 1] == 0 and merged.report["frame_chunk"][f] == 1
+    va = hybrid_skin(model, a.poses.take(f))[0]                 # brute force on the switch frame
+    vb = hybrid_skin(model, b.poses.take(f - 8))[0]
+    assert cut["max_vertex_mm"] == pytest.approx(1000 * np.linalg.norm(va - vb, axis=1).max())
+    assert cut["max_vertex_mm"] > 1.0
+    with pytest.raises(ArticulaInputError, match=r"a.npz and b.npz disagree on frame \d+ .*--start-pose a.npz:8"):
+        merge.merge_chunks([a, b], agree_mm=cut["max_vertex_mm"] - 0.01)
+    assert merge.merge_chunks([a, b], agree_mm=cut["max_vertex_mm"] + 0.01).report["cuts"] == [cut]
