@@ -26,3 +26,11 @@ def cpu_seconds():
     import time
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
     return time.process_time() + kids.ru_utime + kids.ru_stime
+
+
+def addon_modules(bpy):
+    """Enable the add-on in this bpy (as Blender enables an extension) and return ``name ->`` its module
+    (e.g. ``"addon.scene.render"``), for the benchmarks and the docs' picture tools."""
+    import importlib
+    mod = _batch.enable_addon(bpy)
+    return lambda name: importlib.import_module(f"{mod}.{name}")

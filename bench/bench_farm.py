@@ -9,10 +9,13 @@ Scenarios (``--only``):
   chunk bundles written and read, the merged bundle).
 * ``overhead``: the fixed cost of one task (``./run track --frames 0:2``: Blender start, model, recording
   set-up), for the chunk-size plan of docs/farm.md.
+* ``scans``: the capture tracker on 24 unregistered 4-camera scans of a turning subject, chunks of 12
+  with 6 overlap, with the repair off (``--agree 0``) and on (the default): the largest vertex difference at
+  the cut, to the one process, and each run's mean error of the 14 major joints against the ground truth.
 * ``bad``: Manager unreachable; job type not installed; a Worker killed while it tracks a chunk; a job
   cancelled while it runs.  Nothing may be written at the output path by a failed or cancelled job.
 
-Usage: ./run bench farm [--only main,overhead,bad] [--frames 300] [--overlaps 40,60]
+Usage: ./run bench farm [--only main,overhead,bad,scans] [--frames 300] [--overlaps 40,60]
 """
 import argparse
 import os
@@ -99,6 +102,58 @@ def overhead_scenario(rec, folder):
     print(f"fixed cost of one task (./run track --frames 0:2): {wall:.1f} s", flush=True)
 
 
+def _scans(folder):
+    """24 unregistered scans (cached) and the subject's model bundle."""
+    root = os.path.join(flamenco_local.home(), "bench_farm", "scans24")
+    if not os.path.isfile(os.path.join(root, "ground_truth.npz")):
+        subprocess.run([RUN, "samples", "unregistered", "--poses", "24", "--motion", "turn", "--out", root],
+                       check=True, capture_output=True)
+    model = os.path.join(folder, "subject.npz")
+    subprocess.run([RUN, "samples", "subject", "--out", model], check=True, capture_output=True)
+    return root, model
+
+
+def _joint_error(path, gt):
+    """Mean distance (mm) per frame of the 14 major joints to the ground truth."""
+    from articula.solver.formats.bundle import load_bundle
+    from articula.solver.rig.kinematics import forward_kinematics
+    b = load_bundle(path)
+    Rm, tm = forward_kinematics(b.model.skeleton, b.poses)
+    heads = np.einsum("nbij,bj->nbi", Rm, b.model.skeleton.heads) + tm
+    names = [str(n) for n in gt["bone_names"]]
+    bones = [int(k) for k in gt["major_joint_bones"]]
+    ours = [b.model.skeleton.names.index(names[k]) for k in bones]
+    return 1000 * np.linalg.norm(heads[:, ours] - gt["posed_heads"][:, bones], axis=2).mean(axis=1)
+
+
+def scans_scenario(folder):
+    root, model = _scans(folder)
+    one = os.path.join(folder, "scans_one.npz")
+    r, one_wall = _timed([RUN, "track", "--model", model, "--scans", root, "--out", one], timeout=3600)
+    assert r.returncode == 0, r.stderr
+    gt = np.load(os.path.join(root, "ground_truth.npz"))
+    ref, err = _vertices(one), _joint_error(one, gt)
+    print(f"captures, one process: 24 frames in {one_wall:.0f} s; joint error {err.min():.0f}-{err.max():.0f} mm "
+          f"(mean {err.mean():.1f})", flush=True)
+    for agree in ("0", "100"):
+        with flamenco_local.LocalFarm(os.path.join(folder, f"scans{agree}"), _job_types(), RUN) as farm:
+            out = os.path.join(folder, f"scans{agree}", "shared", "tracked.npz")
+            r, wall = _timed([RUN, "farm", "track", "--manager", farm.url, "--model", model, "--scans", root,
+                              "--out", out, "--chunk", "12", "--overlap", "6", "--agree", agree, "--poll", "2"],
+                             timeout=3600)
+        assert r.returncode == 0, r.stdout + r.stderr
+        from articula.solver.formats.bundle import load_bundle
+        cut = load_bundle(out).provenance["report"]["merge"]["cuts"][0]
+        d = np.linalg.norm(_vertices(out) - ref, axis=2).max(axis=1) * 1000
+        e = _joint_error(out, gt)
+        repairs = [line for line in r.stdout.splitlines() if "tracked again" in line]
+        print(f"captures, farm --agree {agree}: {wall:.0f} s; {'repaired: ' + repairs[0].split('; ', 1)[1] if repairs else 'no repair'}; "
+              f"cut frame {cut['frame']}: {cut['max_vertex_mm']:.0f} mm between the chunks; to the one process "
+              f"{d.min():.0f}-{d.max():.0f} mm; joint error {e.min():.0f}-{e.max():.0f} mm (mean {e.mean():.1f}; "
+              f"frames {cut['frame']}+: {e[cut['frame']:].mean():.1f} vs one process {err[cut['frame']:].mean():.1f})",
+              flush=True)
+
+
 def bad_scenario(rec, folder):
     from articula.solver.farm.flamenco import Manager
     out = os.path.join(folder, "bad.npz")
@@ -153,7 +208,7 @@ def _jobs(manager):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="bench farm")
-    ap.add_argument("--only", default="main,overhead,bad")
+    ap.add_argument("--only", default="main,overhead,bad,scans")
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--overlaps", default="40,60")
     args = ap.parse_args(argv)
@@ -170,6 +225,8 @@ def main(argv=None) -> int:
         overhead_scenario(rec, folder)
     if "bad" in only:
         bad_scenario(rec, folder)
+    if "scans" in only:
+        scans_scenario(folder)
     return 0
 
 

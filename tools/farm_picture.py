@@ -8,7 +8,6 @@ solution, the same chunk repaired by the farm, and the one-process run.
 Each bundle's pose is the one of input frame ``--frame`` (its provenance's ``first_frame`` is taken off).
 """
 import argparse
-import importlib
 import os
 import sys
 
@@ -21,10 +20,7 @@ import numpy as np  # noqa: E402
 
 
 def _pkg():
-    sys.path.insert(0, _common.REPO)
-    import batch
-    mod = batch.enable_addon(bpy)
-    return lambda name: importlib.import_module(f"{mod}.{name}")
+    return _common.addon_modules(bpy)
 
 
 def posed_mesh(path, frame, name):

@@ -7,7 +7,6 @@ the body as its posed mesh).
         docs/images/retarget.png [--frame 140]
 """
 import argparse
-import importlib
 import os
 import sys
 
@@ -22,10 +21,7 @@ from mathutils import Matrix, Vector  # noqa: E402
 
 
 def _pkg():
-    sys.path.insert(0, _common.REPO)
-    import batch
-    mod = batch.enable_addon(bpy)
-    return lambda name: importlib.import_module(f"{mod}.{name}")
+    return _common.addon_modules(bpy)
 
 
 def bone_tubes(ob, name, radius=0.012):

@@ -18,6 +18,7 @@ from ...solver.errors import ArticulaInputError, Cancelled
 from ...solver.farm.flamenco import Manager
 from ...solver.farm.follow import FarmRun
 from ...solver.farm.subjects_job import SubjectsJob
+from ...solver.farm.track_job import AGREE_MM
 from ...solver.track_depth.options import TRACKERS
 from ..farm import inputs, job_types
 from .track_depth import CAMERAS
@@ -134,9 +135,9 @@ def add_commands(sub):
     q.add_argument("--overlap", type=int, default=0,
                    help="frames a chunk tracks before its own to settle (default: 60 for --depth, 10 for --scans)")
     q.add_argument("--work-dir", help="shared folder for the chunk bundles (default: OUT.farm beside --out)")
-    q.add_argument("--agree", type=float, default=20.0, metavar="MM",
+    q.add_argument("--agree", type=float, default=AGREE_MM, metavar="MM",
                    help="chunks differing more than this (mm) where the merge switches started on another solution: "
-                        "with --scans the later one is tracked again from the earlier one's pose (default 20; 0: off)")
+                        "with --scans the later one is tracked again from the earlier one's pose (default %(default)s; 0: off)")
     q.set_defaults(func=run_track)
     for name, what in (("learn", "learn a rig per subject folder (learn-rig)"),
                        ("import", "import each subject's scan sequence into a .blend (import-scans)")):

@@ -92,11 +92,11 @@ class FarmRun:
     def _retry_or_raise(self, tasks) -> None:
         failed = [t for t in tasks if t["status"] == "failed"]
         names = ", ".join(t["name"] for t in failed) or "a task"
-        repaired = self.work.repair(self.done) if len(self.done) == self.work.count else ""
         if self.attempt > self.retries:
             tail = self._log_tail(failed[0]) if failed else ""
             raise FarmError(f"{names} failed in {self.attempt} submissions (last job {self.job_id}); "
                             f"{self._outputs_state()}" + (f"; the end of its log:\n{tail}" if tail else ""))
+        repaired = self.work.repair(self.done) if len(self.done) == self.work.count else ""
         self.start()
         self.last.text += f"; {repaired or names + ' failed'}: submitted again as job {self.job_id}"
 

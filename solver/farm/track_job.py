@@ -13,7 +13,7 @@ from . import chunks as chunk_plan
 
 JOB_TYPE = "articula-track"
 KINDS = ("depth", "scans")
-AGREE_MM = 20.0      # chunks whose posed vertices differ more on a cut frame started on another solution
+AGREE_MM = 100.0     # mm: chunks differing more on a cut frame started on another solution (docs/farm.md)
 
 
 @dataclass

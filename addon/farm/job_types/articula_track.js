@@ -27,7 +27,7 @@ const JOB_TYPE = {
           description: "Optional .blend the merged action is baked into (added to the file when it exists)" },
         { key: "options", type: "string", default: "",
           description: "Further tracking flags, e.g. --tracker icp --camera kinect_v1" },
-        { key: "agree_mm", type: "float", default: 20.0,
+        { key: "agree_mm", type: "float", default: 100.0,
           description: "The merge refuses chunks whose posed vertices differ more (mm) where it switches (0: off)" },
         { key: "start_from", type: "string", default: "",
           description: "CHUNK:EARLIER:POSE,...: start a chunk from an earlier chunk's pose (scans; a repair)" },
