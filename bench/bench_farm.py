@@ -146,8 +146,8 @@ def scans_scenario(folder):
         cut = load_bundle(out).provenance["report"]["merge"]["cuts"][0]
         d = np.linalg.norm(_vertices(out) - ref, axis=2).max(axis=1) * 1000
         e = _joint_error(out, gt)
-        repairs = [line for line in r.stdout.splitlines() if "tracked again" in line]
-        print(f"captures, farm --agree {agree}: {wall:.0f} s; {'repaired: ' + repairs[0].split('; ', 1)[1] if repairs else 'no repair'}; "
+        repairs = [part for line in r.stdout.splitlines() for part in line.split("; ") if "tracked again" in part]
+        print(f"captures, farm --agree {agree}: {wall:.0f} s; {'repaired: ' + repairs[0] if repairs else 'no repair'}; "
               f"cut frame {cut['frame']}: {cut['max_vertex_mm']:.0f} mm between the chunks; to the one process "
               f"{d.min():.0f}-{d.max():.0f} mm; joint error {e.min():.0f}-{e.max():.0f} mm (mean {e.mean():.1f}; "
               f"frames {cut['frame']}+: {e[cut['frame']:].mean():.1f} vs one process {err[cut['frame']:].mean():.1f})",
@@ -227,6 +227,7 @@ def main(argv=None) -> int:
         bad_scenario(rec, folder)
     if "scans" in only:
         scans_scenario(folder)
+    print(f"outputs in {folder}")
     return 0
 
 

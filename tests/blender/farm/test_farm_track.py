@@ -232,3 +232,21 @@ def test_many_subjects_one_task_each_and_a_bad_one_is_named_with_its_log(farm, t
     import bpy
     with bpy.data.libraries.load(str(out / "alice.blend")) as (data_from, _):
         assert "alice" in list(data_from.objects)
+
+
+def test_submit_without_waiting_then_status_and_cancel_from_the_command_line(farm, recording, tmp_path):
+    from articula.solver.farm.flamenco import Manager
+    out = tmp_path / "later.npz"
+    r = subprocess.run([RUN, "farm", "track", "--manager", farm.url, "--model", recording["model_path"], "--depth",
+                        recording["out_dir"], "--out", str(out), "--chunk", str(CHUNK), "--overlap", str(OVERLAP),
+                        "--no-wait"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    job = r.stdout.split("submitted job ", 1)[1].split()[0]
+    r = subprocess.run([RUN, "farm", "status", "--manager", farm.url, job], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and f"job {job}" in r.stdout and "chunk-0001 frames 5:100" in r.stdout, r.stdout
+    r = subprocess.run([RUN, "farm", "cancel", "--manager", farm.url, job], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    deadline = time.monotonic() + 120
+    while Manager(farm.url).job(job)["status"] != "canceled" and time.monotonic() < deadline:
+        time.sleep(0.5)
+    assert Manager(farm.url).job(job)["status"] == "canceled" and not out.exists()
