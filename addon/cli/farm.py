@@ -3,6 +3,7 @@
     ./run farm job-types --to /opt/flamenco/scripts          (then restart the Manager)
     ./run farm track --manager http://farm:8080 --model person.npz --depth rec/ --out tracked.npz \\
                      [--blend tracked.blend] [--chunk 300] [--overlap 60] [--retries 2]
+    ./run farm track --manager URL --depth rec/ --out tracked.npz      (template body, adapted by a first task)
     ./run farm learn --manager URL --subjects captures/ --out-dir rigs/ [--names a,b] [--blend]
     ./run farm import --manager URL --subjects captures/ --out-dir blends/
     ./run farm status --manager URL JOB_ID      ./run farm cancel --manager URL JOB_ID
@@ -56,6 +57,9 @@ def run_track(args) -> int:
     job = inputs.track_job(args.model, args.depth or args.scans, kind, args.out, args.blend or "", args.chunk,
                            args.overlap, options, args.camera or "", args.work_dir or "")
     job.agree_mm = args.agree
+    if not 1 <= args.adapt_frames <= 100_000:
+        raise ArticulaInputError(f"--adapt-frames: expected 1..100000, got {args.adapt_frames}")
+    job.adapt_frames = args.adapt_frames
     print(f"{len(job.ranges)} chunks: {', '.join(f'{a}:{b}' for a, b in job.ranges)}; chunk bundles in {job.work_dir}")
     run = FarmRun(Manager(args.manager, args.timeout), job, args.retries)
     _follow(run, args)
@@ -122,7 +126,10 @@ def add_commands(sub):
     q.set_defaults(func=run_job_types)
     q = fs.add_parser("track", help="track a long recording in chunks on the farm (like ./run track)")
     _common(q)
-    q.add_argument("--model", required=True, help="the person's model bundle (.npz)")
+    q.add_argument("--model", default="", help="the person's model bundle (.npz); without it (--depth only) a first "
+                                               "task adapts the built-in template body on --adapt-frames frames")
+    q.add_argument("--adapt-frames", type=int, default=300, metavar="N",
+                   help="without --model: frames the template adapts on before the chunks (default 300)")
     q.add_argument("--depth", metavar="DIR", help="a depth recording (16-bit PNG frames, intrinsics.json)")
     q.add_argument("--scans", metavar="DIR", help="a folder of unregistered captures")
     q.add_argument("--camera", type=str.lower, choices=sorted(CAMERAS), metavar="PRESET",

@@ -29,20 +29,23 @@ def frame_count(kind: str, folder: str, camera: str = "") -> int:
 
 def track_job(model: str, folder: str, kind: str, out: str, blend: str = "", chunk: int = 0, overlap: int = 0,
               options=(), camera: str = "", work_dir: str = "") -> TrackJob:
-    """A checked :class:`TrackJob`; ``chunk``/``overlap`` 0 take :data:`DEFAULT_CHUNK`; ``work_dir``
-    defaults to ``<out>.farm`` beside the output (on the shared storage with it)."""
-    if not model:
-        raise ArticulaInputError("a farm track needs the person's model bundle (--model MODEL.npz): chunks "
-                                 "tracked on separate machines must share one model")
-    model, folder, out = (os.path.abspath(p) for p in (model, folder, out))
+    """A checked :class:`TrackJob`; ``model`` "" with a depth recording: the built-in template body, adapted
+    by a first task; ``chunk``/``overlap`` 0 take :data:`DEFAULT_CHUNK`; ``work_dir`` defaults to
+    ``<out>.farm`` beside the output (on the shared storage with it)."""
+    if not model and kind != "depth":
+        raise ArticulaInputError("tracking captures on the farm needs the person's model bundle (--model MODEL.npz); "
+                                 "only depth recordings can start from the built-in template body")
+    folder, out = os.path.abspath(folder), os.path.abspath(out)
     if not out.lower().endswith(".npz"):
         raise ArticulaInputError(f"{out}: the tracked bundle must be a .npz file")
     check_output_path(out)
     check_blend_output(blend)
-    track_inputs.model_from_bundle(model)
+    if model:
+        model = os.path.abspath(model)
+        track_inputs.model_from_bundle(model)
     total = frame_count(kind, folder, camera)
     size, lap = DEFAULT_CHUNK[kind]
     ranges = chunks.plan(total, int(chunk or size), int(overlap or lap))
     options = list(options) + (["--camera", camera] if camera and kind == "depth" else [])
-    return TrackJob(model, folder, kind, ranges, os.path.abspath(work_dir or out + ".farm"), out,
+    return TrackJob(model or "", folder, kind, ranges, os.path.abspath(work_dir or out + ".farm"), out,
                     os.path.abspath(blend) if blend else "", options)

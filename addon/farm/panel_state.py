@@ -14,7 +14,9 @@ class ArticulaFarmState(bpy.types.PropertyGroup):
     manager_url: bpy.props.StringProperty(name="Manager", default="http://localhost:8080",
                                           description="The Flamenco Manager's address (http://HOST:PORT)")
     model: bpy.props.StringProperty(name="Model", subtype='FILE_PATH',
-                                    description="The person's model bundle (.npz) on the farm's shared storage")
+                                    description="The person's model bundle (.npz) on the farm's shared storage "
+                                                "(empty, depth only: the built-in template body, adapted by a "
+                                                "first task)")
     input_dir: bpy.props.StringProperty(name="Recording", subtype='DIR_PATH',
                                         description="Folder of the recording, on the farm's shared storage")
     kind: bpy.props.EnumProperty(

@@ -9,7 +9,8 @@ only the units that did not complete are submitted again, a bounded number of ti
 ``count``, ``has_finish``, ``outputs_pending(done)`` (the outputs of the units not in ``done`` and of the
 finishing task), ``prepare()`` (makes its folders), ``unit_of(task_name)``, ``body(run)`` and
 ``repair(done)`` (after a failed finish with every unit done: units to run again, removed from ``done``,
-and a line saying why; '' when none)."""
+and a line saying why; '' when none), ``is_prep(task_name)`` and ``prep_done()`` (a first task the units
+wait for, e.g. adapting the template)."""
 from __future__ import annotations
 
 import os
@@ -50,6 +51,7 @@ class FarmRun:
         self.manager, self.work, self.retries = manager, work, int(retries)
         self.done = set()                      # units completed in any submission
         self.attempt, self.job_id, self.jobs, self.last = 0, "", [], None
+        self.prep_status = ""                  # the status of a task the units wait for ("" when none)
 
     def start(self) -> str:
         """Check the Manager knows the job type, then submit the units not yet done; returns the job id."""
@@ -80,6 +82,11 @@ class FarmRun:
         unit_status = ["completed" if k in self.done else "not submitted" for k in range(self.work.count)]
         finish_status = "queued" if self.work.has_finish else "none"
         for t in tasks:
+            if self.work.is_prep(t["name"]):
+                self.prep_status = t["status"]
+                if t["status"] == "completed":
+                    self.work.prep_done()
+                continue
             k = self.work.unit_of(t["name"])
             if k is None:
                 finish_status = t["status"]
@@ -146,8 +153,9 @@ class FarmRun:
             counts[s] = counts.get(s, 0) + 1
         parts = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()))
         again = f" (submission {self.attempt})" if self.attempt > 1 else ""
+        prep = f"adapting {self.prep_status}; " if self.prep_status and self.prep_status != "completed" else ""
         finish = f"; finish {finish_status}" if finish_status != "none" else ""
-        return f"job {self.job_id[:8]} {job_status}{again}: {self.work.unit}s {parts}{finish}"
+        return f"job {self.job_id[:8]} {job_status}{again}: {prep}{self.work.unit}s {parts}{finish}"
 
 
 def remove_partial(out: str) -> None:

@@ -67,3 +67,10 @@ class SubjectsJob:
     def repair(self, done: set) -> str:
         """Nothing to repair between subjects (they are independent)."""
         return ""
+
+    def is_prep(self, task_name: str) -> bool:
+        """Subjects have no first task."""
+        return False
+
+    def prep_done(self) -> None:
+        """Subjects have no first task."""

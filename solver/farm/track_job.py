@@ -18,7 +18,8 @@ AGREE_MM = 100.0     # mm: chunks differing more on a cut frame started on anoth
 
 @dataclass
 class TrackJob:
-    """``model``: model bundle; ``input``: recording folder (``kind`` "depth" or "scans"); ``ranges``: the
+    """``model``: model bundle ("" with a depth recording: a first task adapts the built-in template body on
+    the first ``adapt_frames`` frames and the chunks track with it); ``input``: recording folder (``kind`` "depth" or "scans"); ``ranges``: the
     chunks' tracked ``(start, stop)``; ``work_dir``: shared folder for the chunk bundles; ``out``:
     tracked bundle; ``blend``: optional .blend to bake into; ``options``: further ``track`` flags
     (no paths); ``name``: the job's name; ``agree_mm``: the merge refuses chunks that differ more than
@@ -36,6 +37,7 @@ class TrackJob:
     name: str = ""
     agree_mm: float = AGREE_MM
     start_from: dict = field(default_factory=dict)
+    adapt_frames: int = 300
 
     def chunk_path(self, k: int) -> str:
         """Where chunk ``k``'s tracked bundle lands (the output itself when there is one chunk)."""
@@ -59,6 +61,19 @@ class TrackJob:
         """The tracked bundle and .blend: written by the last task, pending until the job completes."""
         return [self.out] + ([self.blend] if self.blend else [])
 
+    @property
+    def adapted_model(self) -> str:
+        """Where the template adapted by the first task lands (no ``model`` given)."""
+        return os.path.join(self.work_dir, "template_adapted.npz")
+
+    def is_prep(self, task_name: str) -> bool:
+        """Whether ``task_name`` is the task that adapts the template before the chunks."""
+        return task_name.startswith("adapt ")
+
+    def prep_done(self) -> None:
+        """The template is adapted: later submissions track with it instead of adapting again."""
+        self.model = self.adapted_model
+
     def unit_of(self, task_name: str):
         """Chunk number of a task named ``chunk-0003 frames A:B``, else None (the merge task)."""
         head = task_name.split(" ", 1)[0]
@@ -81,6 +96,7 @@ class TrackJob:
                     "chunks": chunk_plan.to_text(self.ranges), "run": ",".join(str(k) for k in run) or "none",
                     "work_dir": self.work_dir, "out": self.out, "blend": self.blend or "",
                     "options": " ".join(self.options), "agree_mm": float(self.agree_mm),
+                    "adapt_frames": int(self.adapt_frames),
                     "start_from": ",".join(f"{k}:{j}:{p}" for k, (j, p) in sorted(self.start_from.items()))}
         folder = os.path.basename(os.path.normpath(self.input))
         name = self.name or f"Articula track {folder}"

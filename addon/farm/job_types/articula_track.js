@@ -1,16 +1,19 @@
 // SPDX-License-Identifier: GPL-3.0-or-later
 // Articula job type "articula-track": a long recording tracked in frame chunks, one task per chunk, then
-// one task that merges the chunks into the tracked bundle and bakes it into a .blend.  Written into the
-// Manager's scripts/ folder by `./run farm job-types --to DIR`; submitted by `./run farm track` and the
-// Farm panel (docs/farm.md).  {articula} is the Manager variable naming the executable that takes
+// one task that merges the chunks into the tracked bundle and bakes it into a .blend.  Without a model (depth
+// recordings), a first task adapts the built-in template body to the person and the chunks track with it.
+// Written into the Manager's scripts/ folder by `./run farm job-types --to DIR`; submitted by
+// `./run farm track` and the Farm panel (docs/farm.md).  {articula} is the Manager variable naming the executable that takes
 // Articula's batch commands (articula-batch, or a checkout's ./run).
 
 const JOB_TYPE = {
     label: "Articula Track",
     description: "Track a recording in frame chunks with a model bundle, merge, bake",
     settings: [
-        { key: "model", type: "string", subtype: "file_path", required: true,
-          description: "Model bundle (.npz) of the person" },
+        { key: "model", type: "string", subtype: "file_path", default: "",
+          description: "Model bundle (.npz) of the person; empty (depth only): the built-in template body, adapted to the person on the first adapt_frames frames by a first task" },
+        { key: "adapt_frames", type: "int32", default: 300,
+          description: "Without a model: frames the template adapts on before the chunks track with it" },
         { key: "input", type: "string", subtype: "dir_path", required: true,
           description: "Folder of the recording: depth PNG frames, or scans" },
         { key: "input_kind", type: "string", required: true, choices: ["depth", "scans"], default: "depth",
@@ -85,16 +88,29 @@ function compileJob(job) {
     const extra = (settings.options || "").split(/\s+/).filter((t) => t.length > 0);
     const kind = settings.input_kind == "scans" ? "--scans" : "--depth";
     const starts = startPoses(settings, chunks);
+    let model = settings.model, adapt = null;
+    if (!model) {
+        if (kind != "--depth") throw "scans need the person's model bundle (model)";
+        model = path.join(settings.work_dir, "template_adapted.npz");
+        const frames = Math.min(settings.adapt_frames, chunks[chunks.length - 1][1]);
+        adapt = author.Task(`adapt frames 0:${frames}`, "misc");
+        adapt.addCommand(author.Command("exec", {
+            exe: "{articula}",
+            args: ["track", kind, settings.input, "--frames", `0:${frames}`, "--out", model].concat(extra),
+        }));
+        job.addTask(adapt);
+    }
     const chunkTasks = [];
     for (const k of selected(settings, chunks.length)) {
         const range = chunks[k];
         const task = author.Task(`chunk-${pad(k)} frames ${range[0]}:${range[1]}`, "misc");
         task.addCommand(author.Command("exec", {
             exe: "{articula}",
-            args: ["track", "--model", settings.model, kind, settings.input, "--frames", `${range[0]}:${range[1]}`,
+            args: ["track", "--model", model, kind, settings.input, "--frames", `${range[0]}:${range[1]}`,
                    "--out", chunkFile(settings, k, range, chunks.length)].concat(
                        k in starts ? ["--start-pose", starts[k]] : [], extra),
         }));
+        if (adapt) task.addDependency(adapt);
         job.addTask(task);
         chunkTasks.push(task);
     }

@@ -55,9 +55,11 @@ def test_an_unreachable_manager_is_named_and_nothing_changes(pkg, bench, tmp_pat
     assert not bpy.ops.articula.farm_cancel.poll()        # nothing followed: Cancel is greyed out
 
 
-@pytest.mark.parametrize("model,match", [("", "needs the person's model bundle"), ("missing.npz", "missing.npz")])
-def test_a_missing_model_is_refused_before_the_manager(bench, tmp_path, model, match):
-    farm_inputs(bpy.context.scene, bench, tmp_path, model=str(tmp_path / model) if model else "")
+@pytest.mark.parametrize("model,kind,match", [("", 'SCANS', "needs the person's model bundle"),
+                                              ("missing.npz", 'DEPTH', "missing.npz")])
+def test_a_missing_model_is_refused_before_the_manager(bench, tmp_path, model, kind, match):
+    """Captures need a model (a depth recording without one starts from the template body)."""
+    farm_inputs(bpy.context.scene, bench, tmp_path, model=str(tmp_path / model) if model else "", kind=kind)
     with pytest.raises(RuntimeError, match=match):
         bpy.ops.articula.farm_submit()
     assert not (tmp_path / "tracked.npz").exists()

@@ -261,3 +261,25 @@ def test_submit_without_waiting_then_status_and_cancel_from_the_command_line(far
     while Manager(farm.url).job(job)["status"] != "canceled" and time.monotonic() < deadline:
         time.sleep(0.5)
     assert Manager(farm.url).job(job)["status"] == "canceled" and not out.exists()
+
+
+def test_without_a_model_a_first_task_adapts_the_template_and_the_chunks_share_it(farm, recording, tmp_path):
+    from articula.addon.farm.inputs import track_job
+    from articula.solver.farm.flamenco import Manager
+    from articula.solver.farm.follow import FarmRun
+    from articula.solver.formats.bundle import load_bundle
+    from articula.solver.track.merge import model_digest
+    out = str(tmp_path / "template.npz")
+    job = track_job("", recording["out_dir"], "depth", out, chunk=CHUNK, overlap=OVERLAP)
+    job.adapt_frames = 20
+    run = FarmRun(Manager(farm.url), job, retries=0)
+    run.start()
+    _follow(run)
+    names = [t["name"] for t in run.manager.tasks(run.job_id)]
+    assert names.count("adapt frames 0:20") == 1 and run.prep_status == "completed", names
+    assert job.model == job.adapted_model                    # a re-submission would track with it
+    adapted = load_bundle(job.adapted_model)
+    merged = load_bundle(out)
+    assert len(merged.poses) == FRAMES and merged.model.skeleton.num_bones == adapted.model.skeleton.num_bones
+    chunks = [load_bundle(job.chunk_path(k)) for k in range(2)]
+    assert {c.provenance["model_sha256"] for c in chunks} == {model_digest(adapted.model)}
