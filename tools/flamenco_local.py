@@ -106,23 +106,11 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def _yaml(value, indent=0) -> str:
-    """A tiny YAML writer for the config dicts below (JSON scalars are valid YAML)."""
-    pad = " " * indent
-    lines = []
-    for key, v in value.items():
-        if isinstance(v, dict):
-            lines.append(f"{pad}{key}:")
-            lines.append(_yaml(v, indent + 2))
-        elif isinstance(v, list) and v and isinstance(v[0], dict):
-            lines.append(f"{pad}{key}:")
-            for item in v:
-                first, *rest = item.items()
-                lines.append(f"{pad}  - {first[0]}: {json.dumps(first[1])}")
-                lines.extend(f"{pad}    {k}: {json.dumps(x)}" for k, x in rest)
-        else:
-            lines.append(f"{pad}{key}: {json.dumps(v)}")
-    return "\n".join(lines)
+def _write_config(path: str, config: dict) -> None:
+    """Write a Flamenco configuration file: JSON, which YAML parsers read as YAML (flow style)."""
+    with open(path, "w") as fh:
+        json.dump(config, fh, indent=1)
+
 
 
 class LocalFarm:
@@ -173,8 +161,7 @@ class LocalFarm:
         shutil.copy2(os.path.join(bins, "flamenco-manager"), exe)   # scripts/ are found beside the executable
         for js in glob.glob(os.path.join(self.job_types, "*.js")):
             shutil.copy2(js, os.path.join(mdir, "scripts"))
-        with open(os.path.join(mdir, "flamenco-manager.yaml"), "w") as fh:
-            fh.write(_yaml(self._config()) + "\n")
+        _write_config(os.path.join(mdir, "flamenco-manager.yaml"), self._config())
         self.manager = self._spawn([exe], mdir, "manager.log")
         deadline = time.monotonic() + START_SECONDS
         while time.monotonic() < deadline:
@@ -190,10 +177,9 @@ class LocalFarm:
     def _start_worker(self, bins, k):
         wdir = os.path.join(self.folder, f"worker{k}")
         os.makedirs(wdir, exist_ok=True)
-        with open(os.path.join(wdir, "flamenco-worker.yaml"), "w") as fh:
-            fh.write(_yaml({"manager_url": self.url, "worker_name": f"articula-test-{k}",
-                            "task_types": ["misc", "blender", "ffmpeg", "file-management"],
-                            "restart_exit_code": 47}) + "\n")
+        _write_config(os.path.join(wdir, "flamenco-worker.yaml"),
+                      {"manager_url": self.url, "worker_name": f"articula-test-{k}",
+                       "task_types": ["misc", "blender", "ffmpeg", "file-management"], "restart_exit_code": 47})
         return self._spawn([os.path.join(bins, "flamenco-worker")], wdir, "worker.log", FLAMENCO_HOME=wdir)
 
     def _spawn(self, cmd, cwd, log, **env):

@@ -82,8 +82,7 @@ def _subjects(args) -> list:
 
 def run_subjects(args) -> int:
     command = {"learn": "learn-rig", "import": "import-scans"}[args.farm_command]
-    out_dir = os.path.abspath(args.out_dir)
-    os.makedirs(out_dir, exist_ok=True)
+    out_dir = os.path.abspath(args.out_dir)          # made by the job's prepare(), once submitting is possible
     work = SubjectsJob(command, os.path.abspath(args.subjects), _subjects(args), out_dir,
                        bool(getattr(args, "blend", False)), args.options.split() if args.options else [])
     run = FarmRun(Manager(args.manager, args.timeout), work, args.retries)

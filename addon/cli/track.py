@@ -126,7 +126,8 @@ def run_merge(args) -> int:
     used = ", ".join(f"{c['name']} {c['used']}" for c in rep["chunks"])
     return finish(f"wrote {args.out}: frames {rep['first_frame']}..{rep['first_frame'] + rep['frames'] - 1} "
                   f"from {len(rep['chunks'])} chunks (frames used: {used}); largest bone-rotation difference on "
-                  f"the overlaps {worst:.3f} deg, largest vertex difference at a cut {cut:.2f} mm" + (f"; wrote {args.report}" if args.report else ""), scene=False)
+                  f"the overlaps {worst:.3f} deg, largest vertex difference at a cut {cut:.2f} mm"
+                  + (f"; wrote {args.report}" if args.report else ""), scene=False)
 
 
 def add_commands(sub):

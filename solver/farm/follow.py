@@ -15,9 +15,11 @@ from __future__ import annotations
 
 import os
 import time
+from collections import Counter
 from dataclasses import dataclass
 
 from ..errors import ArticulaInputError, Cancelled
+from ..formats.bundle import temporary_path
 from .flamenco import FarmError, Manager
 
 
@@ -148,10 +150,7 @@ class FarmRun:
             time.sleep(poll_seconds)
 
     def _text(self, job_status, unit_status, finish_status) -> str:
-        counts = {}
-        for s in unit_status:
-            counts[s] = counts.get(s, 0) + 1
-        parts = ", ".join(f"{n} {s}" for s, n in sorted(counts.items()))
+        parts = ", ".join(f"{n} {s}" for s, n in sorted(Counter(unit_status).items()))
         again = f" (submission {self.attempt})" if self.attempt > 1 else ""
         prep = f"adapting {self.prep_status}; " if self.prep_status and self.prep_status != "completed" else ""
         finish = f"; finish {finish_status}" if finish_status != "none" else ""
@@ -160,8 +159,8 @@ class FarmRun:
 
 def remove_partial(out: str) -> None:
     """Remove the temporary file a stopped task may leave beside ``out`` (bundles are written to
-    ``out.tmp.npz`` and renamed; Blender saves to ``out@`` and renames)."""
-    for tmp in (out + ".tmp.npz", out + "@"):
+    :func:`solver.formats.bundle.temporary_path` and renamed; Blender saves to ``out@`` and renames)."""
+    for tmp in (temporary_path(out), out + "@"):
         if os.path.isfile(tmp):
             try:
                 os.remove(tmp)

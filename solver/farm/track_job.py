@@ -39,14 +39,14 @@ class TrackJob:
     start_from: dict = field(default_factory=dict)
     adapt_frames: int = 300
 
+    job_type = JOB_TYPE
+    unit = "chunk"
+
     def chunk_path(self, k: int) -> str:
         """Where chunk ``k``'s tracked bundle lands (the output itself when there is one chunk)."""
         if len(self.ranges) == 1:
             return self.out
         return os.path.join(self.work_dir, chunk_plan.file_name(k, self.ranges[k]))
-
-    job_type = JOB_TYPE
-    unit = "chunk"
 
     @property
     def count(self) -> int:
@@ -111,11 +111,10 @@ class TrackJob:
         if self.kind != "scans" or not self.agree_mm or len(self.ranges) < 2:
             return ""
         chunks = merge.load_chunks([self.chunk_path(k) for k in range(len(self.ranges))])
-        order = sorted(range(len(chunks)), key=lambda k: (chunks[k].start, chunks[k].end))
-        bad = merge.disagreements(chunks, self.agree_mm)
+        bad = merge.disagreements(chunks, self.agree_mm)   # indices by start: the plan's order
         if not bad:
             return ""
-        i, j = (order[x] for x in bad[0]["indices"])
+        i, j = bad[0]["indices"]
         if j in self.start_from:
             return ""                                  # already started from its neighbour: give up
         self.start_from[j] = (i, self.ranges[j][0] - self.ranges[i][0])

@@ -33,10 +33,15 @@ class Bundle:
     notes: list = field(default_factory=list)      # what loading changed (e.g. normalised quaternions)
 
 
+def temporary_path(path) -> str:
+    """The name :func:`save_bundle` writes to before renaming to ``path`` (a stopped writer may leave it)."""
+    return os.fspath(path) + ".tmp.npz"
+
+
 def save_bundle(path, model: Model, poses: Poses = None, provenance: dict = None) -> None:
     """Validate and write ``model`` (and ``poses``, ``provenance``: a JSON-serialisable dict) to
-    ``path``.  The file is written to a temporary name first and renamed, so a failure never leaves
-    a half-written bundle."""
+    ``path``.  The file is written to :func:`temporary_path` first and renamed, so a failure never
+    leaves a half-written bundle."""
     model.validate()
     sk = model.skeleton
     arrays = {
@@ -59,8 +64,7 @@ def save_bundle(path, model: Model, poses: Poses = None, provenance: dict = None
     except (TypeError, ValueError) as exc:
         raise ArticulaInputError(f"provenance: not JSON-serialisable ({exc})") from exc
     arrays["provenance"] = np.array(text)
-    path = os.fspath(path)
-    tmp = path + ".tmp.npz"
+    path, tmp = os.fspath(path), temporary_path(path)
     with open(tmp, "wb") as fh:
         np.savez_compressed(fh, **arrays)
     os.replace(tmp, path)
