@@ -327,10 +327,12 @@ def widened(prior: PosePrior, other: PosePrior = None, pad: float = 0.0) -> Pose
 
 
 def _mapped_box(src, to_src, R, B):
-    """Bounds (B, 3) of the rotated source boxes (axis-aligned hull); unmapped bones unbounded."""
+    """Bounds (B, 3) of the rotated source boxes (axis-aligned hull); unmapped bones unbounded, and so
+    are bones mapped to a source bone with an unbounded DoF (the generic root, ``Hips``, as a child
+    bone): the rotation mixes its axes, and ``inf - inf`` would give NaN bounds."""
     lower, upper = np.full((B, 3), -np.inf), np.full((B, 3), np.inf)
     for b, s in enumerate(to_src):
-        if s is not None:
+        if s is not None and np.isfinite(src.lower[s]).all() and np.isfinite(src.upper[s]).all():
             centre, half = 0.5 * (src.upper[s] + src.lower[s]), 0.5 * (src.upper[s] - src.lower[s])
             lower[b], upper[b] = R[b] @ centre - np.abs(R[b]) @ half, R[b] @ centre + np.abs(R[b]) @ half
     return lower, upper

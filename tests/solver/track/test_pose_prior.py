@@ -213,3 +213,19 @@ def test_widened_box_is_the_hull_padded(prior):
     for bad in (-0.1, np.inf):
         with pytest.raises(ArticulaInputError, match="pad"):
             widened(prior, pad=bad)
+
+
+def test_generic_prior_on_a_child_bone_named_like_its_root(cmu_subject):
+    """A rig whose ``Hips`` is a child of another root (the generic prior's root is unbounded) gets no
+    bound on that bone, not NaN bounds: the rest pose violates nothing and clamping keeps it finite."""
+    sk = cmu_subject.skeleton
+    heads = np.vstack([sk.heads[:1] - [0, 0, 0.1], sk.heads])
+    tails = np.vstack([sk.heads[:1], sk.tails])
+    rooted = Skeleton(["Root", *sk.names], np.concatenate([[-1], sk.parents + 1]), heads, tails,
+                      np.concatenate([frames_from_bones(heads[:1], tails[:1]), sk.frames]))
+    prior = generic_prior(rooted)
+    assert not np.isnan(prior.lower).any() and not np.isnan(prior.upper).any()
+    assert np.all(np.isinf(prior.lower[1])) and np.all(np.isinf(prior.upper[1]))
+    np.testing.assert_array_equal(prior.lower[2:], generic_prior(sk).lower[1:])
+    violated, clamped = prior.box_violations(np.zeros((rooted.num_bones, 3)))
+    assert not violated.any() and np.isfinite(clamped).all()
