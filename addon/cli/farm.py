@@ -16,6 +16,7 @@ Manager's two-way variables map them between platforms.  Ctrl-C cancels the job.
 import os
 
 from ...solver.errors import ArticulaInputError, Cancelled
+from ...solver.farm import chunks
 from ...solver.farm.flamenco import Manager
 from ...solver.farm.follow import FarmRun
 from ...solver.farm.subjects_job import SubjectsJob
@@ -54,8 +55,11 @@ def run_track(args) -> int:
         if kind != "depth":
             raise ArticulaInputError("--tracker: for --depth only")
         options += ["--tracker", args.tracker]
-    job = inputs.track_job(args.model, args.depth or args.scans, kind, args.out, args.blend or "", args.chunk,
-                           args.overlap, options, args.camera or "", args.work_dir or "")
+    size, overlap, note = chunks.settings(args.chunk, args.overlap, *inputs.DEFAULT_CHUNK[kind])
+    job = inputs.track_job(args.model, args.depth or args.scans, kind, args.out, args.blend or "", size,
+                           overlap, options, args.camera or "", args.work_dir or "")
+    if note:
+        print(note)
     job.agree_mm = args.agree
     if not 1 <= args.adapt_frames <= 100_000:
         raise ArticulaInputError(f"--adapt-frames: expected 1..100000, got {args.adapt_frames}")
@@ -139,7 +143,8 @@ def add_commands(sub):
     q.add_argument("--chunk", type=int, default=0,
                    help="frames per chunk (default: 300 for --depth, 60 for --scans)")
     q.add_argument("--overlap", type=int, default=0,
-                   help="frames a chunk tracks before its own to settle (default: 60 for --depth, 10 for --scans)")
+                   help="frames a chunk tracks before its own to settle (default: 60 for --depth, 10 for --scans; "
+                        "with --chunk alone, at most half the chunk)")
     q.add_argument("--work-dir", help="shared folder for the chunk bundles (default: OUT.farm beside --out)")
     q.add_argument("--agree", type=float, default=AGREE_MM, metavar="MM",
                    help="chunks differing more than this (mm) where the merge switches started on another solution: "

@@ -30,7 +30,8 @@ def frame_count(kind: str, folder: str, camera: str = "") -> int:
 def track_job(model: str, folder: str, kind: str, out: str, blend: str = "", chunk: int = 0, overlap: int = 0,
               options=(), camera: str = "", work_dir: str = "") -> TrackJob:
     """A checked :class:`TrackJob`; ``model`` "" with a depth recording: the built-in template body, adapted
-    by a first task; ``chunk``/``overlap`` 0 take :data:`DEFAULT_CHUNK`; ``work_dir`` defaults to
+    by a first task; ``chunk``/``overlap`` 0 take :data:`DEFAULT_CHUNK` (a chunk alone gets an overlap
+    that fits: :func:`solver.farm.chunks.settings`); ``work_dir`` defaults to
     ``<out>.farm`` beside the output (on the shared storage with it)."""
     if not model and kind != "depth":
         raise ArticulaInputError("tracking captures on the farm needs the person's model bundle (--model MODEL.npz); "
@@ -44,8 +45,8 @@ def track_job(model: str, folder: str, kind: str, out: str, blend: str = "", chu
         model = os.path.abspath(model)
         track_inputs.model_from_bundle(model)
     total = frame_count(kind, folder, camera)
-    size, lap = DEFAULT_CHUNK[kind]
-    ranges = chunks.plan(total, int(chunk or size), int(overlap or lap))
+    size, lap, _note = chunks.settings(chunk, overlap, *DEFAULT_CHUNK[kind])
+    ranges = chunks.plan(total, size, lap)
     options = list(options) + (["--camera", camera] if camera and kind == "depth" else [])
     return TrackJob(model or "", folder, kind, ranges, os.path.abspath(work_dir or out + ".farm"), out,
                     os.path.abspath(blend) if blend else "", options)

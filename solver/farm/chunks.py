@@ -23,6 +23,18 @@ def plan(frames: int, size: int, overlap: int) -> list:
     return [(max(0, a - overlap), b) for a, b in zip(starts, stops)]
 
 
+def settings(size: int, overlap: int, default_size: int, default_overlap: int) -> tuple:
+    """``(size, overlap, note)``: 0 takes the default; a chunk size given without an overlap gets
+    ``min(default_overlap, size // 2)`` (at least 1) so the pair fits, and ``note`` says which ('' when
+    nothing was chosen for the user)."""
+    size, overlap = int(size or default_size), int(overlap)
+    if overlap:
+        return size, overlap, ""
+    chosen = max(1, min(int(default_overlap), size // 2))
+    note = f"overlap {chosen} frames (chunk {size}; give --overlap to choose)" if chosen != default_overlap else ""
+    return size, chosen, note
+
+
 def check(frames: int, size: int, overlap: int) -> None:
     """Raise :class:`ArticulaInputError` naming the setting when the plan cannot work."""
     if frames < 1:

@@ -65,3 +65,13 @@ def test_symmetric_choice_is_unchanged_for_chunks_without_look_ahead():
     ranges = [(0, 10), (6, 20)]
     assert list(choose_frames(ranges, 0, 20)) == [0] * 8 + [1] * 12
     assert list(choose_frames_causal(ranges, 0, 20, 1)) == [0] * 9 + [1] * 11
+
+
+@pytest.mark.parametrize("size,overlap,want", [(0, 0, (300, 60)), (10, 0, (10, 5)), (3, 0, (3, 1)),
+                                               (500, 0, (500, 60)), (10, 3, (10, 3)), (0, 20, (300, 20))])
+def test_a_chunk_given_alone_gets_an_overlap_that_fits(size, overlap, want):
+    """``--chunk N`` without ``--overlap``: min(default, N // 2), said in the note; the plan then works."""
+    got_size, got_overlap, note = chunks.settings(size, overlap, 300, 60)
+    assert (got_size, got_overlap) == want
+    assert (f"overlap {want[1]} frames" in note) == (overlap == 0 and want[1] != 60), note
+    chunks.check(100, got_size, got_overlap)
