@@ -1,3 +1,5 @@
-"""Retargeting captured motion onto other characters (bone roles, mapping, per-segment directions,
-root motion).  Empty until the retargeting issue lands.
+"""Retargeting motion onto other characters: bone roles and the presets that name them, the source to
+target mapping, armature maths, the per-segment direction solve with twist (:mod:`.solve`), root motion
+scaled by the leg ratio, planted feet, and the shared-topology fit (:mod:`.topology`).  No bpy: the
+Blender half is ``addon/retarget``.
 """
