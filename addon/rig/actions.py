@@ -3,7 +3,7 @@
 Writing uses the fast keyframe path (one ``keyframe_points.add`` + ``foreach_set`` per F-curve) into a
 NEW action (Blender makes the name unique, so nothing is overwritten): ``rotation_quaternion`` of every
 control bone, and ``location``/``scale`` of the root bone, on frames ``frame_start .. frame_start+N-1``
-with LINEAR interpolation.  Conventions (ARCHITECTURE.md, model bundle):
+with LINEAR interpolation.  Conventions (docs/skinning.md, model bundle):
 
 * rotations (N,B,4) are the pose-bone quaternions (w,x,y,z) in bone-local axes; consecutive keys are
   sign-aligned (q and -q are the same rotation) so interpolated sub-frames take the short way;

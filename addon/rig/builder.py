@@ -1,5 +1,5 @@
-"""Build an Articula rig in the scene from a :class:`solver.rig.model.Model` (ARCHITECTURE.md, "how Blender
-reproduces it exactly").
+"""Build an Articula rig in the scene from a :class:`solver.rig.model.Model` (docs/RIG.md, "Why the rig
+deforms exactly as the solver's hybrid skin").
 
 The rig is three objects, all at the identity transform (bundle coordinates are Blender world
 coordinates unchanged); the mesh and the twist armature are parented to the main armature so the

@@ -1,4 +1,4 @@
-"""The rig Blender builds deforms exactly like the solver's hybrid skin (ARCHITECTURE.md): evaluated
+"""The rig Blender builds deforms exactly like the solver's hybrid skin (docs/RIG.md): evaluated
 meshes compared with ``solver.rig.skinning.hybrid_skin`` for random poses with ±170° twists, root
 translation and scale; the candy-wrapper test in Blender."""
 import numpy as np
