@@ -89,12 +89,12 @@ def resolve_intrinsics(directory: str, intrinsics: str, preset: str, needed: boo
     """An intrinsics file wins, then a preset (not 'FOLDER'), then the folder's ``intrinsics.json``;
     None when there is none and they are not ``needed`` (point-cloud files)."""
     if intrinsics:
-        return camera.load_intrinsics(bpy.path.abspath(intrinsics))
+        return recording.camera_file(bpy.path.abspath(intrinsics))[0]
     if preset != 'FOLDER':
         return camera.preset(PRESET_NAMES[preset])
     path = os.path.join(directory, "intrinsics.json")
     if os.path.isfile(path):
-        return camera.load_intrinsics(path)
+        return recording.camera_file(path)[0]
     if needed:
         raise ArticulaInputError(f"{directory}: no intrinsics.json; give an intrinsics file or choose a "
                                  "camera preset (e.g. Kinect v1)")
@@ -129,8 +129,8 @@ def plan_import(directory: str, options: dp.DepthOptions, scale_given: bool = Tr
         raise ArticulaInputError(f"{directory or '(no folder given)'}: not a folder")
     paths, clouds = find_frames(folder)
     intr = resolve_intrinsics(folder, intrinsics, preset, needed=not clouds)
-    if intr is not None and not scale_given:
-        options = dataclasses.replace(options, depth_scale=intr.depth_unit_m)  # 0.001 for the presets
+    if intr is not None:
+        options = recording.unit_options(options, intr, options.depth_scale if scale_given else None)
     options.validate()
     name = name or os.path.basename(folder.rstrip(os.sep)) or "Depth"
     if clouds:

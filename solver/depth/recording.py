@@ -14,6 +14,7 @@ import time
 
 import numpy as np
 
+from . import camera as cam
 from . import frames as dp
 from .. import parallel
 from ..errors import ArticulaInputError
@@ -44,6 +45,19 @@ def list_frames(directory: str, extensions) -> list[str]:
     if not frames:
         raise ArticulaInputError(f"{directory}: no frames found (expected {', '.join(extensions)} files)")
     return [os.path.join(directory, n) for n in natural_sorted(frames)]
+
+
+def camera_file(path: str) -> tuple:
+    """``(Intrinsics, cam_to_world (4, 4) or None)`` of an ``intrinsics.json`` (validated): the one reader of
+    a recording's camera file, for the importer and the depth tracker."""
+    return cam.load_intrinsics(path), cam.load_camera_pose(path)
+
+
+def unit_options(options: dp.DepthOptions, intr, depth_scale: float | None = None) -> dp.DepthOptions:
+    """``options`` with ``depth_scale`` (metres per 16-bit PNG unit) = ``depth_scale`` when the user gave
+    one, else the camera's ``depth_unit_m`` (``intrinsics.json``; 0.001 for the presets)."""
+    scale = intr.depth_unit_m if depth_scale is None else depth_scale
+    return dataclasses.replace(options, depth_scale=float(scale))
 
 
 def _require_16bit(raw: np.ndarray, path: str) -> np.ndarray:

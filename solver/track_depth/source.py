@@ -48,11 +48,11 @@ class DepthRecording:
 
     @classmethod
     def from_folder(cls, folder: str, preset: str | None = None, options: dp.DepthOptions | None = None,
-                    frames=None) -> "DepthRecording":
+                    frames=None, depth_scale: float | None = None) -> "DepthRecording":
         """The PNG frames of ``folder`` (``frames``: an optional ``slice`` of them) with ``intrinsics.json``
-        from the folder, else the camera ``preset`` (e.g. ``kinect_v1``, noted in the report)."""
+        from the folder, else the camera ``preset`` (e.g. ``kinect_v1``, noted in the report).  PNG values
+        are in the camera's ``depth_unit_m`` unless ``depth_scale`` (metres per unit) is given, as on import."""
         opts = options or dp.DepthOptions()
-        opts.validate()
         paths = all_paths = rec.list_frames(folder, (".png",))
         if frames is not None:
             paths = all_paths[frames]
@@ -61,13 +61,15 @@ class DepthRecording:
         notes = []
         ipath = os.path.join(folder, "intrinsics.json")
         if os.path.exists(ipath):
-            intr, c2w = cam.load_intrinsics(ipath), cam.load_camera_pose(ipath)
+            intr, c2w = rec.camera_file(ipath)
         elif preset:
             intr, c2w = cam.preset(preset), None
             notes.append(f"no intrinsics.json: the {preset} camera preset is assumed")
         else:
             raise ArticulaInputError(f"{folder}: no intrinsics.json; give a camera preset "
                                      f"({', '.join(cam.PRESETS)})")
+        opts = rec.unit_options(opts, intr, depth_scale)
+        opts.validate()
         rec.check_png_frames(rec.png_frames(paths))
         for a, b in numbering_gaps(paths):
             notes.append(f"frames missing in the numbering between {a} and {b}")
