@@ -13,7 +13,8 @@ from ...solver.retarget.armature import local_from_pose, subset
 from .. import compat
 from ..jobs import scene_guard
 from ..rig.actions import fcurve_values
-from ..retarget.armatures import check_editable, check_scale, read_rest
+from ..linked import check_editable
+from ..retarget.armatures import check_scale, read_rest
 from ..retarget.source_clip import local_from_fcurves, needs_evaluation, pose_from_scene
 from . import chain as chains, layer
 

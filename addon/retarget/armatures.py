@@ -34,13 +34,6 @@ def check_scale(ob, what: str) -> None:
                                  "(or sheared by a parent): apply its scale first (Object › Apply › Scale)")
 
 
-def check_editable(ob, what: str) -> None:
-    """Refuse a target that cannot take a new action: an object linked from a library (no override)."""
-    if ob.library is not None:
-        raise ArticulaInputError(f"{what} {ob.name!r} is linked from the library {ob.library.filepath!r}: make "
-                                 "a library override first (Object › Library Override › Make)")
-
-
 def _parents_first(bones) -> list:
     order, seen = [], set()
 

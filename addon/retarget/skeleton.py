@@ -9,7 +9,8 @@ from ...solver.retarget.mapping import Mapping, auto_roles, describe_missing
 from ...solver.retarget.solve import NEEDED, RetargetOptions, retarget_clip
 from ..jobs import scene_guard
 from . import evaluated_target
-from .armatures import check_editable, check_scale, constrained_bones, driven_bones, read_rest
+from ..linked import check_editable
+from .armatures import check_scale, constrained_bones, driven_bones, read_rest
 from .clip_writer import write_clip
 from .source_clip import active_action, read_clip
 

@@ -154,7 +154,7 @@ def test_linked_target_is_refused(pkg, tmp_path):
         dst.objects = ["Linked"]
     bpy.context.scene.collection.objects.link(dst.objects[0])
     source = import_bvh()
-    _refused(pkg, "linked from the library", source=source.name, target="Linked")
+    _refused(pkg, "linked from lib.blend .*make a library override", source=source.name, target="Linked")
 
 
 def test_batch_command_retargets_a_bvh_into_a_new_blend(pkg, tmp_path):
