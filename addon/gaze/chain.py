@@ -4,8 +4,9 @@ Chest, neck and head are found by role (:func:`solver.retarget.mapping.auto_role
 Articula, MakeHuman/MPFB, Rigify, Mixamo, CMU and Unreal names, then the skeleton's shape), each
 overridable by name.  The gaze line: on an Articula rig whose mesh has the MakeHuman body topology, from
 the annotated back of the head through the point between the eyes (``solver/gaze/data``); otherwise from
-the midpoint of the eye bones (or the middle of the head bone) along the rest pose's facing (left × up of
-the body: Blender's −Y for a character built facing −Y).  Eye bones (``eye``/``Eye`` in the name, below
+the midpoint of the eye bones (or the middle of the head bone) along the rest pose's facing: horizontal
+(perpendicular to the armature's up axis), left × up, so Blender's −Y for a character built facing −Y
+however stooped or leaning its rest pose is.  Eye bones (``eye``/``Eye`` in the name, below
 the head, not driven by constraints) converge on the target.
 """
 import json
@@ -59,16 +60,23 @@ def eye_bones(arm_ob, rest, head: int) -> list:
 
 
 def _facing(rest, roles: dict) -> np.ndarray:
-    """Unit forward direction (armature space) of the rest pose: left × up."""
+    """Unit forward direction (armature space) of an upright character's rest pose: horizontal, i.e.
+    ``left × up`` with ``up`` the armature axis nearest the hips-to-head line and ``left`` (thighs, upper
+    arms or shoulders) made perpendicular to it, so a stooped or leaning rest does not tilt it; −Y (Blender's
+    front) when these bones are missing."""
     _, heads = rest_world(rest)
     heads = rest.armature_points(heads)
-    up = heads[roles["head"]] - heads[roles.get("hips", roles.get("chest", roles["head"]))]
+    body = heads[roles["head"]] - heads[roles.get("hips", roles.get("chest", roles["head"]))]
+    up = np.zeros(3)
+    axis = int(np.argmax(np.abs(body)))
+    up[axis] = np.sign(body[axis])
     left = None
     for a, b in (("thigh.L", "thigh.R"), ("upper_arm.L", "upper_arm.R"), ("shoulder.L", "shoulder.R")):
         if a in roles and b in roles:
             left = heads[roles[a]] - heads[roles[b]]
+            left = left - up * (left @ up)
             break
-    if left is None or np.linalg.norm(up) < 1e-9:
+    if left is None or np.linalg.norm(body) < 1e-9 or np.linalg.norm(left) < 1e-9:
         return np.array([0.0, -1.0, 0.0])
     f = np.cross(left, up)
     return f / np.linalg.norm(f)

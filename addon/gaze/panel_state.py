@@ -8,8 +8,9 @@ class ShotSettings:
     """Properties of a gaze shot common to the panel's state and the operator (a mixin: Blender collects
     the annotations of both classes' bases)."""
     fade_frames: bpy.props.IntProperty(name="Fade", default=10, min=0, description="Frames of fade in and of fade out")
-    shares: bpy.props.FloatVectorProperty(name="Split", size=3, default=(0.1, 0.4, 0.5), min=0.0, max=1.0,
-                                          description="Shares of the turn for chest, neck and head")
+    shares: bpy.props.FloatVectorProperty(name="Split", size=3, default=(0.1, 0.4, 0.5), min=0.0, soft_max=1.0,
+                                          description="Shares of the turn for chest, neck and head (normalised: "
+                                                      "3, 3, 4 is 30/30/40 %)")
     chest: bpy.props.StringProperty(name="Chest Bone", description="Chest bone ('' = found by role)")
     neck: bpy.props.StringProperty(name="Neck Bone", description="Neck bone ('' = found by role)")
     head: bpy.props.StringProperty(name="Head Bone", description="Head bone ('' = found by role)")
