@@ -12,7 +12,7 @@ built as an exact swing/twist rig; a rig learned from registered scans when ``--
 * speed: 1,000 frames onto the 163-bone MakeHuman default rig, operator wall time (target <= 5 s);
   and the slow path of constrained targets: cmu_131_01 onto Rigify's generated human (FK controls).
 
-Then the shared-topology fit (:mod:`_retarget_topology`) and the scan binding (:mod:`_scan_binding`).
+Then the shared-topology fit (:mod:`bench_retarget_topology`) and the scan binding (:mod:`bench_scan_binding`).
 """
 import importlib
 import os
@@ -185,11 +185,11 @@ def main(argv=None) -> int:
         lines.append(speed_line(pkg))
         print(lines[-1], flush=True)
     if "--no-topology" not in argv:
-        from _retarget_topology import topology_lines
+        from bench_retarget_topology import topology_lines
         for line in topology_lines():
             print(line, flush=True)
     if "--no-scan" not in argv:
-        from _scan_binding import scan_binding_lines
+        from bench_scan_binding import scan_binding_lines
         for line in scan_binding_lines():
             print(line, flush=True)
     return 0

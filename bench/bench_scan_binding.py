@@ -15,7 +15,8 @@ closest triangle and the face normal, and each shell's rigid-motion error; the b
 that the binding adds to a saved .blend; and the tube body (19 separate tubes, touching at
 the joints) bound at rest, where vertices near another piece follow it.
 
-Usage: ~/.cache/articula/venv-bpy52/bin/python bench/_scan_binding.py [--picture docs/images/scan_binding.png]
+Usage: ``./run bench scan_binding [--picture docs/images/scan_binding.png]``; ``./run bench retarget`` prints
+the same lines (:func:`scan_binding_lines`).
 """
 import argparse
 import importlib

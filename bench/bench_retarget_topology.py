@@ -1,4 +1,6 @@
-"""Retargeting through shared topology (solver.retarget.topology; dissertation (model-adaptive mocap)
+"""Retargeting through shared mesh topology: fit RMS (mm) vs copying joint angles, time per frame.
+
+Retargeting through shared topology (solver.retarget.topology; dissertation (model-adaptive mocap)
 Sec. 4.2.3, test A2) on MakeHuman subjects of one rig: posed-vertex RMS of the correspondence fit against
 parameter copying, and wall time per frame.
 
@@ -7,10 +9,9 @@ body (both must be 0), male,heavy (the same height macro, another shape), and ma
 taller) without and with the height ratio.  RMS is the per-frame RMS distance (mm) of the target's posed
 vertices from the vertices it is fitted to, averaged over frames (max in brackets).
 
-Standalone: ``~/.cache/articula/venv-bpy52/bin/python bench/_retarget_topology.py [frames]``; the
-retargeting benchmark calls :func:`topology_lines`.
+Usage: ``./run bench retarget_topology [frames]``; ``./run bench retarget`` prints the same lines
+(:func:`topology_lines`).
 """
-import os
 import sys
 import time
 
@@ -64,8 +65,6 @@ def main(argv=None) -> int:
     frames = int(argv[0]) if argv else 60
     for line in topology_lines(frames):
         print(line, flush=True)
-    python = sys.executable.replace(os.path.expanduser("~"), "~", 1)
-    print(f"command: {python} bench/_retarget_topology.py {frames}")
     return 0
 
 
