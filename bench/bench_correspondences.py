@@ -1,4 +1,6 @@
-"""Tracking correspondences (solver.track.correspondences) of the 13,380-vertex MakeHuman subject's exact
+"""Tracking correspondences on MakeHuman's own 4-view scans: time per stage.
+
+Tracking correspondences (solver.track.correspondences) of the 13,380-vertex MakeHuman subject's exact
 posed model against its own unregistered 4-view scans (sample_scenes.unregistered), per stage:
 
 * visibility alone (4 z-buffers) at 320x240 and 640x480, full and half resolution;

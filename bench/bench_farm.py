@@ -1,4 +1,6 @@
-"""Farm batch on Flamenco (issue 22): a Manager and two Workers on this machine (tools/flamenco_local.py),
+"""Farm batch on Flamenco: a local Manager and two Workers track a 300-frame recording vs one process.
+
+Farm batch on Flamenco (issue 22): a Manager and two Workers on this machine (tools/flamenco_local.py),
 a 300-frame depth recording (``sample_scenes.depth_bench`` subject 0, 320x240, Kinect v1 noise) tracked
 by ``./run farm track`` against one ``./run track`` process in the same run.
 

@@ -1,4 +1,6 @@
-"""Gaze benchmark: ``./run bench gaze [--tracked TRACKED.blend]``.
+"""Gaze shots on an MPFB rig and the template body: gaze error (deg), chain shares, fades, speed.
+
+Usage: ``./run bench gaze [--tracked TRACKED.blend]``.
 
 Two characters (spec test A1 on real rigs; targets from the issue):
 

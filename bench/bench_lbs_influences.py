@@ -1,4 +1,6 @@
-"""Linear-blend export with a limited number of influences per vertex (``solver.rig.linear_blend``): the
+"""Linear-blend export with 4 or 8 influences per vertex: deviation from the exact rig (mm).
+
+Linear-blend export with a limited number of influences per vertex (``solver.rig.linear_blend``): the
 deviation from the exact swing/twist rig (max / mean over all vertices and poses, mm) of the unlimited weights,
 of truncate-and-renormalise (what glTF/FBX exporters do) and of the optimised limited weights, at 4 and 8
 influences, on the MakeHuman subject (cmu_mb female, 4 twist segments): on the seeded poses the weights are

@@ -1,4 +1,6 @@
-"""Evaluation of rig learning (issues 4 and 19) against exact ground truth and the peer tool Dem Bones:
+"""Rig learning vs exact ground truth and Dem Bones: training/held-out error, joints, time, memory.
+
+Evaluation of rig learning (issues 4 and 19) against exact ground truth and the peer tool Dem Bones:
 training error, held-out error, joint-centre error, time and memory of ``solver.learn.pipeline.learn_rig``.
 (``bench_learn_speed.py`` times the learner's stages; this one evaluates the result.)  Helpers:
 ``_learn_runs.py``; section 0: ``_learn_issue19.py``.

@@ -1,4 +1,6 @@
-"""Progress reporting of rig learning on a large mesh: the longest gaps between two progress calls of
+"""Progress of rig learning on a 53,514-vertex mesh: the longest gaps between progress calls.
+
+Progress reporting of rig learning on a large mesh: the longest gaps between two progress calls of
 ``solver.learn.pipeline.learn_rig`` (default options) on the MakeHuman subject (cmu_mb, hybrid skin, 5 poses)
 subdivided once by edge midpoints (53,514 vertices), and whether the fractions never decrease.
 

@@ -1,4 +1,6 @@
-"""Speed of rig learning (solver.learn.pipeline.learn_rig) on MakeHuman: per-stage time, wall/CPU, peak memory, accuracy.
+"""Speed of rig learning on MakeHuman: time per stage, wall/CPU, peak memory, accuracy.
+
+Speed of rig learning (solver.learn.pipeline.learn_rig) on MakeHuman: per-stage time, wall/CPU, peak memory, accuracy.
 
     ./run bench learn_speed                          # 13,380 v x 30 scans, 19 parts, default rounds
     ./run bench learn_speed --frames 10 --iterations 3 --gn-iterations 3 --bcd-sweeps 3

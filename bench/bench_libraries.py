@@ -1,4 +1,6 @@
-"""The bundled-library question, measured: Articula's own mesh readers, exact surface distance and mesh
+"""Articula's mesh readers, surface distance and mesh graph next to trimesh's: time, agreement.
+
+The bundled-library question, measured: Articula's own mesh readers, exact surface distance and mesh
 graph next to trimesh's (``trimesh.load``, ``trimesh.proximity.closest_point``, ``trimesh.graph`` /
 ``Trimesh.edges_unique`` / ``trimesh.smoothing.laplacian_calculation``).  docs/libraries.md holds the
 numbers and the decision for each piece.

@@ -1,4 +1,6 @@
-"""Time to generate registered sample sequences (``./run bench samples [--poses N] [--rig R]``).
+"""Time to generate registered sample sequences (OBJ/PLY files and ground truth), per skin.
+
+Usage: ``./run bench samples [--poses N] [--rig R]``.
 
 Reports, per skin, the in-memory posing time (``posed_sequence``) and the full ``generate_registered``
 time (OBJ and PLY files + ground_truth.npz, + model bundle for hybrid) for N poses (default 30), and

@@ -1,4 +1,6 @@
-"""Hybrid swing/twist skinning (solver) next to plain LBS in the same run, on one core, plus the
+"""Hybrid swing/twist skin next to plain LBS on one core (frames/s), and the candy-wrapper figures.
+
+Hybrid swing/twist skinning (solver) next to plain LBS in the same run, on one core, plus the
 candy-wrapper figures on a twisted / swung tube.
 
 Threads: BLAS/OpenMP pools are read when numpy loads, so unless OPENBLAS_NUM_THREADS=1 is already set

@@ -1,4 +1,6 @@
-"""Tracking unregistered scans (``solver.track.pipeline.track_sequence``) on sample_scenes recordings:
+"""Tracking unregistered 4-view scans of MakeHuman subjects: joint and vertex error, lost frames, time.
+
+Tracking unregistered scans (``solver.track.pipeline.track_sequence``) on sample_scenes recordings:
 noisy 4-view scans with outliers (``sample_scenes.unregistered.scan_frame``) of MakeHuman subjects.
 
 Scenarios (``--only`` picks some):

@@ -1,4 +1,6 @@
-"""Tracking single depth-camera recordings (``solver.track_depth``) on synthetic turning subjects
+"""Tracking single depth-camera recordings of turning subjects: joint error, time, bad inputs.
+
+Tracking single depth-camera recordings (``solver.track_depth``) on synthetic turning subjects
 (``sample_scenes.depth_bench``: a MakeHuman subject turning +-40 deg on the spot, arms and legs moving,
 Kinect v1 noise, floor, 64 frames at 30 fps), and the failure cases of issue 18.
 

@@ -1,4 +1,6 @@
-"""Per-frame tracking fit (``solver.track.frame_fit.fit_frame``) with the subject's exact model on its own
+"""One tracking frame fit with the exact model on noisy 4-view scans: error (mm), time, updates.
+
+Per-frame tracking fit (``solver.track.frame_fit.fit_frame``) with the subject's exact model on its own
 noisy, unregistered 4-view scans (``sample_scenes.unregistered.scan_frame``, 4 x 320x240), each frame started
 from the previous frame's true pose, no pose prior: mean vertex error against the ground truth (mm), median
 scan-to-model distance, wall time and updates, for frames 1 and 2 of a walk and of a random motion (MakeHuman

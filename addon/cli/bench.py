@@ -1,6 +1,8 @@
 """``bench NAME [args]``: run ``bench/bench_NAME.py`` of a source checkout (benchmarks are not
-shipped in the extension zip).  ``bench list`` lists them."""
+shipped in the extension zip).  ``bench list`` lists them, each with
+the first line of its docstring."""
 import argparse
+import ast
 import importlib.util
 import os
 import sys
@@ -16,10 +18,20 @@ def _available():
     return sorted(f[6:-3] for f in os.listdir(_BENCH_DIR) if f.startswith("bench_") and f.endswith(".py"))
 
 
+def description(path: str) -> str:
+    """A benchmark's one-line description: the first line of its module docstring ("" without one).  Read
+    from the source, so listing needs none of the benchmarks' imports."""
+    with open(path, encoding="utf-8") as f:
+        doc = ast.get_docstring(ast.parse(f.read(), path)) or ""
+    return doc.splitlines()[0].strip() if doc else ""
+
+
 def run(args) -> int:
     names = _available()
     if args.name == "list":
-        print("\n".join(names))
+        width = max((len(n) for n in names), default=0)
+        for name in names:
+            print(f"{name:<{width}}  {description(os.path.join(_BENCH_DIR, f'bench_{name}.py'))}")
         return 0
     if args.name not in names:
         raise ArticulaInputError(f"no benchmark {args.name!r}; available: {', '.join(names) or 'none'}"
