@@ -113,6 +113,8 @@ def run(args) -> int:
 def run_merge(args) -> int:
     for path in (args.out, args.report):
         result.check_output_path(path or "")
+    if args.agree < 0 or not np.isfinite(args.agree):
+        raise ArticulaInputError(f"--agree: expected millimetres >= 0 (0: no check), got {args.agree}")
     merged = merge.merge_chunks(merge.load_chunks([os.path.abspath(p) for p in args.chunks]), args.agree)
     try:
         save_bundle(args.out, merged.model, merged.poses, merged.provenance)
@@ -163,8 +165,9 @@ def add_commands(sub):
     m = sub.add_parser("merge-tracks", help="join tracked chunks (track --frames A:B, overlapping) into one")
     m.add_argument("chunks", nargs="+", metavar="CHUNK.npz", help="tracked bundles of one input, overlapping")
     m.add_argument("--out", required=True, help="merged tracked bundle to write (.npz)")
-    m.add_argument("--agree", type=float, metavar="MM",
+    m.add_argument("--agree", type=float, default=merge.AGREE_MM, metavar="MM",
                    help="refuse (exit 2, nothing written) when two chunks' posed vertices differ by more than MM "
-                        "millimetres on the frame where the merge switches between them")
+                        "millimetres on the frame where the merge switches between them (default %(default)g; "
+                        "0 accepts any difference)")
     m.add_argument("--report", help="write which chunk each frame came from and the overlaps' differences")
     m.set_defaults(func=run_merge)

@@ -13,7 +13,7 @@ from . import chunks as chunk_plan
 
 JOB_TYPE = "articula-track"
 KINDS = ("depth", "scans")
-AGREE_MM = 100.0     # mm: chunks differing more on a cut frame started on another solution (docs/farm.md)
+AGREE_MM = merge.AGREE_MM     # mm: chunks differing more on a cut frame started on another solution
 
 
 @dataclass

@@ -27,6 +27,9 @@ from ..rig.model import Model, Poses
 from ..rig.skinning import hybrid_skin
 
 SOURCE = "track"
+#: mm: chunks whose posed vertices differ more at a cut started on another solution (``merge-tracks`` and
+#: the farm refuse such a join by default; docs/farm.md).
+AGREE_MM = 100.0
 REQUIRED = ("model_sha256", "input", "first_frame", "frame_names", "options", "adapted")
 
 
@@ -258,14 +261,15 @@ def disagreement_text(cut: dict, chunks) -> str:
     k = chunks[j].start - chunks[i].start
     return (f"{cut['chunks'][0]} and {cut['chunks'][1]} disagree on frame {cut['frame']} by "
             f"{cut['max_vertex_mm']:.0f} mm (the later chunk started on another solution); track "
-            f"{cut['chunks'][1]}'s frames again with --start-pose {cut['chunks'][0]}:{k}, or give more overlap")
+            f"{cut['chunks'][1]}'s frames again with --start-pose {cut['chunks'][0]}:{k}, or give more overlap, "
+            f"or accept the join as it is with --agree 0")
 
 
 def merge_chunks(chunks, agree_mm: float = None) -> MergedTrack:
     """Join tracked chunks (any order) into one track over the union of their frames (module docstring).
     Raises :class:`ArticulaInputError` naming the chunks when they do not belong together, leave a gap,
-    do not overlap or disagree on a shared frame's name, or, with ``agree_mm``, when their posed vertices
-    differ by more than that at a cut (:func:`cut_differences`)."""
+    do not overlap or disagree on a shared frame's name, or, with ``agree_mm`` (mm; None or 0: no
+    check), when their posed vertices differ by more than that at a cut (:func:`cut_differences`)."""
     if len(chunks) < 2:
         raise ArticulaInputError(f"{len(chunks)} chunk given; merging needs at least two tracked chunks")
     chunks = sorted(chunks, key=lambda c: (c.start, c.end))
@@ -274,7 +278,7 @@ def merge_chunks(chunks, agree_mm: float = None) -> MergedTrack:
     lo, hi = chunks[0].start, chunks[-1].end
     chosen = _choose(chunks)
     cuts = cut_differences(chunks, chosen, lo)
-    bad = [c for c in cuts if agree_mm is not None and c["max_vertex_mm"] > agree_mm]
+    bad = [c for c in cuts if agree_mm and c["max_vertex_mm"] > agree_mm]
     if bad:
         raise ArticulaInputError(disagreement_text(bad[0], chunks))
     idx = [lo + k - chunks[i].start for k, i in enumerate(chosen)]

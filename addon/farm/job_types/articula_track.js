@@ -121,7 +121,7 @@ function compileJob(job) {
             exe: "{articula}",
             args: ["merge-tracks"].concat(files, ["--out", settings.out,
                                                   "--report", path.join(settings.work_dir, "merge.json")],
-                                          settings.agree_mm > 0 ? ["--agree", String(settings.agree_mm)] : []),
+                                          ["--agree", String(settings.agree_mm)]),
         }));
     }
     if (settings.blend) {

@@ -198,3 +198,31 @@ def test_start_pose_from_a_bundle(pkg, tmp_path, truth, files, monkeypatch, caps
         assert cli.main(["track", "--model", path, "--scans", folder, "--start-pose", spec, "--out", out, *FAST]) == 2
         assert re.search(message, capsys.readouterr().err), spec
         assert not seen
+
+
+def test_merge_refuses_chunks_that_disagree_by_default(pkg, tmp_path, capsys):
+    """Chunks half a metre apart where the merge switches: refused by default (exit 2, the frame and both
+    files named, how to accept it), nothing written; ``--agree 0`` accepts the same chunks."""
+    from ...solver.track.test_merge import chunk, truth_poses
+    from articula.sample_scenes import synthetic
+    model = synthetic.tube_body(rings=4, segments=6)
+    poses = truth_poses(model, 12)
+    shifted = Poses(poses.rotations, poses.translations + [0.5, 0, 0], poses.scales)
+    paths = {}
+    for name, c in (("early.npz", chunk(model, poses, 0, 8, "early")),
+                    ("late.npz", chunk(model, shifted, 5, 12, "late"))):
+        paths[name] = str(tmp_path / name)
+        save_bundle(paths[name], c.model, c.poses, c.provenance)
+    cli, out, rep = pkg("addon.cli.main"), str(tmp_path / "m.npz"), str(tmp_path / "m.json")
+    capsys.readouterr()
+    assert cli.main(["merge-tracks", paths["early.npz"], paths["late.npz"], "--out", out, "--report", rep]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert re.search(r"early\.npz and late\.npz disagree on frame [67] by 500 mm", err), err
+    assert "--agree 0" in err
+    assert sorted(os.listdir(tmp_path)) == ["early.npz", "home", "late.npz"] or \
+        sorted(os.listdir(tmp_path)) == ["early.npz", "late.npz"]
+    assert cli.main(["merge-tracks", paths["early.npz"], paths["late.npz"], "--out", out, "--agree", "0"]) == 0
+    assert len(load_bundle(out).poses) == 12
+    assert cli.main(["merge-tracks", paths["early.npz"], paths["late.npz"], "--out", out, "--agree", "-1"]) == 2
+    assert "--agree: expected millimetres >= 0" in capsys.readouterr().err
