@@ -9,6 +9,7 @@ import shutil
 import numpy as np
 
 import _common
+from _track_depth_runs import joints_of, recording, track
 
 
 def _copy(src, dst, frames=None):
@@ -49,14 +50,12 @@ def _statuses(res, frames):
 
 
 def _joint_error(res, r, frames):
-    from bench_track_depth import joints_of
     e = np.linalg.norm(joints_of(res.model, res.poses, r["joint_bones"]) - r["joints"][:len(res.poses)], axis=2)
     return 1000 * float(e[frames].mean())
 
 
 def _refused(label, folder):
     from articula.solver.errors import ArticulaInputError
-    from bench_track_depth import track
     try:
         track(folder, None)
     except ArticulaInputError as exc:
@@ -66,7 +65,6 @@ def _refused(label, folder):
 
 
 def bad_inputs(subject, frames, long_frames, cache):
-    from bench_track_depth import recording, track
     r = recording(subject, (320, 240), frames)
     src, model = r["out_dir"], r["model"]
     # nobody in view for frames 20-29, then back
@@ -119,7 +117,6 @@ def _long(src, model, frames, n, cache):
             i = i if cycle % 2 == 0 else frames - 1 - i          # play back and forth: continuous motion
             os.symlink(os.path.join(src, names[i]), os.path.join(folder, f"depth_{k:05d}.png"))
         shutil.copy(os.path.join(src, "intrinsics.json"), os.path.join(folder, "intrinsics.json"))
-    from bench_track_depth import track
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     res, wall = track(folder, model)
     rss1 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

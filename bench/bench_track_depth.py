@@ -25,45 +25,19 @@ Usage: ./run bench track_depth [--subjects 0,1,2] [--resolutions 320x240,640x480
 import argparse
 import os
 import sys
-import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))   # bench_cli loads us by path
 import _common  # noqa: E402  (makes ``import articula`` work)
 
 import numpy as np  # noqa: E402
 
+from _depth_bad_inputs import bad_inputs  # noqa: E402
+from _track_depth_runs import cache, joints_of, recording, track  # noqa: E402
+
 OPTS = {}   # DepthTrackOptions fields of the template runs (scripts set them)
 SEGMENTS = (("shoulder.L", "elbow.L"), ("elbow.L", "wrist.L"), ("shoulder.R", "elbow.R"), ("elbow.R", "wrist.R"),
             ("hip.L", "knee.L"), ("knee.L", "ankle.L"), ("hip.R", "knee.R"), ("knee.R", "ankle.R"),
             ("neck", "head"), ("hip.L", "hip.R"), ("shoulder.L", "shoulder.R"))
-
-
-def _cache(name):
-    root = os.path.join(os.environ.get("ARTICULA_HOME", os.path.expanduser("~/.cache/articula")), "bench_depth")
-    return os.path.join(root, name)
-
-
-def recording(subject, resolution, frames):
-    from articula.sample_scenes.depth_bench import bench_recording
-    w, h = resolution
-    return bench_recording(_cache(f"s{subject}_{w}x{h}_{frames}"), subject, (w, h), frames)
-
-
-def joints_of(model, poses, bones):
-    """(N, len(bones), 3) posed heads of ``bones``."""
-    from articula.solver.rig.kinematics import forward_kinematics
-    Rm, tm = forward_kinematics(model.skeleton, poses)
-    return (np.einsum("nbij,bj->nbi", Rm, model.skeleton.heads) + tm)[:, bones]
-
-
-def track(folder, model, **options):
-    from articula.solver.track_depth.options import DepthTrackOptions
-    from articula.solver.track_depth.pipeline import track_recording
-    from articula.solver.track_depth.source import DepthRecording
-    rec = DepthRecording.from_folder(folder)
-    t0 = time.perf_counter()
-    res = track_recording(rec, model, DepthTrackOptions(**options))
-    return res, time.perf_counter() - t0
 
 
 def _summary(res, wall):
@@ -192,8 +166,7 @@ def main(argv=None) -> int:
     if "speed" in only:
         speed(subjects, a.frames)
     if "bad" in only:
-        from _depth_bad_inputs import bad_inputs
-        bad_inputs(subjects[0], a.frames, a.long, _cache)
+        bad_inputs(subjects[0], a.frames, a.long, cache)
     return 0
 
 
