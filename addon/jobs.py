@@ -9,12 +9,13 @@ An operator using :class:`JobOperator` splits its work in three parts:
     Worker thread (or the calling thread in scripts/background mode).  Calls
     ``progress(fraction, text)`` now and then; that call raises ``Cancelled`` once the user pressed Esc.
 ``finish(context, result)``
-    Main thread.  Creates the scene data.  Runs inside :func:`scene_guard`, so an exception here
+    Main thread.  Creates the scene data.  Runs inside :func:`scene_guard`, so any exception here
     removes every datablock created so far and the scene is left as it was.
 
 ``execute`` (scripts, ``bpy.ops.articula.x()``, background mode) runs all three synchronously and
 prints progress in background mode.  ``invoke`` from the UI starts the worker thread and a modal
-timer that shows progress in the status bar and the window-manager progress indicator.
+timer that shows progress in the status bar and the window-manager progress indicator; Esc cancels
+the work and nothing is changed, even when it had already finished.
 """
 from __future__ import annotations
 
@@ -37,14 +38,51 @@ def _snapshot():
             for name in _GUARDED if hasattr(bpy.data, name)}
 
 
+def _animation_state(ob):
+    """``(active action, slot, {NLA track pointer: {strip pointers}})`` of ``ob``, None without animation data."""
+    ad = ob.animation_data
+    if ad is None:
+        return None
+    return (ad.action, getattr(ad, "action_slot", None),
+            {t.as_pointer(): {s.as_pointer() for s in t.strips} for t in ad.nla_tracks})
+
+
+def _restore_animation(ob, state) -> None:
+    """Put ``ob``'s animation data back to ``state`` (:func:`_animation_state`): new NLA tracks and strips
+    removed, the active action and its slot reassigned."""
+    ad = ob.animation_data
+    if ad is None or state == _animation_state(ob):
+        return
+    if state is None:
+        ob.animation_data_clear()
+        return
+    action, slot, tracks = state
+    for track in list(ad.nla_tracks):
+        old = tracks.get(track.as_pointer())
+        if old is None:
+            ad.nla_tracks.remove(track)
+            continue
+        for strip in [s for s in track.strips if s.as_pointer() not in old]:
+            track.strips.remove(strip)
+    if ad.action != action:
+        ad.action = action
+    if slot is not None and ad.action_slot != slot:
+        ad.action_slot = slot
+
+
 @contextlib.contextmanager
 def scene_guard():
-    """Remove every datablock created inside the block if the block raises; re-raise."""
+    """If the block raises (any exception, not only bad input): remove every datablock created inside it,
+    put the existing objects' animation (active action, NLA tracks and strips) and the current frame back
+    as they were, and re-raise."""
     before = _snapshot()
+    animation = [(ob, _animation_state(ob)) for ob in bpy.data.objects]
     frame = bpy.context.scene.frame_current if bpy.context.scene else None
     try:
         yield
     except BaseException:
+        for ob, state in animation:
+            _restore_animation(ob, state)
         for name, old in before.items():
             coll = getattr(bpy.data, name)
             for id_ in [i for i in coll if i.as_pointer() not in old]:
@@ -118,19 +156,27 @@ class JobOperator:
     def invoke(self, context, event):
         if bpy.app.background:
             return self.execute(context)
+        started = self.start_job(context)
+        if started == {'RUNNING_MODAL'}:
+            wm = context.window_manager
+            self._timer = wm.event_timer_add(0.1, window=context.window)
+            wm.progress_begin(0, 100)
+            wm.modal_handler_add(self)
+        return started
+
+    def start_job(self, context):
+        """Prepare on the main thread and start the worker thread; ``{'RUNNING_MODAL'}``, or
+        ``{'CANCELLED'}`` after reporting bad input.  :meth:`modal` then follows the worker."""
         try:
             work = self.prepare(context)
         except ArticulaInputError as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
+        self._timer = None
         self._progress = Progress(self.job_label)
         self._outcome = {}
         self._thread = threading.Thread(target=self._run, args=(work,), daemon=True)
         self._thread.start()
-        wm = context.window_manager
-        self._timer = wm.event_timer_add(0.1, window=context.window)
-        wm.progress_begin(0, 100)
-        wm.modal_handler_add(self)
         return {'RUNNING_MODAL'}
 
     def _run(self, work):
@@ -154,25 +200,30 @@ class JobOperator:
         return self._end(context)
 
     def _end(self, context):
+        """The worker has ended: report its outcome; build the scene data unless it failed or Esc was
+        pressed (also when Esc came after the work was done: nothing is changed then either)."""
         wm = context.window_manager
-        wm.event_timer_remove(self._timer)
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
         wm.progress_end()
         if context.workspace:
             context.workspace.status_text_set(None)
         error = self._outcome.get("error")
-        if isinstance(error, Cancelled):
+        if isinstance(error, Cancelled) or self._progress.cancelled:
             self.report({'WARNING'}, f"{self.job_label}: cancelled, nothing was changed")
             return {'CANCELLED'}
         if isinstance(error, ArticulaInputError):
             self.report({'ERROR'}, str(error))
             return {'CANCELLED'}
-        if error is not None:
-            self.report({'ERROR'}, f"{self.job_label} failed: {type(error).__name__}: {error}")
-            return {'CANCELLED'}
         try:
+            if error is not None:
+                raise error
             with scene_guard():
                 self.finish(context, self._outcome["result"])
         except ArticulaInputError as exc:
             self.report({'ERROR'}, str(exc))
+            return {'CANCELLED'}
+        except Exception as exc:  # the scene guard has removed what finish made
+            self.report({'ERROR'}, f"{self.job_label} failed: {type(exc).__name__}: {exc}")
             return {'CANCELLED'}
         return {'FINISHED'}

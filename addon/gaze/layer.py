@@ -36,6 +36,15 @@ def push_down_active_action(arm_ob) -> str:
             "(cycles or linear), which the strip holds at its ends instead") if moving else ""
 
 
+def check_rotation_modes(arm_ob, names) -> None:
+    """Refuse before anything changes when a bone of ``names`` rotates in axis-angle mode (COMBINE cannot
+    layer axis-angle channels)."""
+    for name in names:
+        if arm_ob.pose.bones[name].rotation_mode == 'AXIS_ANGLE':
+            raise ArticulaInputError(f"bone {name!r} uses axis-angle rotation, which an NLA layer cannot combine: "
+                                     "set its rotation mode to Quaternion or an Euler order")
+
+
 def _channels(pb, below: np.ndarray, new: np.ndarray) -> list:
     """``[(prop, index, values)]`` that COMBINE onto ``below`` (F, 3, 3) to give ``new`` (F, 3, 3)."""
     mode = pb.rotation_mode
@@ -43,9 +52,6 @@ def _channels(pb, below: np.ndarray, new: np.ndarray) -> list:
         q = quat_mul(quat_conj(matrix_to_quat(below)), matrix_to_quat(new))
         q[q[:, 0] < 0] *= -1
         return [("rotation_quaternion", i, q[:, i]) for i in range(4)]
-    if mode == 'AXIS_ANGLE':
-        raise ArticulaInputError(f"bone {pb.name!r} uses axis-angle rotation, which an NLA layer cannot combine: "
-                                 "set its rotation mode to Quaternion or an Euler order")
     e0, e1 = matrix_to_euler(below, mode), matrix_to_euler(new, mode)
     d = e1 - e0
     d -= 2 * np.pi * np.round(d / (2 * np.pi))

@@ -1,6 +1,7 @@
 """A gaze shot in the scene: check the input, read the character's animation and the target's path over
 the shot, solve (:mod:`solver.gaze.aim`) and add the correction as its own NLA layer (:mod:`.layer`).
-Every check runs before anything changes; a failure while writing removes what was made."""
+Every check runs before anything changes; any failure while writing removes what was made and puts the
+character's animation (active action, NLA) back as it was (:func:`addon.jobs.scene_guard`)."""
 import time
 from dataclasses import replace
 
@@ -139,13 +140,14 @@ def apply_shot(context, arm_ob, target_ob, start: int, end: int, fade: int = 10,
     whole = read_rest(arm_ob)
     chain, eyes, how = chains.gaze_chain(arm_ob, whole, overrides, shares, facing=facing)
     rest, chain, eyes = carrier(whole, chain, eyes)
+    bones = list(chain.joints) + [b for b, _ in eyes]
+    layer.check_rotation_modes(arm_ob, [rest.bones[b] for b in bones])
     local = _input_pose(arm_ob, rest, frames)
     targets = rest.armature_points(target_path(context, target_ob, frames))
     new, report = aim.solve(rest, local, chain, targets, weights)
     eyes_limited = []
     if eyes:
         new, eyes_limited = aim.aim_eyes(rest, new, eyes, targets, weights)
-    bones = list(chain.joints) + [b for b, _ in eyes]
     with scene_guard():
         note = layer.push_down_active_action(arm_ob)
         strip = layer.add_shot(arm_ob, rest, bones, frames, _rotations(local), _rotations(new),

@@ -1,7 +1,16 @@
 """The long-work operator mixin: synchronous execute, progress, cancellation, and roll-back of
-half-created scene data."""
+half-created scene data (also on unexpected errors); the modal path (worker thread, timer events, Esc)
+driven on a real operator."""
+import os
+import time
+
 import bpy
+import numpy as np
 import pytest
+
+from articula.solver.formats.bundle import save_bundle
+from articula.solver.rig.model import Poses
+from articula.solver.track_depth.template import TEMPLATE_PATH, load_template
 
 
 @pytest.fixture
@@ -33,6 +42,8 @@ def job_operator(pkg):
             context.scene.collection.objects.link(ob)
             if self.mode == "fail_in_finish":
                 raise errors.ArticulaInputError("failed half-way")
+            if self.mode == "crash_in_finish":
+                raise ZeroDivisionError("an unexpected error half-way")
 
     bpy.utils.register_class(ARTICULA_OT_test_job)
     yield ARTICULA_OT_test_job
@@ -45,7 +56,8 @@ def test_execute_runs_work_and_finish(job_operator):
 
 
 @pytest.mark.parametrize("mode, message", [("bad_input", "bad input named here"),
-                                            ("fail_in_finish", "failed half-way")])
+                                            ("fail_in_finish", "failed half-way"),
+                                            ("crash_in_finish", "an unexpected error half-way")])
 def test_errors_are_reported_and_leave_scene_untouched(job_operator, mode, message):
     before = (len(bpy.data.objects), len(bpy.data.meshes))
     # An ERROR report makes bpy.ops raise RuntimeError carrying the message (scripts see it).
@@ -69,3 +81,78 @@ def test_progress_clamps_and_cancels(pkg):
     p.cancel()
     with pytest.raises(errors.Cancelled):
         p(0.5)
+
+
+def datablocks():
+    return {name: {i.as_pointer() for i in getattr(bpy.data, name)}
+            for name in ("objects", "meshes", "armatures", "actions", "collections", "materials", "node_groups")}
+
+
+@pytest.fixture
+def bundle(tmp_path):
+    """A model bundle with 3 poses: the template body (the rig, its mesh and an action to build)."""
+    assert os.path.isfile(TEMPLATE_PATH), f"missing fixture {TEMPLATE_PATH}"
+    model = load_template().base
+    bones = model.skeleton.num_bones
+    rotations = np.zeros((3, bones, 4))
+    rotations[..., 0] = 1.0
+    rotations[1:, 1:, :] = [np.cos(0.1), np.sin(0.1), 0.0, 0.0]
+    path = str(tmp_path / "body.npz")
+    save_bundle(path, model, Poses(rotations, np.zeros((3, 3)), np.ones(3)))
+    return path
+
+
+def test_unexpected_error_in_a_real_finish_removes_what_it_made(pkg, monkeypatch, bundle):
+    """articula.build_rig builds the whole rig and bakes its poses, then a real function it calls last
+    raises."""
+    reader = pkg("addon.rig.reader")
+
+    def broken(*args, **kwargs):
+        raise MemoryError("out of memory while reporting")
+    monkeypatch.setattr(reader, "control_names", broken)
+    before = datablocks()
+    with pytest.raises(RuntimeError, match="out of memory while reporting"):
+        bpy.ops.articula.build_rig(filepath=bundle, name="Body")
+    assert datablocks() == before
+
+
+class Event:
+    """A window event as ``modal`` sees it (only its type is read)."""
+    def __init__(self, type_):
+        self.type = type_
+
+
+@pytest.fixture
+def modal_build_rig(pkg):
+    """articula.build_rig run through JobOperator's interactive path as the window manager runs it: the
+    worker thread started by ``start_job``, then ``modal`` called with the events of ``events`` (e.g.
+    "ESC") and timer events until it ends.  (Background Blender has no window to run a modal handler.)"""
+    base = pkg("operators.build_rig").ARTICULA_OT_build_rig
+
+    class ARTICULA_OT_test_modal_build_rig(base):
+        bl_idname = "articula.test_modal_build_rig"
+        events: bpy.props.StringProperty()
+
+        def execute(self, context):
+            state = self.start_job(context)
+            assert self._thread.is_alive() or "result" in self._outcome or "error" in self._outcome
+            for kind in filter(None, self.events.split(",")):
+                state = self.modal(context, Event(kind))
+            while state & {'RUNNING_MODAL', 'PASS_THROUGH'}:
+                time.sleep(0.01)
+                state = self.modal(context, Event('TIMER'))
+            assert not self._thread.is_alive()
+            return state
+
+    bpy.utils.register_class(ARTICULA_OT_test_modal_build_rig)
+    yield bpy.ops.articula.test_modal_build_rig
+    bpy.utils.unregister_class(ARTICULA_OT_test_modal_build_rig)
+
+
+def test_modal_path_builds_and_esc_cancels(modal_build_rig, bundle):
+    before = datablocks()
+    assert modal_build_rig(filepath=bundle, name="Body", events="ESC") == {'CANCELLED'}
+    assert datablocks() == before
+    assert modal_build_rig(filepath=bundle, name="Body", events="MOUSEMOVE") == {'FINISHED'}
+    made = {name: ids - before[name] for name, ids in datablocks().items()}
+    assert made["objects"] and made["meshes"] and made["armatures"] and made["actions"]
