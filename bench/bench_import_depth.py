@@ -41,8 +41,7 @@ def write_recording(folder, frames, seed=0):
     """Synthetic 640x480 recording; returns seconds spent."""
     from articula.solver.depth import camera
     from articula.solver.formats.png16 import write_png16
-    sys.path.insert(0, _common.REPO)
-    from tests.solver.depth_scene import floor_box_scene, ray_box, rays_world
+    from articula.sample_scenes.depth_scene import floor_box_scene, ray_box, rays_world
     intr = camera.PRESETS["kinect_v1"]
     rng = np.random.default_rng(seed)
     t = time.perf_counter()

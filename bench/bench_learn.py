@@ -58,7 +58,7 @@ Sections (every number with its unit; the output is also written to ``bench/resu
    Note: Dem Bones' bones are free rigid transforms per frame (6 DoF each, no skeleton), ours are parts of
    one kinematic tree (3 DoF per joint), so at equal counts Dem Bones has more freedom.
 
-4. (only with ``--order tube``) the synthetic tube body of the solver tests (``tests/solver/learn_data.py``,
+4. (only with ``--order tube``) the synthetic tube body of the solver tests (``sample_scenes/tube_scans.py``,
    509 vertices, 8 parts, hybrid-skin ground truth): 8 training scans, 4 held-out poses from another seed;
    training and held-out error, and joint centres vs the true joints, as in section 1.  Small and quick:
    a check of the whole evaluation path with known truth.
@@ -270,10 +270,9 @@ def section_dembones(args, tmp, have_learner, why, failures, db_py, first_mh, ou
 
 
 def section_tube(args, tmp, have_learner, why, failures):
-    sys.path.insert(0, os.path.join(REPO, "tests", "solver"))
-    from learn_data import hybrid_truth
+    from articula.sample_scenes.tube_scans import hybrid_truth
     from articula.solver.fit import metrics
-    line("== 4. tube body (synthetic, hybrid-skin ground truth; tests/solver/learn_data.py)")
+    line("== 4. tube body (synthetic, hybrid-skin ground truth; sample_scenes/tube_scans.py)")
     truth, true_poses, train = hybrid_truth(8, seed=0)
     test = hybrid_truth(5, seed=1)[2][1:]                  # scan 0 of every sequence is the rest pose
     k = truth.skeleton.num_bones

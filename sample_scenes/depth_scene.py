@@ -1,9 +1,9 @@
 """Exact synthetic depth images by analytic ray casting (the independent reference for the depth
-import tests): a floor plane (world z = 0) seen by a tilted camera, optionally an axis-aligned box
-standing on it and a back wall; plus a sphere.  World Z up; camera frame x right, y down, z forward."""
+import tests and ``./run bench import_depth``): a floor plane (world z = 0) seen by a tilted camera,
+optionally an axis-aligned box standing on it and a back wall; plus a sphere.  World Z up; camera frame x right, y down, z forward."""
 import numpy as np
 
-from articula.solver.depth import camera
+from ..solver.depth import camera
 
 
 def rays_world(intr, cam_to_world):

@@ -18,7 +18,7 @@ from articula.solver.rig.skinning import hybrid_skin
 from articula.solver.geometry.surface_distance import distance_to_surface, per_vertex_scan_distances
 from articula.solver.learn.weights.optimise import optimise_weights
 
-from .learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 
 
 def test_map_keeps_order_runs_on_threads_and_never_nests():

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from ...conftest import REPO
-from ...solver.learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 from ..rig_helpers import poses, subject
 from ..sequences.test_import_depth import make_recording
 

@@ -2,7 +2,7 @@
 builds (one key per scan on the scan frames, evaluated mesh = solver's posed model, heat map), the
 bundle and report of the batch command, bad input and cancellation leaving the scene unchanged.
 
-Data: the small branching tube body of ``tests/solver/learn_data.py`` (509 vertices, 8 parts) posed by
+Data: the small branching tube body of ``sample_scenes/tube_scans.py`` (509 vertices, 8 parts) posed by
 the solver's hybrid skin, written as OBJ files and imported with ``articula.import_scans``.
 """
 import argparse
@@ -16,7 +16,7 @@ import bpy
 import numpy as np
 import pytest
 
-from ...solver.learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 from ..rig_helpers import key_frames
 
 pytestmark = pytest.mark.usefixtures("cache_home")   # a fresh ARTICULA_HOME per test

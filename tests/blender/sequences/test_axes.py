@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from bpy_extras.io_utils import axis_conversion
 
-from ...solver.learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 
 pytestmark = pytest.mark.usefixtures("cache_home")   # a fresh ARTICULA_HOME per test
 

@@ -11,7 +11,7 @@ from articula.solver.depth import recording as ps
 from articula.solver.errors import ArticulaInputError
 from articula.solver.formats.png16 import write_png16
 
-from ..depth_scene import floor_box_scene
+from articula.sample_scenes.depth_scene import floor_box_scene
 
 INTR = camera.Intrinsics(160, 120, 140.0, 138.0, 81.3, 58.2)
 GOOD = {"format": camera.FORMAT, "width": 640, "height": 480, "fx": 580.0, "fy": 580.0, "cx": 319.5, "cy": 239.5}

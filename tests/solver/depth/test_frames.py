@@ -1,4 +1,4 @@
-"""Depth processing against exact synthetic scenes (analytic ray casting in depth_scene.py)."""
+"""Depth processing against exact synthetic scenes (analytic ray casting in sample_scenes/depth_scene.py)."""
 import math
 
 import numpy as np
@@ -11,7 +11,7 @@ from articula.solver.errors import ArticulaInputError
 from articula.solver.formats.point_files import PointSequence
 from articula.solver.formats.png16 import write_png16
 
-from ..depth_scene import floor_box_scene, sphere_depth
+from articula.sample_scenes.depth_scene import floor_box_scene, sphere_depth
 
 INTR = camera.Intrinsics(160, 120, 140.0, 138.0, 81.3, 58.2)
 

@@ -11,7 +11,7 @@ from articula.solver.learn.joints_poses import (JointPoseProblem, normal_equatio
 from articula.solver.learn.objective import RigObjective
 from articula.solver.rig.skinning import hybrid_skin
 
-from ..learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 from .test_joints_poses import WEIGHTED, _angles, _perturbed
 
 

@@ -3,7 +3,7 @@ import pytest
 
 from articula.solver.learn.pipeline import flattened, learn_rig
 
-from ..learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 
 
 def test_flattened_compares_the_last_decrease_with_the_largest():

@@ -10,7 +10,7 @@ from articula.solver.rig.kinematics import forward_kinematics
 from articula.solver.rig.model import Model
 from articula.solver.rig.skinning import hybrid_skin
 
-from ..learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 
 BOX_FACES = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],
                       [2, 3, 7], [2, 7, 6], [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])

@@ -74,7 +74,7 @@ def test_only_centres_outside_the_mesh_are_bounded():
     from articula.solver.geometry.mesh_graph import edges_of
     from articula.solver.learn.skeleton import boundary_vertices, joint_heads
 
-    from ..learn_data import JOINTS, PARENTS, body
+    from articula.sample_scenes.tube_scans import JOINTS, PARENTS, body
     rest, faces, labels = body()
     M = 8
     R = np.broadcast_to(np.eye(3), (M, 8, 3, 3)).copy()

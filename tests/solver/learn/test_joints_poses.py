@@ -12,7 +12,7 @@ from articula.solver.geometry.mesh_graph import uniform_laplacian
 from articula.solver.learn.objective import RigObjective
 from articula.solver.rig.skinning import hybrid_skin
 
-from ..learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 
 WEIGHTED = [1, 3, 5, 6, 7]          # bones with fractional weights: their twist axis is identifiable
 

@@ -8,7 +8,7 @@ from articula.solver.rig.model import Poses
 from articula.solver.fit.pose_fit import fit_poses
 from articula.solver.rig.skinning import hybrid_skin
 
-from ..learn_data import hybrid_truth, random_rigid_poses
+from articula.sample_scenes.tube_scans import hybrid_truth, random_rigid_poses
 
 
 def _rigidly_moved(scans, seed=3):

@@ -68,7 +68,7 @@ def test_size_checks_include_the_part_count_per_vertex():
 
 def test_learn_rig_learns_from_fewer_key_scans_within_a_small_memory_limit():
     from articula.solver.learn.pipeline import learn_rig
-    from ..learn_data import hybrid_truth
+    from articula.sample_scenes.tube_scans import hybrid_truth
     model, _, scans = hybrid_truth(8, seed=1)
     V = model.num_vertices
     limit = 0.5 * (working_memory_bytes(4, V, 8, 8) + working_memory_bytes(5, V, 8, 8)) / 1e9

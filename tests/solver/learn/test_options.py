@@ -10,7 +10,7 @@ from articula.solver.errors import ArticulaInputError
 from articula.solver.learn.options import LearnOptions, property_range
 from articula.solver.learn.pipeline import learn_rig
 
-from ..learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 
 # learn_rig's keyword defaults and module constants (GN_GAIN_TOL, OTHER_SCAN_*) before the options object
 # (solver/learn.py at b8f0acd); parts, key_scans and workers then used None for "automatic", now 0.

@@ -8,7 +8,7 @@ from articula.solver.learn.part_count import (SPLIT_ANGLE_DEG, articulated_parts
 from articula.solver.learn.segmentation import (Clustering, Mesh, Sample, centred, choose_num_parts, moments,
                                                part_errors)
 
-from ..learn_data import hybrid_truth, rigid_scans
+from articula.sample_scenes.tube_scans import hybrid_truth, rigid_scans
 
 
 def _rot(axis, angle):

@@ -7,7 +7,7 @@ from articula.solver.rig.kinematics import forward_kinematics
 from articula.solver.learn.pipeline import learn_rig
 from articula.solver.rig.skinning import hybrid_skin
 
-from ..learn_data import JOINTS, PARTS, TAILS, body, hybrid_truth, rigid_scans
+from articula.sample_scenes.tube_scans import JOINTS, PARTS, TAILS, body, hybrid_truth, rigid_scans
 
 
 @pytest.fixture(scope="module")
@@ -161,7 +161,7 @@ def test_huge_input_refused_up_front_with_memory_estimate():
 
 
 def test_initial_skeleton_is_used_as_given():
-    from ..learn_data import truth_skeleton
+    from articula.sample_scenes.tube_scans import truth_skeleton
     scans, faces, labels, rest, _, _ = rigid_scans(5)
     sk = truth_skeleton()
     res = learn_rig(scans, faces, initial_skeleton=sk, max_iterations=0, rest_scan=0)   # scan 0 = rest pose

@@ -9,7 +9,7 @@ from articula.solver.learn import report, rest_shape
 from articula.solver.learn.pipeline import learn_rig
 from articula.solver.learn.weights import optimise, sweeps
 
-from ..learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 
 SETTINGS = dict(parts=8, max_iterations=2, bcd_sweeps=2, gn_iterations=3, bcd_steps=(0.2, 0.05), warm_start=(),
                 seed=0, workers=2)

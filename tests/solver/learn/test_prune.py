@@ -7,7 +7,7 @@ from articula.solver.learn.prune import drop_bones, empty_leaves, remap_pairs
 from articula.solver.rig.model import Model, Poses, Skeleton
 from articula.solver.rig.skinning import hybrid_skin
 
-from ..learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 
 
 def _with_empty_bones(model, poses, parents, weight_on=None):

@@ -10,7 +10,7 @@ from articula.solver.learn.rest_shape import normal_equations, solve_rest_vertic
 from articula.solver.learn.objective import RigObjective
 from articula.solver.rig.skinning import affine_form, hybrid_skin
 
-from ..learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 
 
 def test_objective_zero_for_exact_model_and_matches_definition():

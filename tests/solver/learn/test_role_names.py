@@ -16,7 +16,7 @@ from articula.solver.rig.model import Skeleton
 from articula.solver.rig.names import problem
 
 from ...conftest import SHARED_DATA
-from ..learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 
 # role -> the MakeHuman ground truth's major joint at the role bone's head
 JOINT_OF = {"upper_arm": "shoulder", "forearm": "elbow", "hand": "wrist", "thigh": "hip", "shin": "knee",

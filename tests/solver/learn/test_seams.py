@@ -5,7 +5,7 @@ import numpy as np
 from articula.solver.learn.pipeline import learn_rig
 from articula.solver.learn.seams import Seams
 
-from ..learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 
 
 def _split_at_seam(scans, faces):

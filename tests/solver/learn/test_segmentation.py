@@ -10,7 +10,7 @@ from articula.solver.geometry.procrustes import fit_parts, fit_rigid
 from articula.solver.learn.segmentation import (Clustering, Mesh, Sample, centred, choose_num_parts, grid_sample,
                                           make_parts_connected, parts_from_curve, segment, sums_cost)
 
-from ..learn_data import body, hybrid_truth, rigid_scans, rotvec_matrix
+from articula.sample_scenes.tube_scans import body, hybrid_truth, rigid_scans, rotvec_matrix
 
 
 def _accuracy(truth, found):

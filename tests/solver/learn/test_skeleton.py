@@ -10,7 +10,7 @@ from articula.solver.learn.segmentation import segment
 from articula.solver.learn.skeleton import build_skeleton, part_adjacency, rotation_centre
 from articula.solver.rig.skinning import hybrid_skin
 
-from ..learn_data import JOINTS, PARTS, TAILS, body, hybrid_truth, rigid_scans, rotvec_matrix
+from articula.sample_scenes.tube_scans import JOINTS, PARTS, TAILS, body, hybrid_truth, rigid_scans, rotvec_matrix
 
 
 def _learned(M=10, seed=0):

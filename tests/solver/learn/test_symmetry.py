@@ -13,7 +13,7 @@ from articula.solver.learn.symmetry import (MAP_COVERAGE, consistent_pairs, cont
                                             mirror_pairs, mirror_partners, mirrored_labels, symmetry_planes,
                                             unequal_pairs)
 
-from ..learn_data import body, hybrid_truth, rigid_scans, rotvec_matrix
+from articula.sample_scenes.tube_scans import body, hybrid_truth, rigid_scans, rotvec_matrix
 
 
 def _exact_mirror(points):

@@ -5,7 +5,7 @@ from articula.solver.geometry.mesh_graph import uniform_laplacian
 from articula.solver.learn.objective import RigObjective
 from articula.solver.rig.model import Model
 
-from ...learn_data import body, hybrid_truth
+from articula.sample_scenes.tube_scans import body, hybrid_truth
 
 
 def binary_start(model):

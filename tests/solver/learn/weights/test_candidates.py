@@ -3,7 +3,7 @@ import numpy as np
 
 from articula.solver.learn.weights.candidates import candidates, children_table
 
-from ...learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 
 
 def test_candidates_respect_bounds_and_anchor_rule():

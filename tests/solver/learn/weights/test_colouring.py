@@ -4,7 +4,7 @@ import numpy as np
 from articula.solver.geometry.mesh_graph import uniform_laplacian
 from articula.solver.learn.weights.colouring import TwoRing, subset_classes, two_ring_colouring
 
-from ...learn_data import body, hybrid_truth
+from articula.sample_scenes.tube_scans import body, hybrid_truth
 
 
 def test_two_ring_colouring_separates_interacting_vertices():

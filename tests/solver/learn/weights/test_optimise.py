@@ -7,7 +7,7 @@ from articula.solver.learn.objective import RigObjective
 from articula.solver.rig.skinning import hybrid_skin
 from articula.solver.learn.weights.optimise import optimise_weights
 
-from ...learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 from .problems import binary_start, noisy_problem
 
 

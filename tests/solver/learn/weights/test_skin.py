@@ -6,7 +6,7 @@ from articula.solver.rig.skinning import hybrid_skin
 from articula.solver.learn.weights.candidates import candidates, children_table
 from articula.solver.learn.weights.skin import CandidateSkin, normal_equations
 
-from ...learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 
 
 def test_candidate_skin_equals_hybrid_skin():

@@ -11,7 +11,7 @@ from articula.solver.learn.weights.skin import CandidateSkin
 from articula.solver.learn.weights.state import State
 from articula.solver.learn.weights.sweeps import STEP_MIN_SHARE, count_steps, joint_move, kept_steps
 
-from ...learn_data import hybrid_truth
+from articula.sample_scenes.tube_scans import hybrid_truth
 from .problems import binary_start, noisy_problem
 
 
