@@ -4,7 +4,8 @@
 Thin: ``prepare`` turns the options into a plan (``addon/depth/plan.py``: frames, intrinsics, colour
 frames read by Blender), the worker runs it (``solver/depth/recording.py``) and ``finish`` builds the
 scene (``addon/sequences/points.py``) and reports.  docs/import_depth.md describes the options.
-Scripts: ``bpy.ops.articula.import_depth(directory=..., preset='KINECT_V1', ...)``.
+Scripts: ``bpy.ops.articula.import_depth(directory=..., preset='kinect_v1', ...)`` (the names of
+``solver.depth.camera.CAMERA_PRESETS``).
 """
 import time
 
@@ -12,15 +13,13 @@ import bpy
 
 from ..addon.depth import plan as depth_plan
 from ..addon.jobs import JobOperator
+from ..solver.depth import camera
 from ..solver.depth import frames as dp
 
 PRESET_ITEMS = (
     ('FOLDER', "From Folder", "Read intrinsics.json from the depth folder (required for depth images "
                               "unless an intrinsics file or a camera preset is given)"),
-    ('KINECT_V1', "Kinect v1", "Nominal Kinect v1 / PrimeSense: 640x480, fx = fy = 580 px"),
-    ('KINECT_V2', "Kinect v2", "Nominal Kinect v2: 512x424, 70.6 x 60 degrees"),
-    ('AZURE_KINECT', "Azure Kinect (NFOV)", "Nominal Azure Kinect DK narrow field of view: 640x576, 75 x 65 degrees"),
-    ('REALSENSE_D435', "RealSense D435", "Nominal Intel RealSense D435: 848x480, 87 x 58 degrees"),
+    *((p.name, p.label, p.description) for p in camera.CAMERA_PRESETS),
 )
 LAST_TIMINGS = {}  # seconds of the last successful import: decode, processing, solver, cache, blender
 

@@ -2,7 +2,7 @@
 and a matching camera, optionally saved to a .blend.
 
     ./run import-depth --depth rec/ --blend out.blend                 (rec/intrinsics.json)
-    ./run import-depth --depth kinect/ --preset KINECT_V1 --voxel 0.01 --blend out.blend
+    ./run import-depth --depth kinect/ --preset kinect_v1 --voxel 0.01 --blend out.blend
     blender -b -P batch.py -- import-depth --depth rec/ --intrinsics cam.json --subtract-background
 
 With ``--blend`` an existing file is opened and the recording added to it (saved with a ``.blend1`` of
@@ -13,9 +13,9 @@ import os
 
 import bpy
 
+from ...solver.depth import camera
 from .common import call_operator, editing, finish
 
-PRESETS = ("KINECT_V1", "KINECT_V2", "AZURE_KINECT", "REALSENSE_D435")
 
 
 def run(args) -> int:
@@ -34,7 +34,7 @@ def _import(args) -> int:
     if args.intrinsics:
         props["intrinsics"] = os.path.abspath(args.intrinsics)
     if args.preset:
-        props["preset"] = args.preset.upper()
+        props["preset"] = args.preset
     if args.depth_scale is not None:
         props["depth_scale"] = args.depth_scale
     if args.background:
@@ -59,7 +59,8 @@ def add_commands(sub):
     p.add_argument("--depth", required=True, metavar="FOLDER", help="folder of depth or point-cloud frames")
     cam = p.add_mutually_exclusive_group()
     cam.add_argument("--intrinsics", metavar="FILE", help="intrinsics.json (default: the one in the folder)")
-    cam.add_argument("--preset", type=str.upper, choices=PRESETS, help="nominal camera model")
+    cam.add_argument("--preset", type=camera.preset_key, choices=tuple(camera.PRESETS),
+                     help=f"nominal camera model ({', '.join(camera.PRESETS)})")
     p.add_argument("--depth-scale", type=float, help="metres per PNG unit (default: the intrinsics' "
                                                      "depth_unit_m, 0.001)")
     p.add_argument("--depth-min", type=float, default=0.3, help="metres (default 0.3)")

@@ -19,6 +19,7 @@ from ...solver.errors import ArticulaInputError, Cancelled
 from ...solver.farm import chunks
 from ...solver.farm.flamenco import Manager
 from ...solver.farm.follow import FarmRun
+from ...solver.depth.camera import preset_key
 from ...solver.farm.subjects_job import SubjectsJob
 from ...solver.farm.track_job import AGREE_MM
 from ...solver.track_depth.options import TRACKERS
@@ -135,7 +136,7 @@ def add_commands(sub):
                    help="without --model: frames the template adapts on before the chunks (default 300)")
     q.add_argument("--depth", metavar="DIR", help="a depth recording (16-bit PNG frames, intrinsics.json)")
     q.add_argument("--scans", metavar="DIR", help="a folder of unregistered captures")
-    q.add_argument("--camera", type=str.lower, choices=sorted(CAMERAS), metavar="PRESET",
+    q.add_argument("--camera", type=preset_key, choices=CAMERAS, metavar="PRESET",
                    help="with --depth: the camera of a folder without intrinsics.json")
     q.add_argument("--tracker", type=str.lower, choices=TRACKERS, help="with --depth: the per-frame fit")
     q.add_argument("--out", required=True, help="tracked bundle to write (.npz)")

@@ -24,7 +24,6 @@ from ...solver.formats.axes import AUTO
 from ...solver.track.options import TrackOptions
 from ...solver.track_depth.options import TRACKERS, DepthTrackOptions
 from .. import jobs
-from ..depth.plan import PRESET_NAMES
 from ..track import inputs
 from ..track.result import check_output_path
 from ..track_depth import inputs as depth_inputs
@@ -32,17 +31,16 @@ from ..track_depth import result, solve
 from ..track_depth.report import report_document, summary_text
 from .common import call_operator, check_blend_output, editing, finish, write_json
 
-# --camera: the import-depth presets' names in lower case, or the solver's own preset names
-CAMERAS = {**{k.lower(): v for k, v in PRESET_NAMES.items()}, **{v: v for v in cam.PRESETS}}
-IMPORT_PRESETS = {v: k for k, v in PRESET_NAMES.items()}       # solver name -> articula.import_depth preset
+# --camera: the names of solver.depth.camera.CAMERA_PRESETS (older spellings read by cam.preset_key)
+CAMERAS = tuple(cam.PRESETS)
 
 
 def add_arguments(p) -> None:
     """The ``track`` command's depth flags."""
     p.add_argument("--depth", metavar="DIR", help="a depth recording: a folder of 16-bit PNG depth frames "
                                                   "(millimetres) with intrinsics.json, or give --camera")
-    p.add_argument("--camera", type=str.lower, choices=sorted(CAMERAS), metavar="PRESET",
-                   help=f"with --depth: the camera of a folder without intrinsics.json ({', '.join(sorted(CAMERAS))})")
+    p.add_argument("--camera", type=cam.preset_key, choices=CAMERAS, metavar="PRESET",
+                   help=f"with --depth: the camera of a folder without intrinsics.json ({', '.join(CAMERAS)})")
     p.add_argument("--tracker", type=str.lower, choices=TRACKERS,
                    help=f"with --depth: the per-frame fit (default {DepthTrackOptions().tracker})")
 
@@ -71,7 +69,7 @@ def run(args) -> int:
         model_input.matrix = np.eye(4)
     else:
         model_input = depth_inputs.template_input()
-    camera = CAMERAS[args.camera] if args.camera else None
+    camera = args.camera or None
     captures = depth_inputs.recording_from_folder(args.depth, camera, args.frames)
     if camera and _has_intrinsics(args.depth):
         print(f"{args.depth}: intrinsics.json found; --camera {args.camera} not used")
@@ -106,7 +104,7 @@ def _save_blend(blend: str, outcome, camera) -> None:
     cap = outcome.captures
     props = dict(directory=cap.label, frame_start=1)
     if not _has_intrinsics(cap.label):
-        props["preset"] = IMPORT_PRESETS[camera]
+        props["preset"] = camera
     with editing(blend):
         call_operator(bpy.ops.articula.import_depth, **props)
         ob = bpy.context.view_layer.objects.active

@@ -23,11 +23,6 @@ from ..sequences import playback
 from ..sequences import points
 from . import images
 
-# the operator's camera presets -> solver.depth.camera.PRESETS
-PRESET_NAMES = {'KINECT_V1': "kinect_v1", 'KINECT_V2': "kinect_v2", 'AZURE_KINECT': "azure_kinect_nfov",
-                'REALSENSE_D435': "realsense_d435"}
-
-
 @dataclasses.dataclass
 class ImportPlan:
     read: Callable          # read(progress) -> PointSequence; no bpy (runs in the worker thread)
@@ -86,18 +81,18 @@ def find_frames(directory: str) -> tuple[list, bool]:
 
 
 def resolve_intrinsics(directory: str, intrinsics: str, preset: str, needed: bool):
-    """An intrinsics file wins, then a preset (not 'FOLDER'), then the folder's ``intrinsics.json``;
-    None when there is none and they are not ``needed`` (point-cloud files)."""
+    """An intrinsics file wins, then a preset (not 'FOLDER'; a name of ``camera.CAMERA_PRESETS``), then the
+    folder's ``intrinsics.json``; None when there is none and they are not ``needed`` (point-cloud files)."""
     if intrinsics:
         return recording.camera_file(bpy.path.abspath(intrinsics))[0]
     if preset != 'FOLDER':
-        return camera.preset(PRESET_NAMES[preset])
+        return camera.preset(preset)
     path = os.path.join(directory, "intrinsics.json")
     if os.path.isfile(path):
         return recording.camera_file(path)[0]
     if needed:
         raise ArticulaInputError(f"{directory}: no intrinsics.json; give an intrinsics file or choose a "
-                                 "camera preset (e.g. Kinect v1)")
+                                 f"camera preset ({', '.join(camera.PRESETS)})")
     return None
 
 

@@ -126,29 +126,59 @@ def _from_fov(name, width, height, hfov_deg, vfov_deg):
                       name=name)
 
 
-#: Nominal depth-camera models.  Real devices differ by a few percent (per-unit factory
-#: calibration); load the device's own values with :func:`load_intrinsics` when you have them.
-PRESETS = {
+@dataclass(frozen=True)
+class CameraPreset:
+    """A nominal depth camera: ``name`` (its one spelling in the panel, the commands, files and messages),
+    ``label`` and ``description`` (the panel), ``intrinsics``, and ``aliases``: older spellings still
+    accepted (scripts, scenes and farm jobs may hold them)."""
+    name: str
+    label: str
+    description: str
+    intrinsics: Intrinsics
+    aliases: tuple = ()
+
+
+#: The camera presets, the one table every place reads.  Nominal models: real devices differ by a few
+#: percent (per-unit factory calibration); load the device's own values with :func:`load_intrinsics`.
+CAMERA_PRESETS = (
     # Kinect v1 (PrimeSense), 640x480 depth: focal length of the IR camera ~580 px (Konolige &
     # Mihelich, "Technical description of Kinect calibration", ROS wiki kinect_calibration/technical;
     # consistent with the nominal 57 deg horizontal FOV), principal point at the image centre.
-    "kinect_v1": Intrinsics(640, 480, 580.0, 580.0, 319.5, 239.5, name="kinect_v1"),
+    CameraPreset("kinect_v1", "Kinect v1", "Nominal Kinect v1 / PrimeSense: 640x480, fx = fy = 580 px",
+                 Intrinsics(640, 480, 580.0, 580.0, 319.5, 239.5, name="kinect_v1")),
     # Kinect v2 (Kinect for Windows v2 / Xbox One), 512x424 ToF depth, nominal FOV 70.6 x 60 deg.
-    "kinect_v2": _from_fov("kinect_v2", 512, 424, 70.6, 60.0),
+    CameraPreset("kinect_v2", "Kinect v2", "Nominal Kinect v2: 512x424, 70.6 x 60 degrees",
+                 _from_fov("kinect_v2", 512, 424, 70.6, 60.0)),
     # Azure Kinect DK, NFOV unbinned depth mode: 640x576, nominal FOV 75 x 65 deg (Azure Kinect DK
     # hardware specification).  Pinhole equivalent of the nominal FOV (the real lens is distorted).
-    "azure_kinect_nfov": _from_fov("azure_kinect_nfov", 640, 576, 75.0, 65.0),
+    CameraPreset("azure_kinect_nfov", "Azure Kinect (NFOV)",
+                 "Nominal Azure Kinect DK narrow field of view: 640x576, 75 x 65 degrees",
+                 _from_fov("azure_kinect_nfov", 640, 576, 75.0, 65.0), aliases=("azure_kinect",)),
     # Intel RealSense D435, 848x480 depth (the recommended resolution), nominal depth FOV
     # 87 x 58 deg (Intel RealSense D400 series datasheet).
-    "realsense_d435": _from_fov("realsense_d435", 848, 480, 87.0, 58.0),
-}
+    CameraPreset("realsense_d435", "RealSense D435", "Nominal Intel RealSense D435: 848x480, 87 x 58 degrees",
+                 _from_fov("realsense_d435", 848, 480, 87.0, 58.0)),
+)
+#: name -> intrinsics of :data:`CAMERA_PRESETS`.
+PRESETS = {p.name: p.intrinsics for p in CAMERA_PRESETS}
+_SPELLINGS = {spelling.lower(): p.name for p in CAMERA_PRESETS for spelling in (p.name, p.label, *p.aliases)}
+
+
+def preset_key(spelling: str) -> str:
+    """The preset's name for ``spelling`` in any case, its label or an older spelling (``AZURE_KINECT``,
+    ``azure_kinect`` -> ``azure_kinect_nfov``); an unknown spelling comes back lower-cased (for
+    argparse's ``choices`` to refuse it with the list of names)."""
+    key = str(spelling).strip().lower()
+    return _SPELLINGS.get(key, key)
 
 
 def preset(name: str, resolution=None) -> Intrinsics:
-    """A copy of ``PRESETS[name]``, optionally rescaled to ``resolution = (width, height)``."""
-    if name not in PRESETS:
+    """A copy of the preset ``name`` (any spelling :func:`preset_key` accepts), optionally rescaled to
+    ``resolution = (width, height)``."""
+    key = preset_key(name)
+    if key not in PRESETS:
         raise ArticulaInputError(f"unknown camera preset {name!r}; available: {', '.join(PRESETS)}")
-    intr = PRESETS[name]
+    intr = PRESETS[key]
     return intr if resolution is None else intr.with_resolution(*resolution)
 
 

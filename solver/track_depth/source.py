@@ -64,7 +64,7 @@ class DepthRecording:
             intr, c2w = rec.camera_file(ipath)
         elif preset:
             intr, c2w = cam.preset(preset), None
-            notes.append(f"no intrinsics.json: the {preset} camera preset is assumed")
+            notes.append(f"no intrinsics.json: the {intr.name} camera preset is assumed")
         else:
             raise ArticulaInputError(f"{folder}: no intrinsics.json; give a camera preset "
                                      f"({', '.join(cam.PRESETS)})")

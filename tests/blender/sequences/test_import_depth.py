@@ -274,8 +274,8 @@ def test_bad_input_is_reported_and_leaves_the_scene_untouched(tmp_path):
     os.remove(os.path.join(folder, "intrinsics.json"))
     _assert_fails(r"rec: no intrinsics.json; give an intrinsics file or choose a camera preset", directory=folder)
     _assert_fails(r"160x120 pixels, but the intrinsics 'kinect_v2' are for 512x424",
-                  directory=folder, preset='KINECT_V2')
-    _assert_fails(r"depth range \[3.0, 1.0\] m is empty", directory=folder, preset='KINECT_V1',
+                  directory=folder, preset='kinect_v2')
+    _assert_fails(r"depth range \[3.0, 1.0\] m is empty", directory=folder, preset='kinect_v1',
                   depth_min=3.0, depth_max=1.0)
     clouds = tmp_path / "clouds"
     clouds.mkdir()
@@ -305,7 +305,7 @@ def test_no_cache_is_left_behind_after_an_error(tmp_path):
 def test_real_kinect_frames_with_the_kinect_v1_preset(tmp_path):
     # No intrinsics ship with these frames: the nominal Kinect v1 model (fx = fy = 580 px) is assumed.
     from articula.solver.formats.png16 import read_png16
-    assert bpy.ops.articula.import_depth(directory=KINECT, preset='KINECT_V1',
+    assert bpy.ops.articula.import_depth(directory=KINECT, preset='kinect_v1',
                                          cache_file=str(tmp_path / "k.npz")) == {'FINISHED'}
     ob = bpy.data.objects["skeltrack_kinect Points"]
     assert ob.articula.frame_count == 12
