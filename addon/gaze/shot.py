@@ -34,7 +34,8 @@ def animation_range(ob):
 
 
 def check_shot(arm_ob, target_ob, start: int, end: int) -> None:
-    """Refusals that need no solving: the target is part of the character, bad frames, linked or scaled."""
+    """Refusals that need no solving: the target is part of the character, NLA tweak mode, bad frames,
+    linked or scaled."""
     if target_ob is None:
         raise ArticulaInputError("choose a target object to look at")
     own = {arm_ob, *arm_ob.children_recursive}
@@ -43,6 +44,9 @@ def check_shot(arm_ob, target_ob, start: int, end: int) -> None:
                                  "pick an object that is not parented to it")
     if end <= start:
         raise ArticulaInputError(f"the shot's last frame {end} must come after its first {start}")
+    if arm_ob.animation_data is not None and arm_ob.animation_data.use_tweak_mode:
+        raise ArticulaInputError(f"{arm_ob.name!r} is in NLA tweak mode: leave it (Tab in the NLA editor) "
+                                 "before adding a gaze shot")
     span = animation_range(arm_ob)
     if span is not None and (start < span[0] or end > span[1]):
         raise ArticulaInputError(f"frames {start}-{end} lie outside the animation of {arm_ob.name!r} "

@@ -66,3 +66,20 @@ def test_unexpected_error_while_writing_is_rolled_back(pkg, monkeypatch):
     monkeypatch.setattr(layer, "add_keys", real)
     assert bpy.ops.articula.gaze(armature=ob.name, target=target.name, fade_frames=5) == {'FINISHED'}
     assert state(ob) != before                              # the same shot, not failing, changes it
+
+
+def test_nla_tweak_mode_is_refused_before_anything_changes(pkg):
+    ob = animated(pkg)
+    target = target_near(pkg("addon.retarget.armatures").read_rest(ob))
+    assert bpy.ops.articula.gaze(armature=ob.name, target=target.name, fade_frames=5) == {'FINISHED'}
+    ad = ob.animation_data
+    base = next(t for t in ad.nla_tracks if t.strips[0].action.name == "HeroAction")   # pushed down by the shot
+    for track in ad.nla_tracks:
+        track.select = track == base
+    base.strips[0].select = True
+    ad.nla_tracks.active = base
+    ad.use_tweak_mode = True                                # editing the base action in place
+    before = state(ob)
+    with pytest.raises(RuntimeError, match="tweak mode"):
+        bpy.ops.articula.gaze(armature=ob.name, target=target.name, fade_frames=5)
+    assert state(ob) == before and ad.use_tweak_mode
