@@ -2,7 +2,7 @@
 jointly with the temporal prior.
 
 Model-adaptive mocap dissertation §4.1.4 (c) and the BUFF pipeline of §4.2: after the frames were fitted
-one by one (pass 1, w_temp = 0; :mod:`.sequence_fit`), windows of 11 frames advancing by 5
+one by one (pass 1, w_temp = 0; in :mod:`.pipeline`), windows of 11 frames advancing by 5
 (:func:`window_schedule`) are optimised jointly with
 
     Q = (1/N) Σ_n (Q_n^data + w_pose Q_n^pose) + w_temp Q^temp           (N frames of the window)

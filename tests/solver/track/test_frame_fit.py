@@ -179,28 +179,6 @@ def test_exact_model_on_its_noisy_scan_from_the_previous_pose(makehuman_walk):
     assert out.stats["median_mm"] < 5.0
 
 
-def test_sequence_pass_one_tracks_frame_after_frame(tube):
-    """Three frames whose root moves 8 mm per frame, exact 60 % point clouds: each frame starts from the
-    previous result and lands under 1 mm RMS; progress reports every frame."""
-    from articula.solver.track.sequence_fit import fit_sequence
-    model, truth = tube
-    rng = np.random.default_rng(3)
-    frames, captures = [], []
-    for n in range(3):
-        pose = _one(truth)
-        pose.translations += [0.008 * n, 0.0, 0.0]
-        posed = hybrid_skin(model, pose)[0]
-        keep = rng.random(len(posed)) < 0.6
-        frames.append(posed)
-        captures.append(ff.Capture(posed[keep], vertex_normals(posed, model.faces)[keep]))
-    calls = []
-    out = fit_sequence(model, captures, _perturbed(truth, rng, 0, 0, 0.008), progress=lambda f, t: calls.append(f))
-    fitted = hybrid_skin(model, out.poses)
-    rms = np.sqrt(np.mean(np.sum((fitted - np.array(frames)) ** 2, axis=2), axis=1))
-    assert len(out.poses) == 3 and np.all(rms < 1e-3) and calls == [1 / 3, 2 / 3, 1.0]
-    assert out.iterations.shape == (3,) and len(out.stats) == 3
-
-
 def test_a_start_outside_the_box_is_moved_into_it_and_the_fit_proceeds(tube):
     """The capture and the start bend a joint past its bound (ordinary motion that few training poses did
     not cover); the start is clamped into the box first and the root, 2 cm off, is recovered.  Without
