@@ -6,6 +6,7 @@ import contextlib
 import bpy
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 
+from ..addon.linked import check_editable
 from ..addon.retarget import mapping_list, skeleton
 from ..addon.retarget.armatures import find_armature
 from ..solver.errors import ArticulaInputError
@@ -88,6 +89,7 @@ class ARTICULA_OT_retarget(bpy.types.Operator):
     def execute(self, context):
         try:
             source, target = _pair(context, self.source, self.target)
+            check_editable(target, "target")
             if self.mapping == 'TOPOLOGY':
                 from ..addon.retarget.topology import retarget_topology_rigs
                 action, report = retarget_topology_rigs(context, source, target)

@@ -14,8 +14,10 @@ import os
 import bpy
 
 from ...solver.errors import ArticulaInputError
+from ...solver.formats.bvh import check_bvh
 from ...solver.retarget.mapping import auto_roles
 from ...solver.retarget.root_motion import leg_length
+from ..linked import check_editable, overrides_of
 from ..retarget.armatures import read_rest
 from .common import call_operator, check_blend_output, finish, open_blend
 
@@ -26,6 +28,8 @@ def _check(args) -> None:
             raise ArticulaInputError(f"{what} {path}: no such file")
     if os.path.splitext(args.source)[1].lower() not in (".bvh", ".blend"):
         raise ArticulaInputError(f"--source {args.source}: give a .bvh motion or a .blend with an animated armature")
+    if args.source.lower().endswith(".bvh"):
+        check_bvh(args.source)
     if os.path.normpath(os.path.abspath(args.out)) == os.path.normpath(os.path.abspath(args.target)):
         raise ArticulaInputError(f"--out {args.out}: give another file than --target (it is never replaced)")
     if os.path.splitext(args.out)[1].lower() != ".blend":
@@ -35,11 +39,14 @@ def _check(args) -> None:
     check_blend_output(args.out)
 
 
-def _armatures(names=None) -> list:
-    return [o for o in bpy.data.objects if o.type == 'ARMATURE' and (names is None or o.name in names)]
+def _armatures() -> list:
+    """The file's armature objects, without the linked ones its library overrides stand for."""
+    return [o for o in bpy.data.objects if o.type == 'ARMATURE' and not (o.library and overrides_of(o))]
 
 
 def _pick(candidates, name: str, what: str, where: str):
+    if not candidates:
+        raise ArticulaInputError(f"{where} has no armature: give a .blend with the {what} character's armature")
     if name:
         match = [o for o in candidates if o.name == name]
         if not match:
@@ -56,7 +63,11 @@ def _pick(candidates, name: str, what: str, where: str):
 
 def _import_bvh(path: str, scale: float):
     before = set(bpy.data.objects)
-    call_operator(bpy.ops.import_anim.bvh, filepath=os.path.abspath(path), global_scale=scale or 1.0)
+    try:
+        call_operator(bpy.ops.import_anim.bvh, filepath=os.path.abspath(path), global_scale=scale or 1.0)
+    except ArticulaInputError as exc:
+        reason = str(exc).strip().splitlines()[-1]
+        raise ArticulaInputError(f"{path}: Blender's BVH importer could not read it ({reason})") from None
     new = [o for o in bpy.data.objects if o not in before and o.type == 'ARMATURE']
     if not new:
         raise ArticulaInputError(f"{path}: Blender's BVH importer made no armature")
@@ -88,6 +99,7 @@ def retarget(args) -> int:
     _check(args)
     open_blend(args.target)
     target = _pick(_armatures(), args.target_object, "target", args.target)
+    check_editable(target, "target")
     if args.source.lower().endswith(".bvh"):
         source = _import_bvh(args.source, args.bvh_scale)
         if not args.bvh_scale:

@@ -13,6 +13,7 @@ from ...solver.rig.model import Poses
 from . import actions
 from . import builder as rig_builder
 from . import reader as rig_reader
+from ..linked import check_editable
 
 
 def rig_name_for(path: str) -> str:
@@ -69,6 +70,7 @@ def bake_bundle(context, path: str, armature: str = "", nla: bool = False, frame
     if bundle.poses is None or len(bundle.poses) == 0:
         raise ArticulaInputError(f"{path}: the bundle holds no poses")
     arm = rig_reader.find_armature(armature, context)
+    check_editable(arm, "rig")
     names = rig_reader.control_names(arm)
     poses = poses_for_rig(bundle.poses, bundle.model.skeleton.names, names, path)
     for text in bundle.notes if warn is not None else ():
