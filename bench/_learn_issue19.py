@@ -5,7 +5,7 @@ parameters, the first scan as its rest mesh, as learn_rig sees only scans) with 
 one after the other in the same run.  Printed per case:
 
 * RMSE ratio, ours / Dem Bones, RMSE as Dem Bones defines it (``DemBones::rmse``; ours: the learned model
-  posed with its learned pose of every scan, ``solver.fit.metrics.dem_bones_rmse``);
+  posed with its learned pose of every scan, ``_learn_metrics.dem_bones_rmse``);
 * wall-time ratio of the command: the child's whole ``learn_rig`` call (learning and its error report; the
   CLI's reading of files and writing of the bundle are outside it) over Dem Bones' ``compute()``;
 * worst joint distance from the surface: every learned joint (bone heads but the root's, which is the root
@@ -147,7 +147,7 @@ def mesh_note(scans, faces):
 # ------------------------------------------------------------------------------------------ measures
 
 def our_rmse(scans, model, poses):
-    from articula.solver.fit import metrics
+    import _learn_metrics as metrics
     from articula.solver.rig import skinning
     return metrics.dem_bones_rmse(skinning.hybrid_skin(model, poses), scans)
 

@@ -1,5 +1,6 @@
 """Evaluation metrics of learned rigs: reconstruction error, its statistics in millimetres, joint-centre
-error against a reference rig, and Dem Bones' RMSE.
+error against a reference rig, and Dem Bones' RMSE (``./run bench learn``; tests/bench/test_learn_metrics.py
+checks them against brute-force references).  Benchmarks import it after ``_common``.
 
 * :func:`scan_to_model_distances` — the reconstruction metric (dissertation (model-adaptive mocap) §4.1,
   §6.1): for every vertex of every target scan, the Euclidean distance to the closest point of the posed model's *surface*
@@ -23,8 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import ArticulaInputError
-from ..geometry.surface_distance import error_statistics, per_vertex_scan_distances
+from articula.solver.errors import ArticulaInputError
+from articula.solver.geometry.surface_distance import error_statistics, per_vertex_scan_distances
 
 
 def _points(name, x, ndim):
@@ -93,7 +94,7 @@ def match_joints(learned, reference) -> JointMatch:
 def posed_joints(skeleton, poses):
     """Joint centres in every frame ``(N, B, 3)``: ``heads[b]`` moved by its part's chain map (a joint is
     the fixed point of its own rotation, so this is also where the parent part carries it)."""
-    from ..rig.kinematics import forward_kinematics
+    from articula.solver.rig.kinematics import forward_kinematics
     Rm, tm = forward_kinematics(skeleton, poses)
     return np.einsum("nbij,bj->nbi", Rm, skeleton.heads) + tm
 

@@ -278,7 +278,7 @@ def skinning_gt(name, whole=False):
     """The skinning_gt rig ``name``: rest (V,3), triangles, joints (J,3), bones (B,2), weights (V,B), posed
     scans (N,V,3) of poses-1 then poses-2 in natural order, and the exact rig's reproduction (N,V,3); only the
     largest connected part of the mesh unless ``whole``."""
-    from articula.solver.formats import libigl as igl_formats
+    import _libigl as igl_formats
     d = os.path.join(SHARED, "skinning_gt", f"{name}-all")
     rest, tris, _ = read_obj(os.path.join(d, f"{name}.obj"))
     joints, bones = igl_formats.read_tgf(os.path.join(d, f"{name}.tgf"))
@@ -330,7 +330,7 @@ def part_joints(g):
 
 def surface_stats(scans, model, poses):
     """Scan-vertex -> posed-model-surface statistics (mm, for data in metres) and Dem Bones' RMSE (m)."""
-    from articula.solver.fit import metrics
+    import _learn_metrics as metrics
     from articula.solver.rig import skinning
     posed = skinning.hybrid_skin(model, poses)
     d = metrics.scan_to_model_distances(scans, posed, model.faces)
@@ -349,11 +349,11 @@ def held_out(model, scans):
 def posed_joints(model, poses):
     """Learned joint centres (non-root bones) in every frame ``(N, B − 1, 3)``.  The learned rest pose is one
     of the scans, so joints are compared posed, frame by frame, not at rest."""
-    from articula.solver.fit import metrics
+    import _learn_metrics as metrics
     return metrics.posed_joints(model.skeleton, poses)[:, 1:]
 
 
 def joint_errors(learned, reference):
     """Hungarian matching of joint trajectories ``(N, J, 3)``; mean distance over the frames per pair."""
-    from articula.solver.fit import metrics
+    import _learn_metrics as metrics
     return metrics.match_joints(learned, reference).distances

@@ -16,8 +16,8 @@ size) and the file size against ``bounded.MAX_SCAN_BYTES`` before a file is read
 """
 import numpy as np
 
-from ..errors import ArticulaInputError
-from .bounded import check_size, read_bytes, read_head, size_text
+from articula.solver.errors import ArticulaInputError
+from articula.solver.formats.bounded import check_size, read_bytes, read_head, size_text
 
 
 def _read_lines(path, numbers: int):

@@ -20,18 +20,18 @@ Sections (every number with its unit; the output is also written to ``bench/resu
    ``game_engine``; shapes ``female,heavy`` and ``male,thin``; generating skins ``lbs`` and ``hybrid``;
    30 random range-of-motion training poses + 10 held-out poses from another seed):
    * training error: every training-scan vertex to the surface of the learned model posed with its learned
-     pose (mm: mean, std, median, MAD, IQR, max — spec §4.1 / §6.1, ``solver.fit.metrics``);
+     pose (mm: mean, std, median, MAD, IQR, max — spec §4.1 / §6.1, ``_learn_metrics``);
    * held-out error: the learned model FIXED, one pose per held-out scan fitted by ``solver.fit.pose_fit``
      (Levenberg–Marquardt from a per-part Procrustes start), the same distance;
    * joint-centre error: learned joint centres matched to the generating rig's joints (Hungarian
-     assignment, ``solver.fit.metrics.match_joints``), both posed in every training scan (the learned rest pose
+     assignment, ``_learn_metrics.match_joints``), both posed in every training scan (the learned rest pose
      is one of the scans), mean distance over the scans per matched pair, mm;
    * wall and CPU time, and peak resident memory of the learning process (a fresh child process per
      run, ``VmHWM``; its baseline after the imports is printed too).
    A reference row needs no learner: ``pose_fit`` with the generating rig's own hybrid model on the held-out
    scans (0 mm for hybrid-skinned data: checks the fitter and the metric end to end).
 2. ``../shared/data/skinning_gt`` cylinder and wolf (libigl .tgf skeleton, .DMAT weights, .Tmat transforms,
-   posed OBJ meshes; ``solver.formats.libigl``): the exact rig's own reproduction error (reader check), Dem Bones
+   posed OBJ meshes; ``_libigl``): the exact rig's own reproduction error (reader check), Dem Bones
    with as many bones as the rig, and ``learn_rig`` with as many parts: reconstruction error and joint-centre
    error against the rig's joints, in the files' units and relative to the bounding-box diagonal.
 3. Dem Bones (``py-dem-bones`` 0.13.1 from PyPI, in its own virtual environment
@@ -197,7 +197,7 @@ def section_skinning_gt(args, tmp, have_learner, why, failures, db_py):
 
 
 def section_dembones(args, tmp, have_learner, why, failures, db_py, first_mh, ours):
-    from articula.solver.fit import metrics
+    import _learn_metrics as metrics
     line("== 3. Dem Bones (py-dem-bones 0.13.1, default parameters, own venv) vs learn_rig")
     line("   RMSE = sqrt(sum over frames and vertices of |reconstruction - target|^2 / (frames * vertices)), "
          "as DemBones::rmse()")
@@ -271,7 +271,7 @@ def section_dembones(args, tmp, have_learner, why, failures, db_py, first_mh, ou
 
 def section_tube(args, tmp, have_learner, why, failures):
     from articula.sample_scenes.tube_scans import hybrid_truth
-    from articula.solver.fit import metrics
+    import _learn_metrics as metrics
     line("== 4. tube body (synthetic, hybrid-skin ground truth; sample_scenes/tube_scans.py)")
     truth, true_poses, train = hybrid_truth(8, seed=0)
     test = hybrid_truth(5, seed=1)[2][1:]                  # scan 0 of every sequence is the rest pose

@@ -102,7 +102,7 @@ def main(argv=None) -> int:
     _common.report("training surface error mean", err["mean"], "1e-3 file units" if args.bone_anim else "mm",
                    f"median {err['median']:.3g}, max {err['max']:.3g}; vertex RMS {rep['vertex_rms_mm']:.3g} mm")
     if args.bone_anim:
-        from articula.solver.fit.metrics import dem_bones_rmse
+        from _learn_metrics import dem_bones_rmse
         _common.report("RMSE (Dem Bones' definition)", dem_bones_rmse(hybrid_skin(res.model, res.poses), verts), "",
                        f"learned from {len(rep['key_scans'])} of {len(verts)} scans")
     _common.report("rounds", rep["iterations"], "", f"converged={rep['converged']} ({rep['stopped']}), objective "

@@ -1,3 +1,3 @@
 """File formats, one module each: polygon meshes (OBJ, PLY, STL, OFF), point caches (MDD, PC2),
-libigl rig files, 16-bit PNG, the model bundle, and scan sequences read from files.
+16-bit PNG, the model bundle, and scan sequences read from files.
 """

@@ -1,10 +1,10 @@
-"""Evaluation metrics (solver.fit.metrics) against brute-force references."""
+"""The benchmarks' evaluation metrics (bench/_learn_metrics.py) against brute-force references."""
 import itertools
 
 import numpy as np
 import pytest
 
-from articula.solver.fit import metrics
+from articula.bench import _learn_metrics as metrics
 from articula.solver.errors import ArticulaInputError
 from articula.solver.geometry.surface_distance import closest_points_on_triangles
 

@@ -1,4 +1,4 @@
-"""libigl text formats (.tgf, .dmat, .Tmat): hand-written files, bad input, and the public skinning ground
+"""libigl text formats (.tgf, .dmat, .Tmat; bench/_libigl.py, read by ``./run bench learn``): hand-written files, bad input, and the public skinning ground
 truth reproduced exactly from its own weights and transforms."""
 import glob
 import os
@@ -6,11 +6,11 @@ import os
 import numpy as np
 import pytest
 
-from articula.solver.formats import libigl as igl_formats
+from articula.bench import _libigl as igl_formats
 from articula.solver.errors import ArticulaInputError
 from articula.solver.formats.obj import read_obj
 
-from ...conftest import SHARED_DATA
+from ..conftest import SHARED_DATA
 
 GT = os.path.join(SHARED_DATA, "skinning_gt")
 

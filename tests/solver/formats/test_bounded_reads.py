@@ -75,10 +75,10 @@ CASES = [
     ("garbage.npy", b"\x80\x04random", "point_files:read_point_file", r"garbage.npy: not a NumPy .npy file"),
     ("valid.xyz", _text(b"# x y z\n", b"0 0 1\n"), "point_files:read_point_file", r"valid.xyz: 2.1 GB is larger than the 1.0 GB"),
     ("garbage.xyz", b"hello world\n", "point_files:read_point_file", r"garbage.xyz, line 1: not a point-cloud text"),
-    ("valid.dmat", b"3 4\n", "libigl:read_dmat", r"valid.dmat: 2.1 GB is larger than the 1.0 GB limit for a single rig file"),
-    ("counts.dmat", b"30 100000000000\n", "libigl:read_dmat", r"counts.dmat: header says 100000000000 x 30 values"),
-    ("valid.tgf", b"1 0 0 0\n", "libigl:read_tgf", r"valid.tgf: 2.1 GB is larger"),
-    ("garbage.Tmat", b"not numbers\n", "libigl:read_tmat", r"garbage.Tmat, line 1: expected 3 numbers"),
+    ("valid.dmat", b"3 4\n", "articula.bench._libigl:read_dmat", r"valid.dmat: 2.1 GB is larger than the 1.0 GB limit for a single rig file"),
+    ("counts.dmat", b"30 100000000000\n", "articula.bench._libigl:read_dmat", r"counts.dmat: header says 100000000000 x 30 values"),
+    ("valid.tgf", b"1 0 0 0\n", "articula.bench._libigl:read_tgf", r"valid.tgf: 2.1 GB is larger"),
+    ("garbage.Tmat", b"not numbers\n", "articula.bench._libigl:read_tmat", r"garbage.Tmat, line 1: expected 3 numbers"),
     ("depth.png", _png_head(), "depth.recording:read_depth_png", r"depth.png: 2.1 GB is far larger"),
 ]
 
@@ -94,7 +94,8 @@ def hwm_kb():
 out = []
 for path, reader in json.loads(sys.argv[2]):
     mod, fn = reader.split(":")
-    func = getattr(importlib.import_module("articula.solver." + ("formats." if "." not in mod else "") + mod), fn)
+    name = mod if mod.startswith("articula.") else "articula.solver." + ("formats." if "." not in mod else "") + mod
+    func = getattr(importlib.import_module(name), fn)
     with open("/proc/self/clear_refs", "w") as f:   # reset the peak RSS to the current RSS
         f.write("5")
     before = hwm_kb()
