@@ -25,6 +25,7 @@ import _common  # noqa: E402  (makes ``import articula`` work)
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
+from _armatures import new_armature  # noqa: E402
 from articula.sample_scenes import mpfb_armature  # noqa: E402
 from articula.solver.retarget import directions, foot_plant, metrics  # noqa: E402
 from articula.solver.retarget.armature import world_pose  # noqa: E402
@@ -54,7 +55,7 @@ def _bvh(name):
 
 def _mpfb(pkg, rig):
     d = mpfb_armature.rig_bones(rig)
-    return pkg("addon.retarget.armature_builder").new_armature(
+    return new_armature(
         bpy.context, f"MPFB {rig}", d["names"], d["parents"], d["heads"], d["tails"], d["rolls"])
 
 

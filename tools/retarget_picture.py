@@ -13,6 +13,7 @@ import sys
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "bench"))
 import _common  # noqa: E402,F401  (makes ``import articula`` work)
+from _armatures import new_armature  # noqa: E402
 
 import bpy  # noqa: E402
 import bmesh  # noqa: E402  (after bpy: the bpy module provides it)
@@ -79,7 +80,7 @@ def main(argv=None):
     targets = []
     for rig, title in (("default", "MakeHuman default rig"), ("game_engine", "game_engine / Unreal rig")):
         d = mpfb_armature.rig_bones(rig)
-        arm = pkg("addon.retarget.armature_builder").new_armature(
+        arm = new_armature(
             bpy.context, title, d["names"], d["parents"], d["heads"], d["tails"], d["rolls"])
         targets.append((arm, title, None))
     body = pkg("addon.rig.builder").build_rig(bpy.context, load_template().base, "Articula body")

@@ -8,6 +8,7 @@ import bpy
 import numpy as np
 import pytest
 
+from articula.bench._armatures import new_armature
 from articula.sample_scenes import mpfb_armature
 from articula.solver.gaze.aim import gaze_line
 from articula.solver.geometry.rotations import matrix_to_quat, quat_to_rotvec
@@ -29,7 +30,7 @@ def hero(pkg, rig="default"):
     """A MakeHuman rig moved by the first 120 frames of a CMU clip (quaternion channels)."""
     source = bvh()
     d = mpfb_armature.rig_bones(rig)
-    ob = pkg("addon.retarget.armature_builder").new_armature(
+    ob = new_armature(
         bpy.context, "Hero", d["names"], d["parents"], d["heads"], d["tails"], d["rolls"])
     assert bpy.ops.articula.retarget(source=source.name, target=ob.name) == {'FINISHED'}
     return ob

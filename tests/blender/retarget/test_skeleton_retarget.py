@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from mathutils import Euler, Matrix
 
+from articula.bench._armatures import new_armature
 from articula.sample_scenes import mpfb_armature
 from articula.solver.retarget import directions, metrics
 from articula.solver.retarget.armature import world_pose
@@ -31,7 +32,7 @@ def import_bvh(path=BVH, scale=CMU_SCALE):
 
 def target_rig(pkg, rig="game_engine", name="Hero"):
     d = mpfb_armature.rig_bones(rig)
-    return pkg("addon.retarget.armature_builder").new_armature(
+    return new_armature(
         bpy.context, name, d["names"], d["parents"], d["heads"], d["tails"], d["rolls"])
 
 
