@@ -21,6 +21,7 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))   # the bench command loads us by path
 import _common  # noqa: E402  (makes ``import articula`` work)
+from _armatures import new_armature  # noqa: E402
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402

@@ -7,6 +7,7 @@ import bpy
 import numpy as np
 import pytest
 
+from articula.bench._armatures import new_armature
 from articula.sample_scenes import mpfb_armature
 from articula.sample_scenes.subjects import resolve_macros
 from articula.solver.geometry.rotations import matrix_to_quat, quat_to_rotvec, rotvec_to_matrix
@@ -47,7 +48,7 @@ def character(pkg, name, shape=None, lean=0.0):
     d = mpfb_armature.rig_bones("default", resolve_macros(shape) if shape else None)
     if lean:
         lean_forward(d, lean)
-    return pkg("addon.retarget.armature_builder").new_armature(
+    return new_armature(
         bpy.context, name, d["names"], d["parents"], d["heads"], d["tails"], d["rolls"])
 
 
