@@ -126,3 +126,116 @@ def test_docstrings_cite_the_project_not_outside_files(top):
     and equation, or docs/)."""
     bad = [rel for rel, path in _sources(top) if "../shared" in open(path, encoding="utf-8").read()]
     assert not bad, f"these files cite ../shared: {bad}"
+
+
+# ------------------------------------------------------------------------------------------- benchmarks
+
+BENCH = os.path.join(REPO, "bench")
+# The extension's two entry points: register() (Blender) and the batch commands (batch.py).
+ENTRY_POINTS = ("addon.registration", "addon.cli.main")
+# Product modules that only tests or benches import, kept for a stated reason (empty is the goal).
+USED_OUTSIDE_THE_PRODUCT_ONLY = {
+    "solver.retarget.metrics": "being extended by issue 32 items 1-2 (retarget angles); moves to bench/ after",
+}
+
+
+def _bench_trees():
+    return {name: ast.parse(open(os.path.join(BENCH, name), encoding="utf-8").read(), name)
+            for name in sorted(os.listdir(BENCH)) if name.endswith(".py")}
+
+
+def _bench_imports(tree):
+    """Top-level module names a bench file imports (``import x.y`` -> ``x``), anywhere in the file."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            yield from (alias.name.split(".")[0] for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            yield node.module.split(".")[0]
+
+
+def test_no_bench_imports_tests():
+    """Benchmarks stand on their own: shared helpers live in bench/ (or sample_scenes/), never in tests/."""
+    bad = []
+    for name, tree in _bench_trees().items():
+        if "tests" in set(_bench_imports(tree)):
+            bad.append(f"{name} imports tests")
+        text = open(os.path.join(BENCH, name), encoding="utf-8").read()
+        if re.search(r"sys\.path\.\w+\([^)]*[\"']tests[\"']", text):
+            bad.append(f"{name} puts tests/ on sys.path")
+    assert not bad, bad
+
+
+def test_every_bench_has_a_one_line_description():
+    """``./run bench list`` shows the first line of each bench_*.py's docstring: it must be there, short,
+    and a line of its own (followed by a blank line or the end of the docstring)."""
+    bad = []
+    for name, tree in _bench_trees().items():
+        if not name.startswith("bench_"):
+            continue
+        lines = (ast.get_docstring(tree) or "").splitlines()
+        if not lines or not lines[0].strip() or len(lines[0]) > 100 or (len(lines) > 1 and lines[1].strip()):
+            bad.append(f"{name}: {lines[:2]}")
+    assert not bad, f"bench files without a one-line description: {bad}"
+
+
+def test_no_import_cycles_between_benches():
+    trees = _bench_trees()
+    local = {name[:-3] for name in trees}
+    graph = {name[:-3]: set(_bench_imports(tree)) & local - {name[:-3]} for name, tree in trees.items()}
+    cycles, seen, stack = [], set(), []
+
+    def visit(node):
+        stack.append(node)
+        for dep in sorted(graph[node]):
+            if dep in stack:
+                cycles.append(tuple(stack[stack.index(dep):] + [dep]))
+            elif dep not in seen:
+                visit(dep)
+        stack.pop()
+        seen.add(node)
+
+    for node in sorted(graph):
+        if node not in seen:
+            visit(node)
+    assert not cycles, f"import cycles between benches: {sorted(set(cycles))}"
+
+
+def test_every_product_module_is_used_by_the_product():
+    """A module of solver/, addon/ or operators/ is reachable from the extension's entry points; code only
+    tests or benches use lives beside them (tests/ helpers, bench/ helpers, sample_scenes/)."""
+    trees = _trees(*PRODUCT)
+    modules = {_module_name(rel) for rel in trees}
+    graph = {_module_name(rel): {n for n in _imports(rel, tree) if n in modules} for rel, tree in trees.items()}
+    reached, todo = set(), list(ENTRY_POINTS)
+    while todo:
+        mod = todo.pop()
+        if mod in reached or mod not in graph:
+            continue
+        reached.add(mod)
+        todo.extend(graph[mod])
+        parts = mod.split(".")
+        todo.extend(".".join(parts[:k]) for k in range(1, len(parts)))     # a module imports its packages
+    unused = sorted(modules - reached - set(USED_OUTSIDE_THE_PRODUCT_ONLY))
+    assert not unused, f"product modules the product never imports (move them beside their users): {unused}"
+
+
+def _docstrings(tree):
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            doc = ast.get_docstring(node)
+            if doc:
+                yield doc
+
+
+@pytest.mark.parametrize("top", PRODUCT + ("sample_scenes", "tests", "bench", "tools"))
+def test_docstrings_cite_documents_that_exist(top):
+    """A Markdown file a docstring names (``docs/RIG.md``, ``README.md``) is in the checkout: citing a
+    document that is not there sends the reader nowhere."""
+    bad = []
+    for rel, path in _sources(top):
+        text = "\n".join(_docstrings(ast.parse(open(path, encoding="utf-8").read(), rel)))
+        for cited in sorted(set(re.findall(r"(?<![\w/.-])((?:[\w-]+/)*[\w-]+\.md)\b", text))):
+            where = [cited] if "/" in cited else [cited, os.path.join("docs", cited)]
+            if not any(os.path.isfile(os.path.join(REPO, w)) for w in where):
+                bad.append(f"{rel} cites {cited}")
+    assert not bad, bad
