@@ -52,7 +52,7 @@ def subdivide(scans, faces):
 def case_data(name, scans):
     """``(scans (M,V,3) float64, faces, key_scans option)`` of data ``name``."""
     if name == "bone":
-        from bench_learn import bone_anim
+        from _learn_runs import bone_anim
         _, frames, _, tris = bone_anim()
         return frames, np.asarray(tris, np.int32), scans
     from articula.sample_scenes.registered import posed_sequence

@@ -62,7 +62,7 @@ def main(argv=None) -> int:
 
     t0 = time.perf_counter()
     if args.bone_anim:
-        from bench_learn import bone_anim
+        from _learn_runs import bone_anim
         _, verts, _, faces = bone_anim()
     else:
         from articula.sample_scenes.registered import posed_sequence
