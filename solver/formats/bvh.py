@@ -44,14 +44,17 @@ def _hierarchy(path: str, lines: list[str]) -> tuple[int, int]:
                              if channels else f"{path}: the BVH hierarchy has no CHANNELS")
 
 
-def _header_value(path: str, lines: list[str], i: int, key: str, kind):
-    words = lines[i].replace(":", ": ").split() if i < len(lines) else []
+def _header_value(path: str, rows: list, k: int, key: str, kind):
+    """The value of header line ``key: value``, the ``k``-th of ``rows`` ((line number, text) after MOTION)."""
+    n, line = rows[k] if k < len(rows) else (None, "")
+    words = line.replace(":", ": ").split()
     try:
         if " ".join(words[:-1]) != key + ":":
             raise ValueError
         return kind(words[-1])
     except (ValueError, IndexError):
-        raise ArticulaInputError(f"{path}: truncated or malformed BVH: line {i + 1} should be '{key}: ...'") from None
+        where = f"line {n} should be" if n else "the file ends before"
+        raise ArticulaInputError(f"{path}: truncated or malformed BVH: {where} '{key}: ...'") from None
 
 
 def check_bvh(path: str) -> tuple[int, int, float]:
@@ -61,11 +64,12 @@ def check_bvh(path: str) -> tuple[int, int, float]:
     text = _read_text(path)
     lines = text.splitlines()
     channels, motion = _hierarchy(path, lines)
-    frames = _header_value(path, lines, motion + 1, "Frames", int)
-    frame_time = _header_value(path, lines, motion + 2, "Frame Time", float)
+    rows = [(n, line) for n, line in enumerate(lines[motion + 1:], motion + 2) if line.strip()]
+    frames = _header_value(path, rows, 0, "Frames", int)
+    frame_time = _header_value(path, rows, 1, "Frame Time", float)
     if frames < 1 or not frame_time > 0:
         raise ArticulaInputError(f"{path}: the BVH declares {frames} frames of {frame_time} s: nothing to import")
-    rows = [(n, line) for n, line in enumerate(lines[motion + 3:], motion + 4) if line.strip()]
+    rows = rows[2:]
     for k, (n, line) in enumerate(rows[:frames]):
         values = line.split()
         if len(values) != channels:
