@@ -8,7 +8,10 @@ import bpy
 import numpy as np
 import pytest
 
+from articula.sample_scenes.depth_scene import floor_box_scene
+from articula.solver.depth import camera
 from articula.solver.formats.bundle import save_bundle
+from articula.solver.formats.png16 import write_png16
 from articula.solver.rig.model import Poses
 from articula.solver.track_depth.template import TEMPLATE_PATH, load_template
 
@@ -122,37 +125,77 @@ class Event:
         self.type = type_
 
 
-@pytest.fixture
-def modal_build_rig(pkg):
-    """articula.build_rig run through JobOperator's interactive path as the window manager runs it: the
-    worker thread started by ``start_job``, then ``modal`` called with the events of ``events`` (e.g.
-    "ESC") and timer events until it ends.  (Background Blender has no window to run a modal handler.)"""
-    base = pkg("operators.build_rig").ARTICULA_OT_build_rig
+def modal_operator(base, idname):
+    """A subclass of the real operator class ``base`` whose ``execute`` runs JobOperator's interactive path
+    as the window manager runs it: the worker thread started by ``start_job``, then ``modal`` called with the
+    events of the ``events`` property (e.g. "ESC") and timer events until it ends; ``outcome`` records how
+    the worker ended.  (Background Blender has no window to run a modal handler.)"""
 
-    class ARTICULA_OT_test_modal_build_rig(base):
-        bl_idname = "articula.test_modal_build_rig"
-        events: bpy.props.StringProperty()
+    class Driven(base):
+        bl_idname = idname
+        events: bpy.props.StringProperty(options={'SKIP_SAVE'})
+        outcome = {}
 
         def execute(self, context):
             state = self.start_job(context)
-            assert self._thread.is_alive() or "result" in self._outcome or "error" in self._outcome
             for kind in filter(None, self.events.split(",")):
                 state = self.modal(context, Event(kind))
             while state & {'RUNNING_MODAL', 'PASS_THROUGH'}:
                 time.sleep(0.01)
                 state = self.modal(context, Event('TIMER'))
             assert not self._thread.is_alive()
+            Driven.outcome = dict(self._outcome)
             return state
 
-    bpy.utils.register_class(ARTICULA_OT_test_modal_build_rig)
-    yield bpy.ops.articula.test_modal_build_rig
-    bpy.utils.unregister_class(ARTICULA_OT_test_modal_build_rig)
+    Driven.__name__ = "ARTICULA_OT_" + idname.split(".")[1]
+    return Driven
 
 
-def test_modal_path_builds_and_esc_cancels(modal_build_rig, bundle):
+@pytest.fixture
+def modal_ops(pkg):
+    """bpy.ops callables of build_rig and import_depth driven through the modal path."""
+    classes = [modal_operator(pkg("operators.build_rig").ARTICULA_OT_build_rig, "articula.test_modal_build_rig"),
+               modal_operator(pkg("operators.import_depth").ARTICULA_OT_import_depth,
+                              "articula.test_modal_import_depth")]
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    yield {"build_rig": (bpy.ops.articula.test_modal_build_rig, classes[0]),
+           "import_depth": (bpy.ops.articula.test_modal_import_depth, classes[1])}
+    for cls in classes:
+        bpy.utils.unregister_class(cls)
+
+
+def test_modal_build_rig_builds_and_esc_cancels(modal_ops, bundle):
+    """Esc pressed while the bundle loads (or right after: nothing is built then either)."""
+    op, _ = modal_ops["build_rig"]
     before = datablocks()
-    assert modal_build_rig(filepath=bundle, name="Body", events="ESC") == {'CANCELLED'}
+    assert op(filepath=bundle, name="Body", events="ESC") == {'CANCELLED'}
     assert datablocks() == before
-    assert modal_build_rig(filepath=bundle, name="Body", events="MOUSEMOVE") == {'FINISHED'}
+    assert op(filepath=bundle, name="Body", events="MOUSEMOVE") == {'FINISHED'}
     made = {name: ids - before[name] for name, ids in datablocks().items()}
     assert made["objects"] and made["meshes"] and made["armatures"] and made["actions"]
+
+
+def depth_recording(folder, frames=20):
+    intr = camera.Intrinsics(160, 120, 140.0, 131.0, 84.3, 55.7)
+    os.makedirs(folder)
+    camera.save_intrinsics(os.path.join(folder, "intrinsics.json"), intr)
+    for k in range(frames):
+        x = -0.5 + k / frames
+        depth, _, _ = floor_box_scene(intr, box=((x - .2, 2.2, 0), (x + .2, 2.6, .8)))
+        write_png16(os.path.join(folder, f"depth_{k:04d}.png"), (depth * 1000).round().astype(np.uint16))
+    return folder
+
+
+def test_modal_import_depth_esc_stops_the_worker(modal_ops, tmp_path, pkg):
+    """Esc pressed as the worker starts reading the frames: the worker stops (Cancelled) and nothing is
+    made, no cache file either; without Esc the same import builds its objects."""
+    op, cls = modal_ops["import_depth"]
+    folder = depth_recording(str(tmp_path / "rec"))
+    cache = str(tmp_path / "cache" / "rec.npz")
+    before = datablocks()
+    assert op(directory=folder, cache_file=cache, events="ESC") == {'CANCELLED'}
+    assert isinstance(cls.outcome.get("error"), pkg("solver.errors").Cancelled)
+    assert datablocks() == before and not os.path.exists(cache)
+    assert op(directory=folder, cache_file=cache, events="") == {'FINISHED'}
+    assert "result" in cls.outcome and datablocks()["objects"] - before["objects"] and os.path.exists(cache)
