@@ -7,6 +7,7 @@ import os
 import bpy
 import numpy as np
 
+from articula.bench._armatures import new_armature
 from articula.sample_scenes import mpfb_armature
 from .rig_helpers import poses, subject
 
@@ -27,8 +28,7 @@ def _hero(pkg, frames=40):
     from articula.solver.geometry.rotations import rotvec_to_quat
     from articula.solver.rig.model import Poses
     d = mpfb_armature.rig_bones("default")
-    ob = pkg("addon.retarget.armature_builder").new_armature(
-        bpy.context, HERO, d["names"], d["parents"], d["heads"], d["tails"], d["rolls"])
+    ob = new_armature(bpy.context, HERO, d["names"], d["parents"], d["heads"], d["tails"], d["rolls"])
     names = [b.name for b in ob.data.bones]
     for pb in ob.pose.bones:
         pb.rotation_mode = 'QUATERNION'

@@ -8,6 +8,7 @@ import sys
 import bpy
 import pytest
 
+from articula.bench._armatures import new_armature
 from articula.sample_scenes import mpfb_armature
 from ...conftest import REPO, SHARED_DATA
 
@@ -24,8 +25,7 @@ def _save(path, armature, pkg):
     """Save a .blend holding an MPFB armature (``armature``) or only a cube."""
     if armature:
         d = mpfb_armature.rig_bones("game_engine")
-        pkg("addon.retarget.armature_builder").new_armature(
-            bpy.context, "Hero", d["names"], d["parents"], d["heads"], d["tails"], d["rolls"])
+        new_armature(bpy.context, "Hero", d["names"], d["parents"], d["heads"], d["tails"], d["rolls"])
     else:
         bpy.ops.mesh.primitive_cube_add()
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
