@@ -1,9 +1,9 @@
 """Bone rotations of a target rig that make every mapped segment point where the source's points.
 
 For a role r mapped on both rigs, its *segment* runs from r's joint to the joint of its first primary
-child mapped on both (:data:`.roles.NEXT`); end roles (no such child, a segment of zero length on
-either rig, like a BVH hips joint that coincides with the spine's, or a target child that does not hang
-from the role's bone, like the chest that is the root of a learned rig) use the bone itself.  With world
+child mapped on both (:data:`.roles.NEXT`); end roles (no such child, or a segment of zero length on
+either rig, like a BVH hips joint that coincides with the spine's) use the bone itself, except on
+reversed chains (below), where a zero-length child is passed over for the next one.  With world
 rest rotations ``S0`` (source bone r) and ``T0`` (target bone r), the target bone's world rotation in a
 frame where the source bone has ``S`` is
 
@@ -17,6 +17,13 @@ with bone r).  The twist about the segment follows the source bone.  End roles t
 parent role.  Target bones that are not mapped (twist segments, helpers, extra spine bones, fingers the
 source lacks) keep their rest pose relative to their parent, so several target bones per source bone
 and several source bones per target bone are both handled.
+
+*Reversed* segments: on a rig rooted elsewhere than the hips (a learned rig whose root part is the
+chest) the child role's bone can be an ancestor of r's bone (the spine above the hips), so turning r's
+bone cannot aim the segment.  Bone r then turns as an end role, and the bone r hangs from (its parent,
+mapped or not) is turned about its own head, after its parents are posed, by the smallest rotation that
+puts r's joint on the source's direction from the child's joint (exact when that parent's head is the
+child's joint; otherwise the nearest point on that line its reach allows).
 """
 from __future__ import annotations
 
@@ -40,6 +47,11 @@ class Segment:
     child: str | None      # the role its segment ends at (None: the bone's own direction)
     source_child: int = -1
     target_child: int = -1
+    aim: int = -1          # target bone that aims the segment (the role's bone, or its parent if reversed)
+
+    @property
+    def aimed_by_own_bone(self) -> bool:
+        return self.child is not None and self.aim == self.target
 
 
 def _height(heads: np.ndarray) -> float:
@@ -57,15 +69,33 @@ def plan_segments(source: ArmatureRest, target: ArmatureRest, pairs: dict) -> li
             continue
         s, t = source.index[pairs[role][0]], target.index[pairs[role][1]]
         seg = Segment(role, s, t, None)
-        child = next((c for c in NEXT.get(role, []) if c in pairs), None)
-        if child is not None:
+        for child in (c for c in NEXT.get(role, []) if c in pairs):
             cs, ct = source.index[pairs[child][0]], target.index[pairs[child][1]]
-            if (np.linalg.norm(hs[cs] - hs[s]) > DEGENERATE * Hs
-                    and np.linalg.norm(ht[ct] - ht[t]) > DEGENERATE * Ht
-                    and target.is_ancestor(t, ct)):    # turning t aims the segment
+            if (np.linalg.norm(hs[cs] - hs[s]) <= DEGENERATE * Hs
+                    or np.linalg.norm(ht[ct] - ht[t]) <= DEGENERATE * Ht):
+                if target.is_ancestor(t, ct):          # t carries the child, whose own aim would undo t's
+                    break
+                continue                               # zero length on a rig: the next child up the line
+            if target.is_ancestor(t, ct):              # turning t aims the segment
+                seg.child, seg.source_child, seg.target_child, seg.aim = child, cs, ct, t
+            elif target.is_ancestor(ct, t):            # reversed: the bone t hangs from aims it
                 seg.child, seg.source_child, seg.target_child = child, cs, ct
+            break
         out.append(seg)
+    _assign_reversed_aims(target, out)
     return out
+
+
+def _assign_reversed_aims(target: ArmatureRest, segs) -> None:
+    """Give each reversed segment the parent of its role's bone as aiming bone, unless that bone already
+    aims a segment of its own (then the segment stays unaimed: its role turns as an end role)."""
+    busy = {seg.aim for seg in segs if seg.aim >= 0}
+    for seg in segs:
+        if seg.child is not None and seg.aim < 0:
+            p = int(target.parents[seg.target])
+            if p >= 0 and p not in busy:
+                seg.aim = p
+                busy.add(p)
 
 
 def body_frame(heads: np.ndarray, segs, which: str) -> np.ndarray:
@@ -98,7 +128,7 @@ def rest_alignments(source: ArmatureRest, target: ArmatureRest, segs) -> np.ndar
     G = body_frame(ht, segs, "target") @ body_frame(hs, segs, "source").T
     Q = {}
     for seg in segs:
-        if seg.child is None:
+        if not seg.aimed_by_own_bone:
             parent = PARENT.get(seg.role)
             while parent is not None and parent not in Q:
                 parent = PARENT.get(parent)
@@ -124,7 +154,7 @@ def target_world_rotations(source: ArmatureRest, target: ArmatureRest, segs, src
     out = np.empty((src_rot.shape[0], len(segs), 3, 3))
     for k, seg in enumerate(segs):
         W = src_rot[:, seg.source] @ (S0[seg.source].T @ Q[k].T @ T0[seg.target])
-        if seg.child is not None:
+        if seg.aimed_by_own_bone:
             rest_dir = unit(ht[seg.target_child] - ht[seg.target])
             now = W @ (T0[seg.target].T @ rest_dir)
             want = unit(src_heads[:, seg.source_child] - src_heads[:, seg.source])
@@ -133,20 +163,37 @@ def target_world_rotations(source: ArmatureRest, target: ArmatureRest, segs, src
     return out
 
 
-def local_rotations(target: ArmatureRest, segs, world_rot) -> np.ndarray:
+def local_rotations(target: ArmatureRest, segs, world_rot, src_heads) -> np.ndarray:
     """(F, Jt, 3, 3) pose-bone rotations of every target bone: the segments' bones get
-    ``world_rot (F, S, 3, 3)``, all other bones keep their rest pose relative to their parent."""
-    T0, _ = rest_world(target)
+    ``world_rot (F, S, 3, 3)``, all other bones keep their rest pose relative to their parent; bones that
+    aim a reversed segment are then turned to aim it (module docstring; ``src_heads (F, Js, 3)`` world)."""
+    T0, ht = rest_world(target)
     F = world_rot.shape[0]
     driven = {seg.target: k for k, seg in enumerate(segs)}
+    reversed_aims = {seg.aim: seg for seg in segs if seg.child is not None and seg.aim >= 0 and seg.aim != seg.target}
     W = np.empty((F, len(target.bones), 3, 3))
+    P = np.empty((F, len(target.bones), 3))
     local = np.empty_like(W)
     for b, p in enumerate(target.parents):
         rest_rel = T0[b] if p < 0 else W[:, p] @ (T0[p].T @ T0[b])
-        if b in driven:
-            W[:, b] = world_rot[:, driven[b]]
-            local[:, b] = np.swapaxes(rest_rel, -1, -2) @ W[:, b]
-        else:
-            W[:, b] = rest_rel
-            local[:, b] = np.eye(3)
+        P[:, b] = ht[b] if p < 0 else P[:, p] + np.einsum("fij,j->fi", W[:, p] @ T0[p].T, ht[b] - ht[p])
+        W[:, b] = world_rot[:, driven[b]] if b in driven else rest_rel
+        if b in reversed_aims:
+            W[:, b] = _aim_reversed(reversed_aims[b], W[:, b], P, T0, ht, src_heads)
+        local[:, b] = np.swapaxes(rest_rel, -1, -2) @ W[:, b]
     return local
+
+
+def _aim_reversed(seg, Wb, P, T0, ht, src_heads) -> np.ndarray:
+    """World rotation ``(F, 3, 3)`` of the aiming bone of reversed segment ``seg``: ``Wb`` turned about the
+    bone's head so that the role's joint lies on the line through the child's joint ``P[:, child]``
+    along the source's direction (the point at the bone's reach from its head)."""
+    b, r, c = seg.aim, seg.target, seg.target_child
+    offset = np.einsum("fij,j->fi", Wb @ T0[b].T, ht[r] - ht[b])         # bone head -> role joint, now
+    reach = np.linalg.norm(ht[r] - ht[b])
+    d = unit(src_heads[:, seg.source] - src_heads[:, seg.source_child])  # child joint -> role joint
+    e = P[:, c] - P[:, b]
+    ed = np.einsum("fi,fi->f", e, d)
+    t = -ed + np.sqrt(np.maximum(ed ** 2 - np.einsum("fi,fi->f", e, e) + reach ** 2, 0.0))
+    want = e + t[:, None] * d
+    return rotation_between(unit(offset), unit(want)) @ Wb

@@ -61,16 +61,16 @@ def retarget_clip(source: ArmatureRest, target: ArmatureRest, mapping: Mapping, 
     segs = directions.plan_segments(source, target, pairs)
     src_rot, src_heads = world_pose(source, source_pose)
     world = directions.target_world_rotations(source, target, segs, src_rot, src_heads)
-    local = directions.local_rotations(target, segs, world)
+    local = directions.local_rotations(target, segs, world, src_heads)
     src_roles = {r: s for r, (s, _) in pairs.items()}
     tgt_roles = {r: t for r, (_, t) in pairs.items()}
     ratio = root_motion.leg_length(target, tgt_roles) / root_motion.leg_length(source, src_roles)
     hips_s, hips_t = source.index[pairs["hips"][0]], target.index[pairs["hips"][1]]
-    _, rest_s = rest_world(source)
     _, rest_t = rest_world(target)
     if options.root_motion:
-        want = root_motion.hips_path(src_heads[:, hips_s], rest_s[hips_s], rest_t[hips_t], ratio,
-                                     options.in_place, options.fps)
+        heights = root_motion.hips_heights(source, target, pairs, source_pose, local, ratio)
+        want = root_motion.hips_path(src_heads[:, hips_s], rest_t[hips_t], heights, ratio, options.in_place,
+                                     options.fps)
     else:
         want = np.repeat(rest_t[hips_t][None], len(source_pose), axis=0)
     report = {"frames": len(source_pose), "segments": len(segs), "leg_ratio": ratio,
@@ -80,7 +80,7 @@ def retarget_clip(source: ArmatureRest, target: ArmatureRest, mapping: Mapping, 
         report["foot_contacts"] = plant
     bone = root_motion.translation_bone(target, hips_t, [seg.target for seg in segs])
     loc = root_motion.root_locations(target, local, hips_t, bone, want)
-    mapped = {seg.target for seg in segs} | {bone}
+    mapped = {seg.target for seg in segs} | {seg.aim for seg in segs if seg.aim >= 0} | {bone}
     q = quat_sign_continuous(matrix_to_quat(local))
     return RetargetResult(q, sorted(mapped | _path_bones(target, segs)), sorted(mapped), bone, loc, ratio, report)
 

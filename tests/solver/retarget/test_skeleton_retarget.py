@@ -120,3 +120,71 @@ def test_root_motion_goes_on_the_bone_that_carries_the_body():
     _, heads_t = _target_pose(chest_root, result)
     i, j = source.index["hips"], chest_root.index["hips"]
     assert np.abs((heads_t[:, j] - heads_t[0, j]) - (heads_s[:, i] - heads_s[0, i])).max() < 1e-9
+
+
+def _chest_rooted(arm):
+    """A learned-like rig from humanoid ``arm``: rooted at the chest, its spine chain reversed (each bone
+    runs down from its upper joint), an unmapped part between the chest and the spine, no spine above."""
+    from articula.sample_scenes.mpfb_rig import roll_frames
+    from articula.solver.retarget.armature import ArmatureRest
+    h = {b: arm.rest[i, :3, 3] for i, b in enumerate(arm.bones)}
+    mid = (h["chest"] + h["spine"]) / 2
+    spec = [("chest", None, h["chest"], mid), ("part", "chest", mid, h["spine"]),
+            ("spine", "part", h["spine"], h["hips"]), ("hips", "spine", h["hips"], h["hips"] - [0, 0, 0.05])]
+    for i, b in enumerate(arm.bones):
+        if b not in ("hips", "spine", "chest"):
+            spec.append((b, arm.bones[arm.parents[i]], h[b], arm.tails[i]))
+    names = [s[0] for s in spec]
+    heads, tails = np.array([s[2] for s in spec]), np.array([s[3] for s in spec])
+    rest = np.tile(np.eye(4), (len(spec), 1, 1))
+    rest[:, :3, :3], rest[:, :3, 3] = roll_frames(heads, tails, np.zeros(len(spec))), heads
+    parents = [names.index(s[1]) if s[1] else -1 for s in spec]
+    return ArmatureRest("learned", names, parents, rest, tails, np.zeros(len(spec), bool), arm.world)
+
+
+def _heads(arm, pose):
+    return world_pose(arm, pose)[1]
+
+
+def test_reversed_chains_of_a_chest_rooted_rig_follow_every_segment():
+    """Hips and spine hang below the chest (their segments' child joints are their ancestors): the bones
+    above them aim those segments, exactly, as every other segment."""
+    source, roles = humanoid(1.0, rng=np.random.default_rng(4))
+    learned = _chest_rooted(humanoid(1.7, 40.0)[0])
+    clip, mapping, result = _run(source, roles, learned, roles, frames=30)
+    _, heads_t = _target_pose(learned, result)
+    angles = metrics.role_segment_angles(mapping.pairs(), source.index, learned.index, _heads(source, clip), heads_t,
+                                         trunk=False)
+    assert {"hips-spine", "spine-chest", "thigh.L-shin.L", "chest-neck"} <= set(angles)
+    assert max(a.max() for a in angles.values()) < 1e-4, {k: round(a.max(), 5) for k, a in angles.items() if a.max() > 1e-4}
+
+
+def _lowest_foot(arm, heads):
+    feet = [arm.index[b] for b in ("foot.L", "foot.R", "toe.L", "toe.R")]
+    tails_z = [arm.world_points(arm.tails[f])[2] for f in feet]
+    return heads[:, feet, 2].min(axis=1), min(tails_z)
+
+
+def test_feet_meet_the_ground_of_a_skeleton_that_hangs_from_its_origin():
+    """A BVH-like source: its rest skeleton hangs from the origin (root offset zero) while the clip walks
+    on the floor through it: the target's feet stay on its ground, as onto a standing source."""
+    source, roles = humanoid(1.0)
+    target, _ = humanoid(1.7, 40.0, yaw_deg=30.0, world_scale=2.0, offset=(1, 2, 0.5))
+    clip = random_clip(source, 40, amplitude=0.3, seed=2)
+    clip[:, :, 2, 3] -= _lowest_foot(source, _heads(source, clip))[0].min()       # the clip stands on z = 0
+    hanging = source.__class__(**{k: getattr(source, k) for k in ("name", "bones", "parents", "rest", "tails",
+                                                                 "connected", "world")})
+    hanging.rest = source.rest.copy()
+    hanging.rest[:, 2, 3] -= 0.53                                                 # hips at the origin
+    hanging.tails = source.tails - [0, 0, 0.53]
+    mapping = Mapping.from_roles(roles, roles)
+    for src in (source, hanging):
+        result = retarget_clip(src, target, mapping, clip)
+        _, heads_t = _target_pose(target, result)
+        t_low, _ = _lowest_foot(target, heads_t)
+        rest_low = min(_lowest_foot(target, world_pose(target, target.rest[None])[1])[0].min(),
+                       _lowest_foot(target, world_pose(target, target.rest[None])[1])[1])
+        s_low = _lowest_foot(src, _heads(src, clip))[0]
+        ground = 0.0 if src is hanging else min(_lowest_foot(source, world_pose(source, source.rest[None])[1])[0].min(),
+                                                _lowest_foot(source, world_pose(source, source.rest[None])[1])[1])
+        assert np.abs((t_low - rest_low) - result.ratio * (s_low - ground)).max() < 1e-9
