@@ -33,6 +33,7 @@ from ...sample_scenes.registered import generate_registered, posed_sequence
 from ...sample_scenes.unregistered import generate_unregistered
 from ...solver.errors import ArticulaInputError
 from ...solver.learn.options import MIN_SCANS
+from ...solver.rig import names as rig_names
 from ..learn import heat_map
 from ..learn import report as learn_report
 from ..scene import frames, render
@@ -54,10 +55,30 @@ def learned_title(scale_mm: float) -> str:
     return f"Learned rig (error heat map, 0-{scale_mm:.0f} mm)"
 
 
-def _stage(name: str, t0: float) -> float:
+def _stage(name: str, t0: float, times: dict = None, key: str = "") -> float:
+    """Print a stage's line with its wall time (s) since ``t0``; record it in ``times[key]`` when given."""
     now = time.perf_counter()
     print(f"demo: {name} ({now - t0:.1f} s)", flush=True)
+    if times is not None and key:
+        times[key] = now - t0
     return now
+
+
+def summary_line(learned: dict, tracked: dict, times: dict, total_s: float) -> str:
+    """The numbers the README's caption quotes, in one line: the learned rig's bones and error (mm), the
+    tracked frames' median distance (mm), and each stage's wall time with the total (s)."""
+    parts = []
+    if learned:
+        err = ", ".join(f"{k} {learned[k]:.2f}" for k in ("mean", "median", "max") if k in learned)
+        parts.append(f"learned rig {learned['bones']} control bones, error (mm) {err}, heat map "
+                     f"0-{learned['scale']:.0f} mm")
+    if tracked:
+        med = tracked.get("median_mm")
+        parts.append(f"tracked {len(tracked.get('frames', []))} frames, median "
+                     f"{'n/a' if med is None else f'{med:.2f}'} mm")
+    stages = ", ".join(f"{k} {v:.1f} s" for k, v in times.items())
+    parts.append(f"times: {stages}; total {total_s:.1f} s")
+    return "demo: summary: " + "; ".join(parts)
 
 
 def make_data(data_dir: str, n_scans: int, n_depth: int, seed: int = 0, n_track: int = 0) -> dict:
@@ -171,6 +192,14 @@ def _heat_scale(objects) -> float:
     return max(float(ob.data.get(heat_map.SCALE_PROPERTY, 0.0)) for ob in objects if ob.type == 'MESH')
 
 
+def learned_numbers(objects, report: dict) -> dict:
+    """The learned rig's control bones (one per part; the swing helpers are not counted), its error
+    statistics (mm: mean, median, max) and its heat map's top (mm)."""
+    arm = next(ob for ob in objects if ob.type == 'ARMATURE' and learn_report.REPORT_PROPERTY in ob)
+    bones = sum(rig_names.BONE_INDEX_PROP in bone for bone in arm.data.bones)
+    return dict(learn_report.error_summary(report), bones=bones, scale=_heat_scale(objects))
+
+
 def learned_summary(report: dict) -> str:
     """One line about a learned rig: parts, rounds and its error statistics (mm)."""
     s = learn_report.error_summary(report)
@@ -206,32 +235,36 @@ def run(args) -> int:
     t0 = time.perf_counter()
     paths = make_data(os.path.join(out, "demo_data"), args.scans, args.depth_frames, args.seed,
                       args.track_frames)
-    t = _stage("sample data written", t0)
+    times, learned, track_report = {}, {}, {}
+    t = _stage("sample data written", t0, times, "sample data")
     blend = os.path.join(out, "demo.blend")
     built = build_scene(paths)
-    t = _stage(f"imported and built ({', '.join(f'{k}: {len(v)} objects' for k, v in built.items())})", t)
+    t = _stage(f"imported and built ({', '.join(f'{k}: {len(v)} objects' for k, v in built.items())})", t,
+               times, "import and build")
     titles = dict(TITLES)
     if not args.no_learn:
         parts = f"{args.parts} parts" if args.parts else "parts chosen from the motion"
         print(f"demo: learning a rig from {args.scans} scans ({parts}, at most {args.learn_iterations} "
               f"rounds)", flush=True)
         built["learned"], report = learn_scene(built["scans"], args.parts, args.learn_iterations, args.seed)
-        titles["learned"] = learned_title(_heat_scale(built["learned"]))
-        t = _stage(f"learned rig {LEARNED_NAME!r}: {learned_summary(report)}", t)
+        learned = learned_numbers(built["learned"], report)
+        titles["learned"] = learned_title(learned["scale"])
+        t = _stage(f"learned rig {LEARNED_NAME!r}: {learned_summary(report)}", t, times, "learning")
         if args.track_frames:
             print(f"demo: tracking {args.track_frames} unregistered scans with the learned rig", flush=True)
             built["tracked"], track_report = track_scene(built["learned"], paths["unregistered"],
                                                          os.path.join(out, "demo_data", "learned.npz"))
-            t = _stage(f"tracked rig {TRACKED_NAME!r}: {tracked_summary(track_report)}", t)
+            t = _stage(f"tracked rig {TRACKED_NAME!r}: {tracked_summary(track_report)}", t, times, "tracking")
     scene = bpy.context.scene
     cover_sequences(scene, built["scans"] + built["depth"] + built.get("tracked", []))
     scene.frame_set(max(1, args.scans // 2))
     png = os.path.join(out, "demo.png")
     coloured = [titles[k] for k in ("learned", "tracked") if k in built]     # heat map, capture error colours
     render.render_overview(scene, png, {titles[k]: v for k, v in built.items()}, coloured, width, height)
-    t = _stage(f"rendered {png}", t)
+    t = _stage(f"rendered {png}", t, times, "rendering")
     save_blend(blend)
-    _stage(f"saved {blend}", t)
+    _stage(f"saved {blend}", t, times, "saving")
+    print(summary_line(learned, track_report, times, time.perf_counter() - t0))
     print(f"demo: done in {time.perf_counter() - t0:.1f} s -> {blend}, {png}")
     return 0
 

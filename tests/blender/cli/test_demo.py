@@ -5,6 +5,7 @@ with one baked key per scan, its report's error is small, its mesh carries the h
 picture shows heat-map colours (which no palette colour of the other exhibits reaches)."""
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -110,6 +111,28 @@ def test_demo_tracks_the_unregistered_scans_with_the_learned_rig(pkg, demo_run):
     mesh = next(ob for ob in bpy.data.objects if ob.type == 'MESH' and ob.parent == arm)
     assert abs(_centre_x(mesh) - _centre_x(caps)) < 0.15
     assert demo.TITLES["tracked"] in {ob.data.body for ob in bpy.data.objects if ob.type == 'FONT'}
+
+
+def test_demo_prints_the_numbers_of_its_caption(pkg, demo_run):
+    """One summary line holds what the README's caption quotes, read back here from the saved scene: the
+    learned rig's control bones (one per part, swing helpers apart) and error statistics, the tracked frames' median, and every stage's time."""
+    stdout, out = demo_run
+    learn_report = pkg("addon.learn.report")
+    line = next((ln for ln in stdout.splitlines() if ln.startswith("demo: summary:")), "")
+    assert line, stdout[-2000:]
+    bpy.ops.wm.open_mainfile(filepath=str(out / "demo.blend"))
+    arm = next(ob for ob in bpy.data.objects if learn_report.REPORT_PROPERTY in ob)
+    report = json.loads(arm[learn_report.REPORT_PROPERTY])
+    err = learn_report.error_summary(report)
+    assert f"learned rig {report['parts']} control bones" in line, line             # one per part
+    assert report["parts"] == sum(not bone.name.startswith("SW-") for bone in arm.data.bones)
+    assert f"mean {err['mean']:.2f}, median {err['median']:.2f}, max {err['max']:.2f}" in line, line
+    tracked = json.loads(bpy.data.objects[pkg("addon.cli.demo").TRACKED_NAME]["articula_track_report"])
+    assert f"tracked {TRACK} frames, median {tracked['median_mm']:.2f} mm" in line, line
+    times = re.search(r"times: (.*); total ([0-9.]+) s", line)
+    stages = dict(re.fullmatch(r"(.+) ([0-9.]+) s", part).groups() for part in times.group(1).split(", "))
+    assert set(stages) == {"sample data", "import and build", "learning", "tracking", "rendering", "saving"}
+    assert sum(map(float, stages.values())) <= float(times.group(2)) + 0.1 * len(stages)
 
 
 def test_demo_frame_range_covers_every_exhibit(pkg, demo_run):
