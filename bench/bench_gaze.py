@@ -5,11 +5,13 @@ Usage: ``./run bench gaze [--tracked TRACKED.blend]``.
 Two characters (spec test A1 on real rigs; targets from the issue):
 
 * an MPFB/MakeHuman default rig (163 bones, eye bones) with an idle animation (slow sway of spine, neck and
-  head, shifting weight) looking at a target that circles in front of it;
+  head, shifting weight) looking at a target that circles in front of it, on the average body and on the
+  stooped "old" body;
 * the Articula template body (exact swing/twist rig, gaze line from the annotated MakeHuman eyes and back
   of the head) moved by a tracked-like motion: CMU 131_01 retargeted onto it.
 
-For each: the gaze error at full strength (deg, read back from Blender's evaluated pose), the chest/neck/
+For each: the gaze error at full strength (deg, read back from Blender's evaluated pose; on the MPFB rigs also
+the face's: the head's rest front −Y from the eyes' midpoint, the eyes' from each eye), the chest/neck/
 head shares of the turn, whether frames outside the shot are bit-identical, whether the fade is monotone,
 and the time of the shot; then the speed of a 1,000-frame shot (target <= 1 s).  ``--tracked`` adds the
 rig of a tracked sample (e.g. ``out/tracked_depth.blend`` of the README's batch sequence).
@@ -21,13 +23,13 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))   # the bench command loads us by path
 import _common  # noqa: E402  (makes ``import articula`` work)
-from _armatures import new_armature  # noqa: E402
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
 from _armatures import new_armature  # noqa: E402
 from articula.sample_scenes import mpfb_armature  # noqa: E402
+from articula.sample_scenes.subjects import resolve_macros  # noqa: E402
 from articula.solver.gaze import fade  # noqa: E402
 from articula.solver.gaze.aim import gaze_line  # noqa: E402
 from articula.solver.geometry.rotations import matrix_to_quat, quat_to_rotvec, rotvec_to_quat  # noqa: E402
@@ -43,9 +45,10 @@ def _addon():
     return lambda name: importlib.import_module(f"{mod}.{name}")
 
 
-def idle_rig(pkg, frames=240):
-    """MakeHuman default rig with a procedural idle: spine, neck and head sway a few degrees, hips shift."""
-    d = mpfb_armature.rig_bones("default")
+def idle_rig(pkg, frames=240, shape=None):
+    """MakeHuman default rig (body of preset ``shape``, None = average) with a procedural idle: spine, neck
+    and head sway a few degrees, hips shift."""
+    d = mpfb_armature.rig_bones("default", resolve_macros(shape) if shape else None)
     ob = new_armature(
         bpy.context, "Idle", d["names"], d["parents"], d["heads"], d["tails"], d["rolls"])
     names = d["names"]
@@ -108,15 +111,33 @@ def measure(pkg, ob, target, first, last, fade_frames, label):
         turns.append(np.linalg.norm(quat_to_rotvec(matrix_to_quat(D)), axis=1))
     turns = np.stack(turns, axis=1)
     shares = (turns / turns.sum(axis=1, keepdims=True)).mean(axis=0)
+    face = _face_errors(rest, after[full], rest.armature_points(shot.target_path(bpy.context, target, frames[full])))
     outside = (frames < first) | (frames > last)
     same = np.array_equal(after[outside], before[outside])
     ramp = w[(frames >= first) & (frames <= first + fade_frames)]
     return (f"{label}: shot {first}-{last} (fade {fade_frames}), gaze line from {how}; at full strength error "
-            f"mean {err.mean():.4f} deg max {err.max():.4f} deg; shares chest/neck/head "
+            f"mean {err.mean():.4f} deg max {err.max():.4f} deg{face}; shares chest/neck/head "
             f"{' / '.join(f'{s:.4f}' for s in shares)}; frames outside the shot bit-identical: {same}; fade "
             f"monotone: {bool(np.all(np.diff(ramp) > 0))}; out of reach (limited, left out of the error) on "
             f"{len(report['limited'])} frames; "
             f"{report['seconds']:.3f} s for {report['frames']} frames")
+
+
+def _face_errors(rest, pose, goal) -> str:
+    """Largest angle (deg) between the target and the face (head's rest −Y from the eyes' midpoint) and each
+    eye (its rest −Y from its centre) in poses ``pose``; '' without MPFB eye bones."""
+    if not {"eye.L", "eye.R"} <= set(rest.index):
+        return ""
+
+    def front(bone):
+        j = rest.index[bone]
+        return pose[:, j, :3, :3] @ (rest.rest[j, :3, :3].T @ [0.0, -1.0, 0.0]), pose[:, j, :3, 3]
+
+    def worst(d, g):
+        return np.degrees(np.arccos(np.clip(np.einsum("fi,fi->f", d, g) / np.linalg.norm(g, axis=1), -1, 1))).max()
+    (d, _), (dl, pl), (dr, pr) = front("head"), front("eye.L"), front("eye.R")
+    return (f"; face (head's rest -Y) max {worst(d, goal - (pl + pr) / 2):.4f} deg, eyes max "
+            f"{max(worst(dl, goal - pl), worst(dr, goal - pr)):.4f} deg")
 
 
 def speed_line(pkg, body) -> str:
@@ -154,6 +175,11 @@ def main(argv=None) -> int:
     idle = idle_rig(pkg)
     line = measure(pkg, idle, circling_target((0.0, 0.0, 1.6), np.arange(1, 241)), 20, 220, 12,
                    "MakeHuman default rig, idle")
+    print(line, flush=True)
+    old = idle_rig(pkg, shape="old")
+    old.location.x -= 3.0
+    line = measure(pkg, old, circling_target((-3.0, 0.0, 1.6), np.arange(1, 241), name="Look old"), 20, 220, 12,
+                   "MakeHuman default rig on the stooped old body, idle")
     print(line, flush=True)
     body = tracked_body(pkg)
     print(speed_line(pkg, body), flush=True)
