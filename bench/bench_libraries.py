@@ -11,13 +11,17 @@ numbers and the decision for each piece.
 2. malformed files: the message each side gives (or what trimesh loads without complaint);
 3. surface distance: 13,380 noisy scan points vs the posed model, another pose vs the model, and 20
    Bone_Anim-sized frames: CPU seconds, largest difference, points that differ, brute force at the worst;
-4. graph queries: edges, adjacency, uniform Laplacian, components: CPU seconds and identical arrays.
+4. graph queries: edges, adjacency, uniform Laplacian, components: CPU seconds and identical arrays;
+5. k-d tree shape (scipy's ``cKDTree``): the MakeHuman rest vertices reflected through the three planes
+   through their centroid along the principal axes (the symmetry search's queries, mostly off the surface)
+   against the tree built by ``solver.geometry.neighbours.far_query_tree`` and scipy's default tree:
+   CPU seconds of the queries and identical distances.
 
 ``trimesh.proximity.closest_point`` needs the ``rtree`` package, which neither the venvs nor the zip carry:
 install it anywhere (``python -m pip install --target /tmp/rtree rtree``) and pass ``--rtree /tmp/rtree``;
 without it part 3 reports ours only.
 
-Usage: ./run bench libraries [--rtree DIR] [--repeats 5]
+Usage: ./run bench libraries [--rtree DIR] [--repeats 5] [--only loading|errors|distance|graph|trees]
 """
 import argparse
 import os
@@ -251,16 +255,32 @@ def _graph(repeats):
                        note="13380 vertices, CPU time")
 
 
+def _trees(repeats):
+    """Part 5: reflected-point queries against the two k-d tree shapes (module docstring)."""
+    from scipy.spatial import cKDTree
+    from articula.solver.geometry.neighbours import far_query_tree
+    pts = _makehuman()[0][0]
+    c = pts.mean(axis=0)
+    _, axes = np.linalg.eigh(np.cov((pts - c).T))
+    queries = np.concatenate([pts - 2.0 * np.outer((pts - c) @ n, n) for n in axes.T])
+    t_default, (d_default, _) = _best(lambda: cKDTree(pts).query(queries), repeats, time.process_time)
+    t_far, (d_far, _) = _best(lambda: far_query_tree(pts).query(queries), repeats, time.process_time)
+    _common.report("k-d tree, reflected points: far_query_tree", t_far, "s",
+                   f"scipy's default tree {t_default:.3f} s ({t_default / t_far:.2f}x); distances identical "
+                   f"{bool(np.array_equal(d_far, d_default))}; {len(pts)} points, {len(queries)} queries, CPU time, "
+                   f"tree build included")
+
+
 def main(argv) -> int:
     parser = argparse.ArgumentParser(prog="./run bench libraries", description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=5, help="best of this many runs (default 5)")
     parser.add_argument("--rtree", default="", help="folder holding the rtree package (for trimesh's "
                                                     "closest_point)")
-    parser.add_argument("--only", choices=("loading", "errors", "distance", "graph"), help="one part only")
+    parser.add_argument("--only", choices=("loading", "errors", "distance", "graph", "trees"), help="one part only")
     args = parser.parse_args(argv)
     parts = {"loading": lambda: _loading(args.repeats), "errors": _errors,
              "distance": lambda: _distances(max(1, args.repeats // 2), args.rtree),
-             "graph": lambda: _graph(args.repeats)}
+             "graph": lambda: _graph(args.repeats), "trees": lambda: _trees(args.repeats)}
     for name, run in parts.items():
         if args.only in (None, name):
             run()
