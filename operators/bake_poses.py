@@ -1,9 +1,7 @@
 """``articula.bake_poses``: bake the poses of a bundle onto an existing rig as a new action."""
 import bpy
 
-from ..addon.linked import check_editable
 from ..addon.rig import bundle_io as rig_io
-from ..addon.rig import reader as rig_reader
 from ..addon.jobs import JobOperator
 from .bundle_file import BundleFileInput
 
@@ -24,7 +22,6 @@ class ARTICULA_OT_bake_poses(BundleFileInput, JobOperator, bpy.types.Operator):
 
     def prepare(self, context):
         path = self.bundle_path()
-        check_editable(rig_reader.find_armature(self.armature, context), "rig")
         return lambda progress: path
 
     def finish(self, context, path):

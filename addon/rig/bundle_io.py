@@ -65,7 +65,8 @@ def poses_for_rig(poses: Poses, bundle_names, rig_names_, path: str = "") -> Pos
 def bake_bundle(context, path: str, armature: str = "", nla: bool = False, frame_start: int = 1,
                 action_name: str = "", warn=None):
     """Bake the poses of the bundle at ``path`` onto the rig ``armature`` (or the active rig) as a new
-    action; returns the action.  ``warn(text)`` receives what loading changed (``Bundle.notes``)."""
+    action; returns the action.  ``warn(text)`` receives what loading changed (``Bundle.notes``).  A rig
+    linked from another .blend without a library override is refused before anything changes."""
     bundle = load_bundle(path)
     if bundle.poses is None or len(bundle.poses) == 0:
         raise ArticulaInputError(f"{path}: the bundle holds no poses")

@@ -44,6 +44,9 @@ def test_retarget_onto_a_library_override_matches_the_local_character(pkg, tmp_p
     bpy.ops.wm.read_homefile(use_empty=True)
     hero = overridden(link_override(lib, HERO_CHAR), HERO)
     source = _bvh()
+    original = next(o for o in bpy.data.objects if o.name == HERO and o.library is not None)
+    with pytest.raises(pkg("solver.errors").ArticulaInputError, match="use its library override 'Hero'"):
+        pkg("addon.retarget.skeleton").retarget(bpy.context, source, original)        # the linked original
     assert bpy.ops.articula.retarget(source=source.name, target=hero.name) == {'FINISHED'}
     action = hero.animation_data.action.name
     assert hero.animation_data.action.library is None and "cmu_131_01" in action
