@@ -2,7 +2,8 @@
 
 Each module in ``COMMAND_MODULES`` defines ``add_commands(subparsers)``; every command parser sets
 ``func`` (``args -> int`` exit code).  Input errors (``ArticulaInputError``) become a one-line
-message and exit code 2; anything else is a bug and prints a traceback, exit code 1.
+message and exit code 2; anything else is a bug and prints a traceback, exit code 1.  A command that
+fails writes nothing (:mod:`.outputs`).
 """
 import argparse
 import sys
@@ -12,7 +13,7 @@ import bpy
 
 from ...sample_scenes import cli as samples
 from ...solver.errors import ArticulaInputError, Cancelled
-from . import bench, bind_scan, demo, depth, farm, gaze, lbs, learn, retarget, rig, scans, track
+from . import bench, bind_scan, demo, depth, farm, gaze, lbs, learn, outputs, retarget, rig, scans, track
 
 COMMAND_MODULES = (bench, samples, rig, lbs, scans, depth, learn, track, retarget, bind_scan, gaze, farm, demo)
 
@@ -36,7 +37,10 @@ def main(argv) -> int:
         parser.print_help()
         return 2
     try:
-        return int(args.func(args) or 0)
+        with outputs.kept_on_failure(outputs.output_paths(args)) as outcome:   # a failure writes nothing
+            code = int(args.func(args) or 0)
+            outcome["ok"] = code == 0
+        return code
     except ArticulaInputError as exc:
         print(f"articula {args.command}: error: {exc}", file=sys.stderr)
         return 2

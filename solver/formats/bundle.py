@@ -41,7 +41,8 @@ def temporary_path(path) -> str:
 def save_bundle(path, model: Model, poses: Poses = None, provenance: dict = None) -> None:
     """Validate and write ``model`` (and ``poses``, ``provenance``: a JSON-serialisable dict) to
     ``path``.  The file is written to :func:`temporary_path` first and renamed, so a failure never
-    leaves a half-written bundle."""
+    leaves a half-written bundle (nor the temporary file); a path that cannot be written raises
+    :class:`ArticulaInputError`."""
     model.validate()
     sk = model.skeleton
     arrays = {
@@ -65,9 +66,16 @@ def save_bundle(path, model: Model, poses: Poses = None, provenance: dict = None
         raise ArticulaInputError(f"provenance: not JSON-serialisable ({exc})") from exc
     arrays["provenance"] = np.array(text)
     path, tmp = os.fspath(path), temporary_path(path)
-    with open(tmp, "wb") as fh:
-        np.savez_compressed(fh, **arrays)
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+        os.replace(tmp, path)
+    except BaseException as exc:
+        if os.path.isfile(tmp):
+            os.remove(tmp)                 # e.g. ``path`` is a folder: the rename failed
+        if isinstance(exc, OSError):
+            raise ArticulaInputError(f"{path}: cannot write the bundle ({exc.strerror or exc})") from None
+        raise
 
 
 def _read_arrays(path) -> dict:
