@@ -15,6 +15,9 @@ Reading evaluates the F-curves at integer frames (keys read directly when they s
 and returns :class:`solver.rig.model.Poses` with normalised quaternions; channels without an F-curve read
 as the rest value.
 """
+import os
+import re
+
 import bpy
 import numpy as np
 
@@ -63,6 +66,29 @@ def channels(names, poses, root_axes):
     out += [(names[0], "location", i, loc[:, i]) for i in range(3)]
     out += [(names[0], "scale", i, poses.scales) for i in range(3)]
     return out
+
+
+def _base_name(name: str, word: str) -> str:
+    """``name`` without Blender's ``.001`` suffix and without a trailing `` <word>`` (repeated)."""
+    name = re.sub(r"\.\d{3,}$", "", name.strip())
+    while name.endswith(" " + word):
+        name = name[:-len(word) - 1]
+    return name
+
+
+def tracked_action_name(rig: str, recording: str) -> str:
+    """``"<rig> tracked <recording>"``: the action of the motion tracked in ``recording`` (an object's
+    name, or a path: its file or folder name without extension) on ``rig``.  A rig that tracking built is
+    already named ``"<model> tracked"``; the word is said once, so tracking again never piles it up."""
+    if os.sep in recording:
+        recording = os.path.splitext(os.path.basename(os.path.normpath(recording)))[0]
+    return f"{_base_name(rig, 'tracked')} tracked {recording}".strip()
+
+
+def adapted_rig_name(rig: str) -> str:
+    """``"<rig> adapted"``, said once: adapting an adapted rig again gives the same base name (Blender
+    adds ``.001``)."""
+    return f"{_base_name(rig, 'adapted')} adapted"
 
 
 def write_action(arm, names, poses, name: str = "Articula Poses", frame_start: int = 1,

@@ -39,7 +39,8 @@ def build(context, outcome, name: str = "", blend_path: str = ""):
     mi, cap = outcome.model_input, outcome.captures
     old = bpy.data.objects.get(mi.rig) if mi.rig else None
     keep = old is not None and not outcome.result.adapted
-    base = name or (f"{old.name} adapted" if old is not None else f"{os.path.splitext(mi.label)[0]} tracked")
+    base = name or (actions.adapted_rig_name(old.name) if old is not None
+                    else f"{os.path.splitext(mi.label)[0]} tracked")
     arm, names, warnings = tracking_rig(context, outcome.model, old, keep, base, mi.matrix)
     if keep and mi.training_action and not arm.get(TRAINING_ACTION):
         arm[TRAINING_ACTION] = mi.training_action
@@ -69,10 +70,12 @@ def tracking_rig(context, model, old, keep: bool, base: str, matrix):
 
 
 def bake(context, arm, names, outcome, frame0: int, residual_properties, report: dict):
-    """The tracked poses as the action "<rig> tracked" from scene frame ``frame0``, marked as tracked,
-    with the residual curves and the ``report`` (JSON) on the armature."""
-    action = actions.write_action(arm, names, outcome.poses, name=f"{arm.name} tracked", frame_start=frame0,
-                                  scene=context.scene)
+    """The tracked poses as the action "<rig> tracked <recording>" (:func:`actions.tracked_action_name`)
+    from scene frame ``frame0``, marked as tracked, with the residual curves and the ``report`` (JSON) on
+    the armature."""
+    cap = outcome.captures
+    name = actions.tracked_action_name(arm.name, cap.object_name or cap.label)
+    action = actions.write_action(arm, names, outcome.poses, name=name, frame_start=frame0, scene=context.scene)
     action[TRACKED_ACTION] = True
     add_residual_curves(arm, action, outcome.result, frame0, residual_properties)
     arm[REPORT_PROPERTY] = json.dumps(report)

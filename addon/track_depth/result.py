@@ -17,6 +17,7 @@ import bpy
 from ...solver.errors import ArticulaInputError
 from ...solver.formats.bundle import save_bundle
 from ...solver.track.merge import track_provenance
+from ..rig import actions
 from ..track.result import bake, check_output_path, tracking_rig
 from .report import options_dict, report_document
 
@@ -32,7 +33,7 @@ def build(context, outcome, name: str = ""):
     if name:
         base = name
     elif old is not None:
-        base = f"{old.name} adapted"
+        base = actions.adapted_rig_name(old.name)
     else:
         base = TEMPLATE_RIG if mi.model is None else f"{os.path.splitext(mi.label)[0]} tracked"
     arm, names, warnings = tracking_rig(context, outcome.model, old, old is not None and not outcome.new_model,

@@ -10,6 +10,7 @@ pass, no adaptation: a few seconds).
 """
 import json
 import os
+import re
 
 import bpy
 import numpy as np
@@ -460,3 +461,28 @@ def test_point_cloud_object_is_tracked_in_world_coordinates(pkg, tmp_path, truth
     want = 1000 * pkg("solver.geometry.surface_distance").distance_to_surface(
         world_points(ob), evaluated_world(pkg, mesh), model.faces)
     np.testing.assert_allclose(got, want, atol=0.01)
+
+
+def test_action_names_say_rig_and_recording_once(pkg, tmp_path, truth):
+    """The real pipeline, tracking again and again on the same rig (from the bundle, then the rig it
+    built, after a bake onto it): every tracked action is "<model> tracked <recording>" (Blender's .001
+    for repeats), never "tracked tracked"; adapting an adapted rig names it "<rig> adapted" once."""
+    model, poses, captures = truth
+    ob = import_captures(tmp_path, captures, name="walk")
+    path = str(tmp_path / "person.npz")
+    save_bundle(path, model, Poses(poses.rotations[:3], poses.translations[:3], poses.scales[:3]))
+    assert bpy.ops.articula.track(bundle=path, captures=ob.name, **FAST) == {'FINISHED'}
+    rig = bpy.data.objects["person tracked"]
+    select(rig, ob)
+    assert bpy.ops.articula.track(**FAST) == {'FINISHED'}
+    assert bpy.ops.articula.bake_poses(filepath=path, armature=rig.name) == {'FINISHED'}
+    select(rig, ob)
+    assert bpy.ops.articula.track(**FAST) == {'FINISHED'}
+    tracked = sorted(a.name for a in bpy.data.actions if a.get("articula_tracked"))
+    assert len(tracked) == 3 and rig.animation_data.action.name in tracked, tracked
+    assert all(re.fullmatch(r"person tracked walk(\.\d{3})?", n) for n in tracked), tracked
+    assert not [a.name for a in bpy.data.actions if "tracked tracked" in a.name or "poses poses" in a.name]
+    actions = pkg("addon.rig.actions")
+    assert actions.adapted_rig_name("Person adapted.001") == actions.adapted_rig_name("Person") == "Person adapted"
+    assert actions.tracked_action_name("learned tracked", os.path.join("out", "data", "unreg")) \
+        == "learned tracked unreg"

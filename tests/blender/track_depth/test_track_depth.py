@@ -97,7 +97,7 @@ def test_rig_tracks_the_recording_and_plays_over_it(pkg, bench):
     select(rig, ob)
     assert bpy.ops.articula.track() == {'FINISHED'}
     assert key_frames(pkg, rig) == {tuple(range(FRAME_START, FRAME_START + N))}
-    assert rig.animation_data.action.name == "Subject tracked"
+    assert rig.animation_data.action.name == f"Subject tracked {ob.name}"
     np.testing.assert_allclose(np.array(rig.matrix_world), moved(), atol=1e-6)      # the rig stays where it was
     err = np.linalg.norm(rig_joints(rig, bench, range(FRAME_START, FRAME_START + N))
                          - true_joints_in_blender(bench, ob), axis=-1)
