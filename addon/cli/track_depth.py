@@ -1,5 +1,5 @@
-"""Batch command ``track --depth``: a depth recording (16-bit PNG frames) + a model bundle or the built-in
-template body -> a tracked bundle, + report, + .blend (the ``track`` parser is in :mod:`.track`).
+"""Batch command ``track --depth``: a depth recording (16-bit PNG or EXR frames) + a model bundle or the
+built-in template body -> a tracked bundle, + report, + .blend (the ``track`` parser is in :mod:`.track`).
 
     ./run track --depth rec/ --out tracked.npz --report tracked.json          (template, rec/intrinsics.json)
     ./run track --depth kinect/ --camera kinect_v1 --frames 0:8 --out tracked.npz --blend tracked.blend
@@ -37,8 +37,9 @@ CAMERAS = tuple(cam.PRESETS)
 
 def add_arguments(p) -> None:
     """The ``track`` command's depth flags."""
-    p.add_argument("--depth", metavar="DIR", help="a depth recording: a folder of 16-bit PNG depth frames "
-                                                  "(millimetres) with intrinsics.json, or give --camera")
+    p.add_argument("--depth", metavar="DIR", help="a depth recording: a folder of 16-bit PNG (millimetres, or "
+                                                  "intrinsics.json's depth_unit_m) or EXR (metres) depth frames "
+                                                  "with intrinsics.json, or give --camera")
     p.add_argument("--camera", type=cam.preset_key, choices=CAMERAS, metavar="PRESET",
                    help=f"with --depth: the camera of a folder without intrinsics.json ({', '.join(CAMERAS)})")
     p.add_argument("--tracker", type=str.lower, choices=TRACKERS,

@@ -18,10 +18,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...solver.depth import camera as cam
-from ...solver.depth.recording import list_frames
+from ...solver.depth.recording import DEPTH_EXTENSIONS, list_frames
 from ...solver.errors import ArticulaInputError
 from ...solver.track.merge import model_digest
 from ...solver.track_depth.source import DepthRecording, PointsRecording
+from ..depth import images
 from ..rig import bundle_io, reader
 from ..sequences import playback, points
 from ..track.inputs import ModelInput, parse_frames
@@ -153,10 +154,11 @@ def recording_from_object(ob, matrix, frames: slice | None = None) -> DepthCaptu
 
 def recording_from_folder(folder: str, camera: str | None = None, frames: str | None = None,
                           flag: str = "--camera") -> DepthCaptures:
-    """The 16-bit PNG depth frames of ``folder`` with its ``intrinsics.json``, else the camera preset
-    ``camera`` (:data:`solver.depth.camera.PRESETS`); ``frames``: "A:B" (input frames A..B-1)."""
+    """The depth frames of ``folder`` (16-bit PNG, or EXR in metres read by Blender) with its
+    ``intrinsics.json``, else the camera preset ``camera`` (:data:`solver.depth.camera.PRESETS`);
+    ``frames``: "A:B" (input frames A..B-1)."""
     folder = os.path.abspath(folder)
-    paths = list_frames(folder, (".png",))
+    paths = list_frames(folder, DEPTH_EXTENSIONS)
     has_intrinsics = os.path.isfile(os.path.join(folder, "intrinsics.json"))
     if not has_intrinsics and not camera:
         raise ArticulaInputError(f"{folder}: no intrinsics.json; give the camera with {flag} "
@@ -165,7 +167,8 @@ def recording_from_folder(folder: str, camera: str | None = None, frames: str | 
     if frames is not None:
         a, b = parse_frames(frames, len(paths))
         span = slice(a, b)
-    recording = DepthRecording.from_folder(folder, preset=None if has_intrinsics else camera, frames=span)
+    recording = DepthRecording.from_folder(folder, preset=None if has_intrinsics else camera, frames=span,
+                                           read_exr=images.load_exr_depth)
     coordinates = ("world: intrinsics.json's cam_to_world" if recording.world
                    else "camera: OpenCV axes (+X right, +Y down, +Z forward)")
     return DepthCaptures(recording, folder, len(paths), 0 if span is None else span.start, 1, "", "", coordinates)

@@ -87,6 +87,17 @@ def png_frames(paths) -> list[DepthFrame]:
     return [DepthFrame(p, (lambda p=p: read_depth_png(p)), png=p) for p in paths]
 
 
+def depth_frames(paths, read_exr=None) -> list[DepthFrame]:
+    """The frames of ``paths``: 16-bit PNGs (decoded in batches) and EXRs in metres, read one at a time
+    when needed by ``read_exr(path) -> (H, W)`` (Blender's image reader); EXR without it is refused."""
+    exr = [p for p in paths if p.lower().endswith(".exr")]
+    if exr and read_exr is None:
+        raise ArticulaInputError(f"{exr[0]}: EXR depth frames are read by Blender's image loader; use the "
+                                 "batch command or the add-on, or 16-bit PNG frames")
+    return [DepthFrame(p, (lambda p=p: read_exr(p)), metres=True) if p in exr else png_frames([p])[0]
+            for p in paths]
+
+
 def check_png_frames(frames) -> None:
     """Every PNG frame's header (first 33 bytes: a PNG, 16-bit, the size of the first PNG frame, a
     file size that fits its image) checked before any frame is decoded."""

@@ -34,10 +34,11 @@ def numbering_gaps(names) -> list:
 
 @dataclasses.dataclass
 class DepthRecording:
-    """``paths`` of the depth PNG frames; ``camera`` (:class:`.observation.ViewCamera`); ``world`` True
-    when ``cam_to_world`` came from ``intrinsics.json``; ``options`` (:class:`solver.depth.frames.DepthOptions`);
-    ``notes`` for the report; ``setup_paths``: the frames the floor and background are fitted on (all
-    frames of the folder when ``paths`` is a range of them, so a chunk sees the floor a whole run sees)."""
+    """``paths`` of the depth frames (16-bit PNG, or EXR in metres read by ``read_exr``); ``camera``
+    (:class:`.observation.ViewCamera`); ``world`` True when ``cam_to_world`` came from ``intrinsics.json``;
+    ``options`` (:class:`solver.depth.frames.DepthOptions`); ``notes`` for the report; ``setup_paths``: the
+    frames the floor and background are fitted on (all frames of the folder when ``paths`` is a range of
+    them, so a chunk sees the floor a whole run sees); ``read_exr(path) -> (H, W)`` metres (Blender's)."""
     paths: list
     camera: ViewCamera
     world: bool
@@ -45,15 +46,17 @@ class DepthRecording:
     notes: list
     setup: object = None
     setup_paths: list = None
+    read_exr: object = None
 
     @classmethod
     def from_folder(cls, folder: str, preset: str | None = None, options: dp.DepthOptions | None = None,
-                    frames=None, depth_scale: float | None = None) -> "DepthRecording":
-        """The PNG frames of ``folder`` (``frames``: an optional ``slice`` of them) with ``intrinsics.json``
+                    frames=None, depth_scale: float | None = None, read_exr=None) -> "DepthRecording":
+        """The depth frames of ``folder`` (``frames``: an optional ``slice`` of them) with ``intrinsics.json``
         from the folder, else the camera ``preset`` (e.g. ``kinect_v1``, noted in the report).  PNG values
-        are in the camera's ``depth_unit_m`` unless ``depth_scale`` (metres per unit) is given, as on import."""
+        are in the camera's ``depth_unit_m`` unless ``depth_scale`` (metres per unit) is given, as on import;
+        EXR frames are metres, read by ``read_exr`` (:func:`solver.depth.recording.depth_frames`)."""
         opts = options or dp.DepthOptions()
-        paths = all_paths = rec.list_frames(folder, (".png",))
+        paths = all_paths = rec.list_frames(folder, rec.DEPTH_EXTENSIONS)
         if frames is not None:
             paths = all_paths[frames]
             if not paths:
@@ -70,13 +73,13 @@ class DepthRecording:
                                      f"({', '.join(cam.PRESETS)})")
         opts = rec.unit_options(opts, intr, depth_scale)
         opts.validate()
-        rec.check_png_frames(rec.png_frames(paths))
+        rec.check_png_frames(rec.depth_frames(paths, read_exr))
         for a, b in numbering_gaps(paths):
             notes.append(f"frames missing in the numbering between {a} and {b}")
         camera = ViewCamera(intr, np.eye(4) if c2w is None else c2w)
         notes.append("poses in the world frame of intrinsics.json's cam_to_world" if c2w is not None
                      else "poses in the camera frame (OpenCV: +X right, +Y down, +Z forward)")
-        return cls(paths, camera, c2w is not None, opts, notes, setup_paths=all_paths)
+        return cls(paths, camera, c2w is not None, opts, notes, setup_paths=all_paths, read_exr=read_exr)
 
     def __len__(self) -> int:
         return len(self.paths)
@@ -88,7 +91,7 @@ class DepthRecording:
     def prepare(self, progress=None) -> None:
         """Fit the floor (and background) once; rescales the intrinsics to the frames' size."""
         if self.setup is None:
-            frames = rec.png_frames(self.setup_paths or self.paths)
+            frames = rec.depth_frames(self.setup_paths or self.paths, self.read_exr)
             self.setup = rec.recording_setup(frames, self.camera.intr, self.options,
                                              progress=progress or (lambda f, t="": None))
             self.camera = ViewCamera(self.setup.intr, self.camera.cam_to_world)
@@ -106,7 +109,7 @@ class DepthRecording:
     def observations(self, max_points: int, start: int = 0):
         """``(k, Observation)`` for every frame from ``start``, decoded in order."""
         self.prepare()
-        frames = rec.png_frames(self.paths)
+        frames = rec.depth_frames(self.paths, self.read_exr)
         s = self.setup
         for k, z in rec.stream_metres(frames[start:], self.options, s.shape):
             yield start + k, observe(z, s.rays, self.camera, self.options, s.background, s.floor, max_points=max_points)

@@ -44,6 +44,7 @@ def test_readme_and_docs_list_the_table():
     assert f"camera preset ({labels})" in text("README.md")
     assert f"Camera: {quoted};" in text("docs", "import_depth.md")
     assert f"--camera {'|'.join(NAMES)}" in text("docs", "depth_samples.md")
+    assert f"`--camera` ({quoted};" in text("docs", "track_depth.md")
 
 
 @pytest.mark.parametrize("spelling", ["AZURE_KINECT", "azure_kinect", "Azure Kinect (NFOV)", "azure_kinect_nfov"])
