@@ -3,11 +3,11 @@
 Evaluation of rig learning (issues 4 and 19) against exact ground truth and the peer tool Dem Bones:
 training error, held-out error, joint-centre error, time and memory of ``solver.learn.pipeline.learn_rig``.
 (``bench_learn_speed.py`` times the learner's stages; this one evaluates the result.)  Helpers:
-``_learn_runs.py``; section 0: ``_learn_issue19.py``.
+``_learn_runs.py``; section 0: ``_learn_bodies.py``.
 
 Sections (every number with its unit; the output is also written to ``bench/results/``):
 
-0. Issue 19 (``--order issue19``; ``_learn_issue19.py`` has the definitions): MakeHuman ``cmu_mb`` subjects
+0. Issue 19 (``--order issue19``; ``_learn_bodies.py`` has the definitions): MakeHuman ``cmu_mb`` subjects
    of three shapes (range-of-motion poses + walk frames), the skinning_gt wolf and the fox sequence; per
    case ``learn_rig`` with its default options, then Dem Bones with as many bones as ours chose, in the same
    run.  One row per case: RMSE ratio (ours / Dem Bones), wall-time ratio (our whole learn_rig call, report
@@ -85,7 +85,7 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))   # bench_cli loads us by path
 import numpy as np  # noqa: E402
 
-import _learn_issue19 as i19  # noqa: E402
+import _learn_bodies as i19  # noqa: E402
 import _learn_runs as runs  # noqa: E402  (also makes ``import articula`` work)
 from _learn_runs import (HERE, REPO, SHARED, DEMBONES_PIN, Tee, line, stats_text, machine,  # noqa: E402
                          learner_status, learn_detail, learn_or_fail, versus, wall_split, dembones_python,

@@ -1,5 +1,5 @@
-"""Section 0 of ``bench_learn.py`` (``--order issue19``): issue 19, "Learned rigs that an animator can use on
-any body".  Per case, ``learn_rig`` with its DEFAULT options (the part count chosen from the motion; the
+"""Section 0 of ``bench_learn.py`` (``--order issue19``): learned rigs that an animator can use on any body
+(issue 19).  Per case, ``learn_rig`` with its DEFAULT options (the part count chosen from the motion; the
 child process of :func:`_learn_runs.run_learner`), then Dem Bones (``dembones_runner.py``, its default
 parameters, the first scan as its rest mesh, as learn_rig sees only scans) with as many bones as ours chose,
 one after the other in the same run.  Printed per case:
