@@ -7,7 +7,8 @@ empty scene (no default cube, camera and light).  The importers write their cach
 opened file, and saving (:func:`save_blend`, Blender's own save: a ``.blend1`` backup of the file it
 replaces, as the preferences' save versions say) carries them beside the .blend with relative paths
 (``addon/sequences/playback.py``).  A command that fails saves nothing: an existing file keeps its bytes,
-no new file is made, and the caches the command wrote are removed.  So does a command given no
+no new file is made, and the caches the command wrote are removed (:mod:`.outputs`, around every
+command, removes any other output a failed command started: bundle, report, temporary files).  So does a command given no
 ``--blend`` (also with ``--open file.blend``: the opened file is never saved over unasked); its last
 line says so (:data:`NOT_SAVED`).
 """
