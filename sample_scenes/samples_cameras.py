@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import time
 
+from ..solver.depth import camera
 from ..solver.errors import ArticulaInputError
 from .arguments import add_motion_arguments, add_subject_arguments, sequence_from_args
 from .depth_noise import NOISELESS, NoiseParams
@@ -47,8 +48,8 @@ def _noise(args) -> NoiseParams:
 def _add_common(p) -> None:
     add_subject_arguments(p)
     add_motion_arguments(p)
-    p.add_argument("--camera", default="kinect_v1",
-                   help="camera preset: kinect_v1, kinect_v2, azure_kinect_nfov, realsense_d435")
+    p.add_argument("--camera", default="kinect_v1", type=camera.preset_key, choices=tuple(camera.PRESETS),
+                   help=f"camera preset: {', '.join(camera.PRESETS)}")
     p.add_argument("--noise", default="auto", choices=("auto", "kinect_v1", "mm", "none"),
                    help="kinect_v1: Kinect v1 model with 1/8 px disparity steps; mm: the same noise with "
                    "millimetre rounding only (used for the other cameras by auto); none: exact depth")

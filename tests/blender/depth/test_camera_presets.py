@@ -32,6 +32,7 @@ def test_table_names_every_place(pkg):
     assert tuple(_flag(parser, "import-depth", "--preset").choices) == NAMES
     assert tuple(_flag(parser, "track", "--camera").choices) == NAMES
     assert tuple(_flag(parser, "farm", "track", "--camera").choices) == NAMES
+    assert tuple(_flag(parser, "samples", "depth", "--camera").choices) == NAMES
 
 
 def test_readme_and_docs_list_the_table():
