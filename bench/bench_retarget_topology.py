@@ -12,10 +12,12 @@ vertices from the vertices it is fitted to, averaged over frames (max in bracket
 Usage: ``./run bench retarget_topology [frames]``; ``./run bench retarget`` prints the same lines
 (:func:`topology_lines`).
 """
+import os
 import sys
 import time
 
-import _common  # noqa: F401  (makes ``import articula`` work)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))   # the bench command loads us by path
+import _common  # noqa: F401,E402  (makes ``import articula`` work)
 
 from articula.sample_scenes.registered import make_poses
 from articula.sample_scenes.subjects import make_subject

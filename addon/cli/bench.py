@@ -37,6 +37,8 @@ def run(args) -> int:
         raise ArticulaInputError(f"no benchmark {args.name!r}; available: {', '.join(names) or 'none'}"
                                  " (benchmarks run from a source checkout)")
     path = os.path.join(_BENCH_DIR, f"bench_{args.name}.py")
+    if _BENCH_DIR not in sys.path:          # a benchmark imports its helpers (_common, _*.py) by name
+        sys.path.insert(0, _BENCH_DIR)
     spec = importlib.util.spec_from_file_location(f"articula_bench_{args.name}", path)
     mod = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = mod
