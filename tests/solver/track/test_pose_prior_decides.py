@@ -61,3 +61,33 @@ def test_without_the_prior_the_twist_stays_where_it_started(hand_twist):
     model, hand, _, truth, start = hand_twist
     out, _ = _fit(model, truth, start, None)
     assert abs(quat_to_rotvec(out.pose.rotations[0, hand])[1]) < 0.05
+
+
+def test_the_tracker_uses_the_models_own_prior():
+    """The whole tracker (``pipeline.track_sequence`` with ``prior="model"``, the prior learned from the
+    model's poses whose hand twists by 0.5 +- 0.15 rad) from a start twisted by 0.2: the twist ends at the
+    true 0.5; with ``prior="none"`` it stays at 0.2."""
+    from articula.solver.track import pipeline
+    from articula.solver.track.options import TrackOptions
+    model = synthetic.tube_body()
+    sk = model.skeleton
+    B, hand = sk.num_bones, sk.names.index("hand.L")
+    rng = np.random.default_rng(0)
+    train = rng.normal(scale=0.05, size=(40, B, 3))
+    train[:, 0] = 0.0
+    train[:, hand] = [0.0, TWIST, 0.0] + rng.normal(scale=0.15, size=(40, 3))
+    poses = Poses(rotvec_to_quat(train), np.zeros((40, 3)), np.ones(40))
+    r = np.random.default_rng(5).normal(scale=0.05, size=(B, 3))
+    r[0] = 0.0
+    r[hand] = [0.0, TWIST, 0.0]
+    posed = hybrid_skin(model, Poses(rotvec_to_quat(r)[None], np.zeros((1, 3)), np.ones(1)))[0]
+    r[hand] = [0.0, 0.2, 0.0]
+    start = Poses(rotvec_to_quat(r)[None], np.zeros((1, 3)), np.ones(1))
+    captures = [ff.Capture(posed, vertex_normals(posed, model.faces))]
+    twist = {}
+    for prior in ("model", "none"):
+        res = pipeline.track_sequence(model, captures, TrackOptions(prior=prior, temporal=False, max_points=0),
+                                      poses, start_pose=start)
+        twist[prior] = quat_to_rotvec(res.poses.rotations[0, hand])[1]
+    assert abs(twist["model"] - TWIST) < 0.02
+    assert abs(twist["none"] - 0.2) < 0.02
