@@ -4,6 +4,7 @@ after it wrote an earlier output (``--report`` at an existing folder after the b
 existing folder after the work); it must exit non-zero and leave the output folder as it was (no
 bundle, report, temporary file, .blend or cache; a replaced file back to its bytes), and no cache in
 ``ARTICULA_HOME``."""
+import collections
 import hashlib
 import os
 
@@ -90,7 +91,7 @@ def commands(i, out) -> dict:
         "build-rig": ["build-rig", "--bundle", i["bundle"], "--blend", taken],
         "bake": ["bake", "--bundle", i["bundle"], "--blend", i["rig"], "--out", taken],
         "export-bundle": ["export-bundle", "--blend", i["rig"], "--out", taken],
-        "export-lbs": ["export-lbs", "--blend", i["rig"], "--out", os.path.join(taken)],
+        "export-lbs": ["export-lbs", "--blend", i["rig"], "--out", taken],
         "import-scans": ["import-scans", "--scans", i["scans"], "--blend", taken],
         "import-depth": ["import-depth", "--depth", i["depth"], "--blend", taken],
         "learn-rig": ["learn-rig", "--scans", i["learn_scans"], "--parts", "4", "--iterations", "0", "--threads",
@@ -131,14 +132,14 @@ def parser_commands(main) -> set:
     return names(main.build_parser()) - {"help"}
 
 
-def test_every_command_is_covered(pkg, tmp_path):
-    assert parser_commands(pkg("addon.cli.main")) == set(commands({k: "" for k in (
-        "bundle", "rig", "scans", "learn_scans", "person", "captures", "depth", "chunks", "subjects", "bvh")},
-        str(tmp_path)))
+NAMES = sorted(commands(collections.defaultdict(str), ""))
 
 
-@pytest.mark.parametrize("command", sorted(commands({k: "" for k in (
-    "bundle", "rig", "scans", "learn_scans", "person", "captures", "depth", "chunks", "subjects", "bvh")}, "")))
+def test_every_command_is_covered(pkg):
+    assert parser_commands(pkg("addon.cli.main")) == set(NAMES)
+
+
+@pytest.mark.parametrize("command", NAMES)
 def test_a_failed_command_writes_nothing(pkg, inputs, tmp_path, command, monkeypatch):
     home = tmp_path / "home"
     if not command.startswith(("samples", "demo")):       # those read the MakeHuman assets cached there
