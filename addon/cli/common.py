@@ -16,6 +16,7 @@ import contextlib
 import io
 import json
 import os
+import re
 import sys
 
 import bpy
@@ -167,3 +168,9 @@ def finish(summary: str, blend: str = "", scene: bool = True) -> int:
         opened = f" ({os.path.basename(bpy.data.filepath)} is unchanged)" if bpy.data.filepath else ""
         print(NOT_SAVED + opened)
     return 0
+
+
+def allow_axis_values(parser) -> None:
+    """Let a command's options take signed axis values such as ``-Y`` (``--facing -Y``, ``--up -Z``): argparse
+    would take them for options, as it would ``-1`` if it did not know negative numbers."""
+    parser._negative_number_matcher = re.compile(r"^-\d+$|^-\d*\.\d+$|^-[XYZxyz]$")

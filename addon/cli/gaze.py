@@ -11,7 +11,7 @@ import bpy
 
 from ...solver.errors import ArticulaInputError
 from ..gaze.chain import FACINGS
-from .common import call_operator, check_blend_output, finish, open_blend
+from .common import allow_axis_values, call_operator, check_blend_output, finish, open_blend
 
 
 def _frames(text: str):
@@ -59,6 +59,7 @@ def add_commands(sub):
     p.add_argument("--split", default="0.1,0.4,0.5", help="shares of the turn for chest,neck,head")
     for role in ("chest", "neck", "head"):
         p.add_argument(f"--{role}", default="", help=f"the {role} bone (default: found by role)")
+    allow_axis_values(p)
     p.add_argument("--facing", choices=("AUTO", *FACINGS), default="AUTO",
                    help="where the face points in the rest pose (default: annotated eyes, else the body's facing)")
     p.add_argument("--out", required=True, help=".blend to save the result to")

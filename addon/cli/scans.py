@@ -12,13 +12,12 @@ file (``<blend name>_articula/``) and referenced relative to it.  A failed impor
 """
 import argparse
 import os
-import re
 
 import bpy
 
 from ...solver.errors import ArticulaInputError
 from ...solver.formats.axes import AUTO, parse_axis
-from .common import call_operator, editing, finish
+from .common import allow_axis_values, call_operator, editing, finish
 
 
 def run(args) -> int:
@@ -60,8 +59,7 @@ def _axis(text: str) -> str:
 
 def add_axis_arguments(p) -> None:
     """``--forward`` / ``--up`` (X, Y, Z, -X, -Y, -Z or auto) of a command reading scan files."""
-    # "-Z" would otherwise be taken for an option: let values like -X pass as argparse lets -1 pass.
-    p._negative_number_matcher = re.compile(r"^-\d+$|^-\d*\.\d+$|^-[XYZxyz]$")
+    allow_axis_values(p)
     for flag, which in (("--forward", "+Y (forward)"), ("--up", "+Z (up)")):
         p.add_argument(flag, default=AUTO, type=_axis, metavar="AXIS",
                        help=f"the files' axis that becomes Blender's {which}: X, Y, Z, -X, -Y, -Z (default auto: "
