@@ -38,7 +38,8 @@ import numpy as np  # noqa: E402
 
 from _armatures import new_armature  # noqa: E402
 from articula.sample_scenes import mpfb_armature  # noqa: E402
-from articula.solver.retarget import foot_plant, metrics  # noqa: E402
+import _retarget_metrics as metrics  # noqa: E402
+from articula.solver.retarget import foot_plant  # noqa: E402
 from articula.solver.retarget.armature import world_pose  # noqa: E402
 from articula.solver.retarget.roles import LEG_ROLES  # noqa: E402
 

@@ -134,9 +134,7 @@ BENCH = os.path.join(REPO, "bench")
 # The extension's two entry points: register() (Blender) and the batch commands (batch.py).
 ENTRY_POINTS = ("addon.registration", "addon.cli.main")
 # Product modules that only tests or benches import, kept for a stated reason (empty is the goal).
-USED_OUTSIDE_THE_PRODUCT_ONLY = {
-    "solver.retarget.metrics": "being extended by issue 32 items 1-2 (retarget angles); moves to bench/ after",
-}
+USED_OUTSIDE_THE_PRODUCT_ONLY = {}
 
 
 def _bench_trees():

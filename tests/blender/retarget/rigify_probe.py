@@ -31,7 +31,9 @@ def pkg(name):
 
 
 def main():
-    directions, metrics = pkg("solver.retarget.directions"), pkg("solver.retarget.metrics")
+    directions = pkg("solver.retarget.directions")
+    sys.path.insert(0, batch.dev_package_root())                  # the checkout as ``articula``
+    from articula.bench import _retarget_metrics as metrics
     world_pose = pkg("solver.retarget.armature").world_pose
     bpy.ops.wm.read_homefile(use_empty=True)
     bpy.ops.object.armature_human_metarig_add()

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from articula.sample_scenes.registered import generate_registered, posed_sequence
-from articula.solver.retarget import metrics
+from articula.bench import _retarget_metrics as metrics
 from articula.solver.retarget.armature import world_pose
 from ...conftest import SHARED_DATA
 from ..learn.test_learn_rig import import_sequence

@@ -15,7 +15,8 @@ from mathutils import Euler, Matrix
 
 from articula.bench._armatures import new_armature
 from articula.sample_scenes import mpfb_armature
-from articula.solver.retarget import directions, metrics
+from articula.bench import _retarget_metrics as metrics
+from articula.solver.retarget import directions
 from articula.solver.retarget.armature import world_pose
 from ...conftest import SHARED_DATA
 

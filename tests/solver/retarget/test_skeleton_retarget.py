@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from articula.solver.errors import ArticulaInputError
-from articula.solver.retarget import directions, metrics
+from articula.bench import _retarget_metrics as metrics
+from articula.solver.retarget import directions
 from articula.solver.retarget.armature import forward, local_matrices, world_pose
 from articula.solver.geometry.rotations import quat_to_matrix
 from articula.solver.retarget.mapping import Mapping
