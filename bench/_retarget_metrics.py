@@ -1,7 +1,8 @@
 """How well a retargeted clip follows its source: segment directions, root travel, foot sliding.
 
 Inputs are world-space joint positions read back independently of the solver (e.g. from Blender's
-evaluated pose); ``segs`` are :class:`.directions.Segment` (only those with a child joint count).
+evaluated pose); ``segs`` are :class:`solver.retarget.directions.Segment` (only those with a child joint
+count).  Used by ``./run bench retarget`` and the retargeting tests (as ``articula.bench._retarget_metrics``).
 """
 from __future__ import annotations
 
