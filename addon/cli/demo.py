@@ -17,7 +17,8 @@
 5. lays the results out side by side (depth recording, ground-truth rig, scans, learned rig, tracked
    rig over its captures), saves
    ``<out>/demo.blend`` and renders ``<out>/demo.png`` (Workbench, headless; the learned rig in its
-   heat-map colours, blue 0 mm to red at the largest error).
+   heat-map colours, blue 0 mm to red at the largest error);
+6. prints one summary line with the numbers the README's caption quotes (:func:`summary_line`).
 """
 from __future__ import annotations
 
