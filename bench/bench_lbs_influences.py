@@ -11,6 +11,7 @@ Usage: ./run bench lbs_influences [--segments 4]
 import argparse
 import os
 import sys
+import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))   # bench_cli loads us by path
 import _common  # noqa: E402  (makes ``import articula`` work)
@@ -29,7 +30,9 @@ def main(argv=None) -> int:
     weights = {"unlimited": unlimited}
     for k in (4, 8):
         weights[f"k={k} truncated"] = influences.truncate(unlimited, k)
+        t0 = time.perf_counter()
         weights[f"k={k} optimised"] = lb.limited_weights(model, args.segments, k, fit)[1]
+        _common.report(f"k={k} optimised weights: fit time", time.perf_counter() - t0, "s", "wall")
     print(f"MakeHuman cmu_mb female: {model.num_vertices} vertices, {B} bones, {args.segments} segments")
     for label, poses in ((f"fitted poses (seed {lb.FIT_SEED})", fit), (f"held-out poses (seed {lb.MEASURE_SEED})", held_out)):
         for name, W in weights.items():
