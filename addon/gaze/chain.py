@@ -59,6 +59,25 @@ def eye_bones(arm_ob, rest, head: int) -> list:
     return [b for b in below if rest.bones[b] not in busy]
 
 
+def _up(heads: np.ndarray, roles: dict) -> np.ndarray:
+    """The armature axis (unit, signed) nearest the hips-to-head line of rest joint positions ``heads`` (B,3)."""
+    body = heads[roles["head"]] - heads[roles.get("hips", roles.get("chest", roles["head"]))]
+    up = np.zeros(3)
+    if np.linalg.norm(body) < 1e-9:
+        up[2] = 1.0
+        return up
+    axis = int(np.argmax(np.abs(body)))
+    up[axis] = np.sign(body[axis])
+    return up
+
+
+def _level(direction: np.ndarray, up: np.ndarray):
+    """``direction`` with its component along ``up`` removed, unit length; None when it is (nearly) vertical."""
+    flat = direction - up * (direction @ up)
+    n = np.linalg.norm(flat)
+    return flat / n if n > 1e-6 else None
+
+
 def _facing(rest, roles: dict) -> np.ndarray:
     """Unit forward direction (armature space) of an upright character's rest pose: horizontal, i.e.
     ``left × up`` with ``up`` the armature axis nearest the hips-to-head line and ``left`` (thighs, upper
@@ -66,20 +85,22 @@ def _facing(rest, roles: dict) -> np.ndarray:
     front) when these bones are missing."""
     _, heads = rest_world(rest)
     heads = rest.armature_points(heads)
-    body = heads[roles["head"]] - heads[roles.get("hips", roles.get("chest", roles["head"]))]
-    up = np.zeros(3)
-    axis = int(np.argmax(np.abs(body)))
-    up[axis] = np.sign(body[axis])
-    left = None
+    up = _up(heads, roles)
     for a, b in (("thigh.L", "thigh.R"), ("upper_arm.L", "upper_arm.R"), ("shoulder.L", "shoulder.R")):
         if a in roles and b in roles:
-            left = heads[roles[a]] - heads[roles[b]]
-            left = left - up * (left @ up)
-            break
-    if left is None or np.linalg.norm(body) < 1e-9 or np.linalg.norm(left) < 1e-9:
-        return np.array([0.0, -1.0, 0.0])
-    f = np.cross(left, up)
-    return f / np.linalg.norm(f)
+            left = _level(heads[roles[a]] - heads[roles[b]], up)
+            if left is not None:
+                return np.cross(left, up)
+    return np.array([0.0, -1.0, 0.0])
+
+
+def _level_line(line, rest, roles: dict):
+    """The annotated gaze line with its direction made level (perpendicular to the rest's up): the
+    nasion-to-occiput axis pitches down by a few degrees, more on a stooped body, and the rest facing of an
+    upright character is horizontal."""
+    _, heads = rest_world(rest)
+    forward = _level(line[1], _up(rest.armature_points(heads), roles))
+    return line[0], (line[1] if forward is None else forward)
 
 
 def _annotated_line(arm_ob, rest):
@@ -124,7 +145,7 @@ def gaze_chain(arm_ob, rest, overrides=None, shares=SHARES, max_deg=MAX_DEG, fac
         origin = rest.rest[eyes, :3, 3].mean(axis=0) if eyes else (rest.rest[head, :3, 3] + rest.tails[head]) / 2
         how = f"facing {facing} (set by hand)"
     elif line is not None:
-        origin, forward, how = line[0], line[1], "annotated MakeHuman eyes and back of head"
+        (origin, forward), how = _level_line(line, rest, all_roles), "annotated MakeHuman eyes, level"
     else:
         forward = _facing(rest, all_roles)
         if eyes:
