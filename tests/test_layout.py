@@ -237,3 +237,16 @@ def test_docstrings_cite_documents_that_exist(top):
             if not any(os.path.isfile(os.path.join(REPO, w)) for w in where):
                 bad.append(f"{rel} cites {cited}")
     assert not bad, bad
+
+
+def test_cited_bench_lines_exist():
+    """Every ``./run bench NAME`` in the README and docs/ names a benchmark that exists (bench/bench_NAME.py):
+    a number's reproduction line must run."""
+    bad = []
+    docs = [os.path.join(REPO, "README.md")] + [os.path.join(REPO, "docs", n) for n in sorted(os.listdir(
+        os.path.join(REPO, "docs"))) if n.endswith(".md")]
+    for path in docs:
+        for name in set(re.findall(r"\./run bench ([a-z_0-9]+)", open(path, encoding="utf-8").read())):
+            if name != "list" and not os.path.isfile(os.path.join(BENCH, f"bench_{name}.py")):
+                bad.append(f"{os.path.relpath(path, REPO)}: ./run bench {name}")
+    assert not bad, bad
