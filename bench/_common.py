@@ -19,6 +19,19 @@ def report(name: str, value, unit: str = "", note: str = "") -> None:
     print(f"{name}: {text} {unit}".rstrip() + (f"  ({note})" if note else ""), flush=True)
 
 
+def best_time(fn, repeats, clock=None):
+    """(best time in seconds over ``repeats`` calls of ``fn``, the last call's result); ``clock`` defaults to
+    ``time.perf_counter`` (wall), ``time.process_time`` measures CPU."""
+    import time
+    clock = clock or time.perf_counter
+    best, out = float("inf"), None
+    for _ in range(repeats):
+        t0 = clock()
+        out = fn()
+        best = min(best, clock() - t0)
+    return best, out
+
+
 def cpu_seconds():
     """CPU time (s) of this process (all threads) plus that of its children that have been waited for
     (the solver's forked helper processes, :class:`solver.parallel.ForkedCall`)."""

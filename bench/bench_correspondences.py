@@ -15,21 +15,11 @@ Usage: ./run bench correspondences [--repeats 3]
 import argparse
 import os
 import sys
-import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))   # bench_cli loads us by path
 import _common  # noqa: E402  (makes ``import articula`` work)
 
 import numpy as np  # noqa: E402
-
-
-def _best(fn, repeats):
-    best, out = float("inf"), None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
 
 
 def _scan(model, faces, resolution, seed):
@@ -42,7 +32,7 @@ def _scan(model, faces, resolution, seed):
 def _bench_visibility(model, normals, faces, cams, repeats):
     from articula.solver.track.visibility import visible_vertices
     for scale in (1.0, 0.5):
-        dt, seen = _best(lambda: visible_vertices(model, normals, faces, cams, scale), repeats)
+        dt, seen = _common.best_time(lambda: visible_vertices(model, normals, faces, cams, scale), repeats)
         w, h = cams[0][1].width, cams[0][1].height
         _common.report(f"visibility 4 cameras {w}x{h} scale {scale}", dt * 1000, "ms",
                        f"{seen.sum()} of {len(model)} vertices visible")
@@ -51,7 +41,8 @@ def _bench_visibility(model, normals, faces, cams, repeats):
 def _bench_call(label, model, normals, faces, points, pnormals, tris, cams, repeats, **options):
     from articula.solver.track import correspondences as corr
     opts = corr.CorrespondenceOptions(**options)
-    dt, out = _best(lambda: corr.correspondences(model, faces, normals, points, pnormals, tris, cams, opts), repeats)
+    dt, out = _common.best_time(
+        lambda: corr.correspondences(model, faces, normals, points, pnormals, tris, cams, opts), repeats)
     cap = out.from_capture
     stages = ", ".join(f"{k} {v * 1000:.0f}" for k, v in out.stats["seconds"].items())
     _common.report(f"{label}: {len(points)} points", dt * 1000, "ms",

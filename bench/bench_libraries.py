@@ -37,16 +37,6 @@ import numpy as np  # noqa: E402
 DEM = os.path.join(os.path.dirname(os.path.realpath(_common.REPO)), "shared", "data", "dem_bones")
 
 
-def _best(fn, repeats, clock=time.perf_counter):
-    """(best time over ``repeats`` calls, last result)."""
-    best, out = float("inf"), None
-    for _ in range(repeats):
-        t0 = clock()
-        out = fn()
-        best = min(best, clock() - t0)
-    return best, out
-
-
 def _makehuman():
     """(posed vertices (3, 13380, 3), triangles (26756, 3), quads (13378, 4)) of a 3-pose sample sequence."""
     from articula.sample_scenes.registered import posed_sequence
@@ -95,8 +85,8 @@ def _loading(repeats):
         for fmt in ("obj", "ply"):
             path = os.path.join(tmp, f"mh.{fmt}")
             SequenceWriter(quads, fmt).write(path, posed[0])
-            t_ours, _ = _best(lambda: read_mesh(path), repeats)
-            t_tm, _ = _best(lambda: trimesh.load(path, process=False), repeats)
+            t_ours, _ = _common.best_time(lambda: read_mesh(path), repeats)
+            t_tm, _ = _common.best_time(lambda: trimesh.load(path, process=False), repeats)
             _common.report(f"load 13380-vertex {fmt.upper()}", f"ours {1e3 * t_ours:.1f} ms, trimesh "
                            f"{1e3 * t_tm:.1f} ms", note="best wall time")
             _exactness(f"  {fmt.upper()}", *_load_pair(path))
@@ -104,8 +94,8 @@ def _loading(repeats):
         paths = [os.path.join(tmp, f"f{i:04d}.obj") for i in range(len(frames))]
         for p, v in zip(paths, frames):
             writer.write(p, v)
-        t_ours, _ = _best(lambda: [read_mesh(p) for p in paths], max(1, repeats // 2))
-        t_tm, _ = _best(lambda: [trimesh.load(p, process=False) for p in paths], max(1, repeats // 2))
+        t_ours, _ = _common.best_time(lambda: [read_mesh(p) for p in paths], max(1, repeats // 2))
+        t_tm, _ = _common.best_time(lambda: [trimesh.load(p, process=False) for p in paths], max(1, repeats // 2))
         _common.report(f"load {len(paths)} OBJs of {frames.shape[1]} vertices ({name})",
                        f"ours {t_ours:.3f} s, trimesh {t_tm:.3f} s", note="best wall time")
         _exactness("  small OBJ", *_load_pair(paths[0]))
@@ -160,14 +150,14 @@ def _brute_force(point, vertices, faces):
 def _distance_case(label, points, vertices, faces, repeats, with_trimesh):
     import trimesh
     from articula.solver.geometry.surface_distance import distance_to_surface
-    t_ours, ours = _best(lambda: distance_to_surface(points, vertices, faces), repeats, time.process_time)
+    t_ours, ours = _common.best_time(lambda: distance_to_surface(points, vertices, faces), repeats, time.process_time)
     if not with_trimesh:
         _common.report(label, f"ours {t_ours:.3f} s", note="CPU time; trimesh needs rtree (--rtree DIR)")
         return
 
     def theirs_fn():
         return trimesh.proximity.closest_point(trimesh.Trimesh(vertices, faces, process=False), points)[1]
-    t_tm, theirs = _best(theirs_fn, repeats, time.process_time)
+    t_tm, theirs = _common.best_time(theirs_fn, repeats, time.process_time)
     diff = np.abs(ours - theirs)
     worst = int(np.argmax(diff))
     brute = _brute_force(points[worst], vertices, faces)
@@ -248,8 +238,8 @@ def _graph(repeats):
          lambda: trimesh.graph.connected_component_labels(mesh().edges_unique, node_count=nv)),
     ]
     for label, ours_fn, tm_fn in cases:
-        t_ours, ours = _best(ours_fn, repeats, time.process_time)
-        t_tm, theirs = _best(tm_fn, repeats, time.process_time)
+        t_ours, ours = _common.best_time(ours_fn, repeats, time.process_time)
+        t_tm, theirs = _common.best_time(tm_fn, repeats, time.process_time)
         _common.report(f"graph {label}", f"ours {1e3 * t_ours:.1f} ms, trimesh {1e3 * t_tm:.1f} ms "
                        f"(Trimesh construction included); identical arrays {_same(ours, theirs)}",
                        note="13380 vertices, CPU time")
@@ -263,8 +253,8 @@ def _trees(repeats):
     c = pts.mean(axis=0)
     _, axes = np.linalg.eigh(np.cov((pts - c).T))
     queries = np.concatenate([pts - 2.0 * np.outer((pts - c) @ n, n) for n in axes.T])
-    t_default, (d_default, _) = _best(lambda: cKDTree(pts).query(queries), repeats, time.process_time)
-    t_far, (d_far, _) = _best(lambda: far_query_tree(pts).query(queries), repeats, time.process_time)
+    t_default, (d_default, _) = _common.best_time(lambda: cKDTree(pts).query(queries), repeats, time.process_time)
+    t_far, (d_far, _) = _common.best_time(lambda: far_query_tree(pts).query(queries), repeats, time.process_time)
     _common.report("k-d tree, reflected points: far_query_tree", t_far, "s",
                    f"scipy's default tree {t_default:.3f} s ({t_default / t_far:.2f}x); distances identical "
                    f"{bool(np.array_equal(d_far, d_default))}; {len(pts)} points, {len(queries)} queries, CPU time, "

@@ -30,22 +30,12 @@ from articula.solver.geometry.surface_distance import per_vertex_scan_distances 
 from articula.solver.rig.skinning import hybrid_skin  # noqa: E402
 
 
-def _best(fn, repeats):
-    """(best wall seconds over ``repeats`` calls, the last result)."""
-    best, out = float("inf"), None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
-
-
 def _one_vs_two(label, fn, repeats, note):
     """Time ``fn`` with one worker and with two; report both and whether the results agree."""
     with parallel.using(1):
-        t1, r1 = _best(fn, repeats)
+        t1, r1 = _common.best_time(fn, repeats)
     with parallel.using(2):
-        t2, r2 = _best(fn, repeats)
+        t2, r2 = _common.best_time(fn, repeats)
     diff = float(np.abs(np.asarray(r1) - np.asarray(r2)).max())
     _common.report(f"{label}: two workers", t2, "s", f"one worker {t1:.3f} s ({t1 / t2:.2f}x); {note}; "
                                                     f"largest difference {diff:.1e}")

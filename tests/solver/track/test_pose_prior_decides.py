@@ -17,25 +17,35 @@ from articula.solver.track.visibility import vertex_normals
 TWIST = 0.5        # radians about the hand's own axis (bone-local +Y)
 
 
+def _twisted_hand_poses(sk, hand, spread):
+    """40 training rotation vectors (40, B, 3): small random bends, the hand twisted by TWIST +- ``spread``."""
+    rng = np.random.default_rng(0)
+    train = rng.normal(scale=0.05, size=(40, sk.num_bones, 3))
+    train[:, 0] = 0.0
+    train[:, hand] = [0.0, TWIST, 0.0] + rng.normal(scale=spread, size=(40, 3))
+    return train
+
+
+def _with_hand_twist(r, hand, twist):
+    """One-frame Poses of rotation vectors ``r`` (B, 3) with the hand's twist set to ``twist`` radians."""
+    r = r.copy()
+    r[hand] = [0.0, twist, 0.0]
+    return Poses(rotvec_to_quat(r)[None], np.zeros((1, 3)), np.ones(1))
+
+
 @pytest.fixture(scope="module")
 def hand_twist():
     """(model, hand bone, prior, true pose, start pose with the hand untwisted)."""
     model = synthetic.tube_body()
     sk = model.skeleton
     B, hand = sk.num_bones, sk.names.index("hand.L")
-    rng = np.random.default_rng(0)
-    train = rng.normal(scale=0.05, size=(40, B, 3))
-    train[:, 0] = 0.0
-    train[:, hand] = [0.0, TWIST, 0.0] + rng.normal(scale=0.05, size=(40, 3))
+    train = _twisted_hand_poses(sk, hand, 0.05)
     # margin 1: the box (0.25..0.74 rad of twist) leaves the mixture to find the twist inside it
     prior = PosePrior.from_poses(sk, Poses(rotvec_to_quat(train), np.zeros((40, 3)), np.ones(40)), k_max=1,
                                  margin=1.0)
     r = np.random.default_rng(5).normal(scale=0.05, size=(B, 3))
     r[0] = 0.0
-    r[hand] = [0.0, TWIST, 0.0]
-    truth = Poses(rotvec_to_quat(r)[None], np.zeros((1, 3)), np.ones(1))
-    r[hand] = 0.0
-    start = Poses(rotvec_to_quat(r)[None], np.zeros((1, 3)), np.ones(1))
+    truth, start = _with_hand_twist(r, hand, TWIST), _with_hand_twist(r, hand, 0.0)
     return model, hand, prior, truth, start
 
 
@@ -72,17 +82,12 @@ def test_the_tracker_uses_the_models_own_prior():
     model = synthetic.tube_body()
     sk = model.skeleton
     B, hand = sk.num_bones, sk.names.index("hand.L")
-    rng = np.random.default_rng(0)
-    train = rng.normal(scale=0.05, size=(40, B, 3))
-    train[:, 0] = 0.0
-    train[:, hand] = [0.0, TWIST, 0.0] + rng.normal(scale=0.15, size=(40, 3))
+    train = _twisted_hand_poses(sk, hand, 0.15)
     poses = Poses(rotvec_to_quat(train), np.zeros((40, 3)), np.ones(40))
     r = np.random.default_rng(5).normal(scale=0.05, size=(B, 3))
     r[0] = 0.0
-    r[hand] = [0.0, TWIST, 0.0]
-    posed = hybrid_skin(model, Poses(rotvec_to_quat(r)[None], np.zeros((1, 3)), np.ones(1)))[0]
-    r[hand] = [0.0, 0.2, 0.0]
-    start = Poses(rotvec_to_quat(r)[None], np.zeros((1, 3)), np.ones(1))
+    posed = hybrid_skin(model, _with_hand_twist(r, hand, TWIST))[0]
+    start = _with_hand_twist(r, hand, 0.2)
     captures = [ff.Capture(posed, vertex_normals(posed, model.faces))]
     twist = {}
     for prior in ("model", "none"):
