@@ -76,11 +76,10 @@ def plan_segments(source: ArmatureRest, target: ArmatureRest, pairs: dict) -> li
                 if target.is_ancestor(t, ct):          # t carries the child, whose own aim would undo t's
                     break
                 continue                               # zero length on a rig: the next child up the line
-            if target.is_ancestor(t, ct):              # turning t aims the segment
-                seg.child, seg.source_child, seg.target_child, seg.aim = child, cs, ct, t
-            elif target.is_ancestor(ct, t):            # reversed: the bone t hangs from aims it
-                seg.child, seg.source_child, seg.target_child = child, cs, ct
-            break
+            seg.child, seg.source_child, seg.target_child = child, cs, ct
+            if not target.is_ancestor(ct, t):          # turning t aims it (through constraints on Rigify)
+                seg.aim = t
+            break                                      # else reversed: the bone t hangs from aims it
         out.append(seg)
     _assign_reversed_aims(target, out)
     return out

@@ -31,7 +31,6 @@ def pkg(name):
 
 
 def main():
-    directions = pkg("solver.retarget.directions")
     sys.path.insert(0, batch.dev_package_root())                  # the checkout as ``articula``
     from articula.bench import _retarget_metrics as metrics
     world_pose = pkg("solver.retarget.armature").world_pose
@@ -55,9 +54,11 @@ def main():
     src, tgt = read(source), read(rig)
     _, hs = world_pose(src, pose_from_scene(source, src, frames))
     _, ht = world_pose(tgt, pose_from_scene(rig, tgt, frames))
-    angles = metrics.segment_angles(directions.plan_segments(src, tgt, mapping.pairs()), hs, ht)
+    angles = metrics.role_segment_angles(mapping.pairs(), src.index, tgt.index, hs, ht, trunk=False)
     return {"preset": found.preset, "upper_arm.L": mapping.pairs()["upper_arm.L"][1],
-            "solved": report["target_solved"], "segments": int(angles.shape[1]), "max_angle": float(angles.max())}
+            "solved": report["target_solved"], "segments": len(angles),
+            "max_angle": max(float(a.max()) for a in angles.values()),
+            "shoulder": "shoulder.L-upper_arm.L" in angles}
 
 
 try:
