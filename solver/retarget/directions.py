@@ -23,7 +23,9 @@ chest) the child role's bone can be an ancestor of r's bone (the spine above the
 bone cannot aim the segment.  Bone r then turns as an end role, and the bone r hangs from (its parent,
 mapped or not) is turned about its own head, after its parents are posed, by the smallest rotation that
 puts r's joint on the source's direction from the child's joint (exact when that parent's head is the
-child's joint; otherwise the nearest point on that line its reach allows).
+child's joint; otherwise the nearest point on that line its reach allows).  A bone aims one segment: its
+own, unless it is the child role's bone and the reversed segment it spans is the longer (a learned chest
+that carries the neck and, below it, the spine); the other segment then turns as an end role.
 """
 from __future__ import annotations
 
@@ -81,20 +83,26 @@ def plan_segments(source: ArmatureRest, target: ArmatureRest, pairs: dict) -> li
                 seg.aim = t
             break                                      # else reversed: the bone t hangs from aims it
         out.append(seg)
-    _assign_reversed_aims(target, out)
+    _assign_reversed_aims(target, out, ht)
     return out
 
 
-def _assign_reversed_aims(target: ArmatureRest, segs) -> None:
-    """Give each reversed segment the parent of its role's bone as aiming bone, unless that bone already
-    aims a segment of its own (then the segment stays unaimed: its role turns as an end role)."""
-    busy = {seg.aim for seg in segs if seg.aim >= 0}
+def _assign_reversed_aims(target: ArmatureRest, segs, heads: np.ndarray) -> None:
+    """Give each reversed segment the parent of its role's bone as aiming bone.  A bone aims one segment:
+    when that bone already aims its own, the reversed one takes it only if the bone is the child role's
+    (it spans the reversed segment, as a learned chest above the spine) and the segment is the longer on
+    the target (world rest ``heads``); the other then turns with its bone as an end role."""
+    length = lambda seg: np.linalg.norm(heads[seg.target_child] - heads[seg.target])  # noqa: E731
+    aims = {seg.aim: seg for seg in segs if seg.aim >= 0}
     for seg in segs:
-        if seg.child is not None and seg.aim < 0:
-            p = int(target.parents[seg.target])
-            if p >= 0 and p not in busy:
-                seg.aim = p
-                busy.add(p)
+        if seg.child is None or seg.aim >= 0 or target.parents[seg.target] < 0:
+            continue
+        p = int(target.parents[seg.target])
+        if p in aims and (p != seg.target_child or length(aims[p]) >= length(seg)):
+            continue
+        if p in aims:
+            aims[p].aim = -1
+        seg.aim, aims[p] = p, seg
 
 
 def body_frame(heads: np.ndarray, segs, which: str) -> np.ndarray:

@@ -123,15 +123,17 @@ def test_root_motion_goes_on_the_bone_that_carries_the_body():
     assert np.abs((heads_t[:, j] - heads_t[0, j]) - (heads_s[:, i] - heads_s[0, i])).max() < 1e-9
 
 
-def _chest_rooted(arm):
+def _chest_rooted(arm, part=True):
     """A learned-like rig from humanoid ``arm``: rooted at the chest, its spine chain reversed (each bone
-    runs down from its upper joint), an unmapped part between the chest and the spine, no spine above."""
+    runs down from its upper joint), an unmapped part between the chest and the spine (or not)."""
     from articula.sample_scenes.mpfb_rig import roll_frames
     from articula.solver.retarget.armature import ArmatureRest
     h = {b: arm.rest[i, :3, 3] for i, b in enumerate(arm.bones)}
     mid = (h["chest"] + h["spine"]) / 2
     spec = [("chest", None, h["chest"], mid), ("part", "chest", mid, h["spine"]),
             ("spine", "part", h["spine"], h["hips"]), ("hips", "spine", h["hips"], h["hips"] - [0, 0, 0.05])]
+    if not part:
+        spec = [spec[0][:3] + (h["spine"],), ("spine", "chest") + spec[2][2:], spec[3]]
     for i, b in enumerate(arm.bones):
         if b not in ("hips", "spine", "chest"):
             spec.append((b, arm.bones[arm.parents[i]], h[b], arm.tails[i]))
@@ -189,3 +191,17 @@ def test_feet_meet_the_ground_of_a_skeleton_that_hangs_from_its_origin():
         ground = 0.0 if src is hanging else min(_lowest_foot(source, world_pose(source, source.rest[None])[1])[0].min(),
                                                 _lowest_foot(source, world_pose(source, source.rest[None])[1])[1])
         assert np.abs((t_low - rest_low) - result.ratio * (s_low - ground)).max() < 1e-9
+
+
+def test_a_chest_that_carries_neck_and_spine_aims_the_longer_segment():
+    """No part between chest and spine: the chest bone spans the reversed spine segment and carries the
+    neck; it aims the longer (the spine: the lean), the neck bone still aims neck to head."""
+    source, roles = humanoid(1.0, rng=np.random.default_rng(6))
+    learned = _chest_rooted(humanoid(1.7, 40.0)[0], part=False)
+    clip, mapping, result = _run(source, roles, learned, roles, frames=30)
+    _, heads_t = _target_pose(learned, result)
+    angles = metrics.role_segment_angles(mapping.pairs(), source.index, learned.index, _heads(source, clip), heads_t,
+                                         trunk=False)
+    assert angles["chest-neck"].max() > 1.0                          # the shorter one gives way
+    off = {k: round(a.max(), 5) for k, a in angles.items() if k != "chest-neck" and a.max() > 1e-4}
+    assert not off and {"hips-spine", "spine-chest"} <= set(angles), off
