@@ -126,29 +126,29 @@ class Event:
 
 
 def modal_operator(base, idname):
-    """A subclass of the real operator class ``base`` whose ``execute`` runs JobOperator's interactive path
-    as the window manager runs it: the worker thread started by ``start_job``, then ``modal`` called with the
-    events of the ``events`` property (e.g. "ESC") and timer events until it ends; ``outcome`` records how
-    the worker ended.  (Background Blender has no window to run a modal handler.)"""
+    """A copy of the real operator class ``base`` (its bases, methods and properties; not a subclass: registering
+    and unregistering a subclass of a registered operator unbinds the real one from Blender) whose ``execute``
+    runs JobOperator's interactive path as the window manager runs it: the worker thread started by
+    ``start_job``, then ``modal`` called with the events of the ``events`` property (e.g. "ESC") and timer
+    events until it ends; ``outcome`` records how the worker ended.  (Background Blender has no window to run a
+    modal handler.)"""
 
-    class Driven(base):
-        bl_idname = idname
-        events: bpy.props.StringProperty(options={'SKIP_SAVE'})
-        outcome = {}
+    def execute(self, context):
+        state = self.start_job(context)
+        for kind in filter(None, self.events.split(",")):
+            state = self.modal(context, Event(kind))
+        while state & {'RUNNING_MODAL', 'PASS_THROUGH'}:
+            time.sleep(0.01)
+            state = self.modal(context, Event('TIMER'))
+        assert not self._thread.is_alive()
+        type(self).outcome = dict(self._outcome)
+        return state
 
-        def execute(self, context):
-            state = self.start_job(context)
-            for kind in filter(None, self.events.split(",")):
-                state = self.modal(context, Event(kind))
-            while state & {'RUNNING_MODAL', 'PASS_THROUGH'}:
-                time.sleep(0.01)
-                state = self.modal(context, Event('TIMER'))
-            assert not self._thread.is_alive()
-            Driven.outcome = dict(self._outcome)
-            return state
-
-    Driven.__name__ = "ARTICULA_OT_" + idname.split(".")[1]
-    return Driven
+    body = {k: v for k, v in base.__dict__.items() if k not in ("bl_rna", "__dict__", "__weakref__")}
+    body["__annotations__"] = {**base.__dict__.get("__annotations__", {}),
+                               "events": bpy.props.StringProperty(options={'SKIP_SAVE'})}
+    body.update(bl_idname=idname, execute=execute, outcome={})
+    return type("ARTICULA_OT_" + idname.split(".")[1], base.__bases__, body)
 
 
 @pytest.fixture
