@@ -161,7 +161,7 @@ def add_commands(sub):
         q.add_argument("--options", default="", help="further flags of the command, quoted (no paths)")
         if name == "learn":
             q.add_argument("--blend", action="store_true", help="also save <subject>.blend")
-        q.set_defaults(func=run_subjects)
+        q.set_defaults(func=run_subjects, partial_outputs=("out_dir",))   # subjects done stay when others fail
     for name, func, what in (("status", run_status, "show a job's tasks"), ("cancel", run_cancel, "cancel a job")):
         q = fs.add_parser(name, help=what)
         _common(q, follow=False)

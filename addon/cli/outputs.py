@@ -6,7 +6,9 @@ output path, at the temporary names writers use beside it (``.tmp.npz`` of
 :func:`solver.formats.bundle.temporary_path`, ``.tmp``, ``.part``, Blender's ``@``) or, for a .blend, in
 its ``<name>_articula`` cache folder is removed; inside an output path that is a folder, what is new in
 it; the folders the command made on the way; and an output file that existed and was replaced gets its
-previous bytes back (a hard link kept while the command runs).  Paths that existed stay.
+previous bytes back (a hard link kept while the command runs).  Paths that existed stay.  A command whose
+outputs are many independent results (``farm learn``/``farm import``: one file per subject) names them in
+``partial_outputs`` (``set_defaults``): what it finished stays when others fail.
 """
 import contextlib
 import os
@@ -19,8 +21,10 @@ KEEP = ".articula-previous"          # suffix of the hard link that keeps a repl
 
 
 def output_paths(args) -> list:
-    """The absolute paths of the output options ``args`` (an ``argparse.Namespace``) sets."""
-    return sorted({os.path.abspath(v) for k in OPTIONS for v in [getattr(args, k, None)]
+    """The absolute paths of the output options ``args`` (an ``argparse.Namespace``) sets, except those its
+    command keeps in part (``args.partial_outputs``)."""
+    partial = set(getattr(args, "partial_outputs", ()))
+    return sorted({os.path.abspath(v) for k in OPTIONS if k not in partial for v in [getattr(args, k, None)]
                    if isinstance(v, str) and v.strip()})
 
 

@@ -153,3 +153,17 @@ def test_a_failed_command_writes_nothing(pkg, inputs, tmp_path, command, monkeyp
     assert _walk(out) == before
     assert _walk(os.path.dirname(inputs["rig"])) == inputs_before          # inputs untouched, no cache beside
     assert not [n for _d, _s, names in os.walk(home) for n in names]
+
+
+@pytest.mark.parametrize("kind", ["learn", "import"])
+def test_a_failed_farm_subjects_job_keeps_the_subjects_it_finished(pkg, tmp_path, kind):
+    """``farm learn``/``farm import`` write one result per subject: when one subject fails (exit 2), the others'
+    results stay in ``--out-dir`` (hours of farm work)."""
+    args = pkg("addon.cli.main").build_parser().parse_args(
+        ["farm", kind, "--manager", NOBODY, "--subjects", str(tmp_path), "--out-dir", str(tmp_path / "rigs")])
+    outputs = pkg("addon.cli.outputs")
+    with outputs.kept_on_failure(outputs.output_paths(args)) as outcome:
+        os.makedirs(tmp_path / "rigs")
+        (tmp_path / "rigs" / "alice.blend").write_bytes(b"done")
+        outcome["ok"] = False
+    assert (tmp_path / "rigs" / "alice.blend").read_bytes() == b"done"
