@@ -22,6 +22,7 @@ import sys
 import bpy
 
 from ...solver.errors import ArticulaInputError
+from ...solver.formats.atomic import written_through
 from .. import console
 from ..sequences import playback
 
@@ -31,17 +32,8 @@ NOT_SAVED = "not saved: give --blend FILE to keep it"
 def write_json(path: str, doc: dict) -> None:
     """Write ``doc`` as indented JSON to ``path`` through a temporary file (no half-written report, no
     temporary file left; a path that cannot be written is an input error)."""
-    tmp = path + ".tmp"
-    try:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            json.dump(doc, fh, indent=1)
-        os.replace(tmp, path)
-    except BaseException as exc:
-        if os.path.isfile(tmp):
-            os.remove(tmp)
-        if isinstance(exc, OSError):
-            raise ArticulaInputError(f"{path}: cannot write the report ({exc.strerror or exc})") from None
-        raise
+    with written_through(path, path + ".tmp", "the report") as tmp, open(tmp, "w", encoding="utf-8") as fh:
+        json.dump(doc, fh, indent=1)
 
 
 def _without_report(printed: str, report: str) -> str:

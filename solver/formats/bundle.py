@@ -18,6 +18,7 @@ import numpy as np
 
 from ..errors import ArticulaInputError
 from ..rig.model import Model, Poses, Skeleton
+from .atomic import written_through
 
 FORMAT = "articula-model/1"
 MODEL_KEYS = ("rest_vertices", "faces", "bone_names", "parents", "heads", "tails", "frames",
@@ -66,16 +67,8 @@ def save_bundle(path, model: Model, poses: Poses = None, provenance: dict = None
         raise ArticulaInputError(f"provenance: not JSON-serialisable ({exc})") from exc
     arrays["provenance"] = np.array(text)
     path, tmp = os.fspath(path), temporary_path(path)
-    try:
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-        os.replace(tmp, path)
-    except BaseException as exc:
-        if os.path.isfile(tmp):
-            os.remove(tmp)                 # e.g. ``path`` is a folder: the rename failed
-        if isinstance(exc, OSError):
-            raise ArticulaInputError(f"{path}: cannot write the bundle ({exc.strerror or exc})") from None
-        raise
+    with written_through(path, tmp, "the bundle"), open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
 
 
 def _read_arrays(path) -> dict:

@@ -39,6 +39,7 @@ import zlib
 import numpy as np
 
 from ..errors import ArticulaInputError
+from .atomic import written_through
 from .bounded import file_size, open_file, size_text
 
 SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -355,14 +356,8 @@ def write_png16(path, image, filter_type="up", level: int = 6) -> None:
     path = os.fspath(path)
     data = encode_png(image, filter_type, level, name=path)
     tmp = f"{path}.part{os.getpid()}"
-    try:
-        with open(tmp, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except OSError as exc:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise ArticulaInputError(f"{path}: cannot write PNG ({exc.strerror or exc})") from exc
+    with written_through(path, tmp, "PNG"), open(tmp, "wb") as f:
+        f.write(data)
 
 
 def encode_png(image, filter_type="up", level: int = 6, name: str = "<image>") -> bytes:

@@ -32,6 +32,7 @@ import warnings
 import numpy as np
 
 from ..errors import ArticulaInputError
+from .atomic import written_through
 from .bounded import all_numbers, check_size, complete_lines, read_bytes, read_head
 from .ply import check_ply, read_ply
 
@@ -209,13 +210,8 @@ class PointSequence:
         """Write the cache atomically (a temporary file renamed into place)."""
         os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
         tmp = f"{path}.part{os.getpid()}.npz"
-        try:
+        with written_through(path, tmp, "point cache"):
             np.savez(tmp, **self._arrays())
-            os.replace(tmp, path)
-        except OSError as exc:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-            raise ArticulaInputError(f"{path}: cannot write point cache ({exc.strerror or exc})") from exc
 
     def _arrays(self) -> dict:
         data = {"format": np.array(FORMAT), "points": self.points.astype(np.float32),
