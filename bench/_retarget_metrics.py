@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from articula.solver.retarget.roles import NEXT
+from articula.solver.roles import NEXT
 
 
 def segment_angles(segs, src_heads: np.ndarray, tgt_heads: np.ndarray) -> np.ndarray:

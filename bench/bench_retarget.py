@@ -41,7 +41,7 @@ from articula.sample_scenes import mpfb_armature  # noqa: E402
 import _retarget_metrics as metrics  # noqa: E402
 from articula.solver.retarget import foot_plant  # noqa: E402
 from articula.solver.retarget.armature import world_pose  # noqa: E402
-from articula.solver.retarget.roles import LEG_ROLES  # noqa: E402
+from articula.solver.roles import LEG_ROLES  # noqa: E402
 
 MOCAP = os.path.join(os.path.dirname(os.path.realpath(_common.REPO)), "shared", "data", "mocap")
 CLIPS = ("cmu_01_01", "cmu_131_01")

@@ -1,8 +1,8 @@
 """Which bones turn a rig's gaze and where its face points.
 
-Chest, neck and head are found by role (:func:`solver.retarget.mapping.auto_roles`: rig presets for
-Articula, MakeHuman/MPFB, Rigify, Mixamo, CMU and Unreal names, then the skeleton's shape), each
-overridable by name.  The gaze line: on an Articula rig whose mesh has the MakeHuman body topology, from
+Chest, neck and head are found by role (:func:`solver.retarget.mapping.auto_roles`: the bone names
+through the role vocabulary :mod:`solver.roles` — Articula, MakeHuman/MPFB, Rigify, Mixamo, CMU and Unreal
+names — then the skeleton's shape), each overridable by name.  The gaze line: on an Articula rig whose mesh has the MakeHuman body topology, from
 the annotated back of the head through the point between the eyes (``solver/gaze/data``); otherwise from
 the midpoint of the eye bones (or the middle of the head bone) along the rest pose's facing: horizontal
 (perpendicular to the armature's up axis), left × up, so Blender's −Y for a character built facing −Y
@@ -19,10 +19,11 @@ from ...solver.errors import ArticulaInputError
 from ...solver.gaze.aim import GazeChain
 from ...solver.retarget.armature import rest_world
 from ...solver.retarget.mapping import auto_roles
+from ...solver.roles import CENTRE
 from ..retarget.armatures import constrained_bones, driven_bones
 from ..rig import reader as rig_reader
 
-ROLES = ("chest", "neck", "head")
+ROLES = CENTRE[2:]                  # chest, neck, head
 SHARES = (0.1, 0.4, 0.5)
 MAX_DEG = (25.0, 50.0, 60.0)        # chest, neck, head: each joint's largest turn
 _ANNOTATION = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),

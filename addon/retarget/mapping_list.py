@@ -4,7 +4,7 @@ UI drawing and the conversion to and from :class:`solver.retarget.mapping.Mappin
 import bpy
 
 from ...solver.retarget.mapping import Mapping
-from ...solver.retarget.roles import ROLES
+from ...solver.roles import ROLES
 
 
 def _is_armature(self, ob):

@@ -1,4 +1,4 @@
-"""Human role names (:mod:`solver.retarget.roles`) for the bones of a learned skeleton that is a humanoid.
+"""Human role names (the vocabulary :mod:`solver.roles`) for the bones of a learned humanoid skeleton.
 
 A learned rest pose is one of the scans (any pose of a range of motion), the root part may be the chest
 or the pelvis and the scans' up axis is unknown, so recognition uses what no pose changes: the tree and
@@ -12,6 +12,8 @@ left is ``up × forward`` of each leg, forward being where the foot points from 
 else the farthest rest vertex of the leg's end from its axis).
 """
 import numpy as np
+
+from ..roles import ARM, LEG
 
 LEG_JOINTS = ((0.42, 0.25, 0.62), (0.80, 0.66, 0.95))   # knee, ankle: (target, lo, hi) fractions of the leg
 ARM_JOINTS = ((0.42, 0.25, 0.62), (0.75, 0.62, 0.92))   # elbow, wrist, from the shoulder joint
@@ -275,8 +277,7 @@ def _sided(tree, layout, roles, left_leg):
     left = heads[roles["legs"][left_leg][1]] - heads[roles["legs"][1 - left_leg][1]]
     shoulders = [heads[arm[1]] for arm in roles["arms"]]
     left_arm = 0 if float((shoulders[0] - shoulders[1]) @ left) > 0 else 1
-    for names, limbs, first in ((("hip", "thigh", "shin", "foot", "toe"), roles["legs"], left_leg),
-                                (("shoulder", "upper_arm", "forearm", "hand"), roles["arms"], left_arm)):
+    for names, limbs, first in ((LEG, roles["legs"], left_leg), (ARM, roles["arms"], left_arm)):
         for i, bones in enumerate(limbs):
             side = "L" if i == first else "R"
             out.update({f"{name}.{side}": b for name, b in zip(names, bones) if b is not None})

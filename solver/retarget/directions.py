@@ -36,7 +36,7 @@ import numpy as np
 from ..errors import ArticulaInputError
 from ..geometry.rotations import rotation_between
 from .armature import ArmatureRest, rest_world
-from .roles import NEXT, PARENT, ROLES
+from ..roles import NEXT, PARENT, ROLES
 
 DEGENERATE = 1e-3        # segments shorter than this fraction of the body height are skipped
 

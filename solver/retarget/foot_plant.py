@@ -16,7 +16,7 @@ from . import root_motion
 from .directions import unit
 from .root_motion import moving_average
 from .armature import ArmatureRest, forward, local_matrices, world_pose
-from .roles import LEG_ROLES
+from ..roles import LEG_ROLES
 
 HEIGHT = 0.06
 SPEED = 0.25

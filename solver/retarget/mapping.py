@@ -1,7 +1,7 @@
 """A bone mapping between two rigs: for each role, the source bone and the target bone that play it.
 
-Found automatically (:func:`auto_roles`: the best-fitting built-in preset, then the skeleton's topology
-and geometry for roles the preset lacks or for unknown rigs, :mod:`.humanoid`), shown and edited in the
+Found automatically (:func:`auto_roles`: the bone names through :func:`solver.roles.recognise`, then the
+skeleton's topology and geometry for roles the names lack or for unknown rigs, :mod:`.humanoid`), shown and edited in the
 panel, saved and loaded as JSON ``{"format": "articula-retarget-mapping", "version": 1, "rows":
 [{"role", "source", "target"}, ...]}``.
 """
@@ -11,9 +11,9 @@ import json
 from dataclasses import dataclass, field
 
 from ..errors import ArticulaInputError
-from . import humanoid, presets
+from ..roles import CORE, ROLES, ordered, recognise
+from . import humanoid
 from .armature import subset
-from .roles import CORE, ROLES, ordered
 
 FORMAT = "articula-retarget-mapping"
 HELPER_PREFIXES = ("SW-", "TW-", "NEUTRAL", "MCH-", "ORG-", "VIS_", "WGT-")   # Articula and Rigify helpers
@@ -29,9 +29,10 @@ class RoleFinding:
 
 
 def auto_roles(arm) -> RoleFinding:
-    """Roles of armature ``arm`` (:class:`~.armature.ArmatureRest`): the best built-in preset, completed
-    (or replaced, for unknown rigs) by topology/geometry inference on the bones that are not helpers."""
-    preset, found = presets.best_preset(arm.bones)
+    """Roles of armature ``arm`` (:class:`~.armature.ArmatureRest`): from its bone names, completed (or
+    replaced, for unknown rigs) by topology/geometry inference on the bones that are not helpers."""
+    named = recognise(arm.bones)
+    preset, found = named.preset, {role: arm.bones[b] for role, b in named.roles.items()}
     guessed = humanoid.infer_roles(subset(arm, [not b.startswith(HELPER_PREFIXES) for b in arm.bones]))
     roles = dict(found)
     taken = set(roles.values())

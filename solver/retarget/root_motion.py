@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import ArticulaInputError
 from .armature import ArmatureRest, forward, local_matrices, rest_world
-from .roles import LEG_ROLES
+from ..roles import LEG_ROLES
 
 FOOT_ROLES = ("foot.L", "foot.R", "toe.L", "toe.R")
 GROUND_PERCENTILE = 5     # where the clip's feet come down: this percentile of the lowest foot point's height

@@ -1,27 +1,23 @@
-"""Rig presets: which bone of a known rig family plays which role (:mod:`.roles`).
+"""Rig presets: which bone of a known rig family plays which role (:mod:`.vocabulary`).
 
 A preset is a JSON file ``{"format": "articula-rig-preset", "version": 1, "name", "label",
 "description", "priority" (optional), "roles": {role: bone name}}``; the built-in ones live in ``presets/`` beside this module
-(CMU BVH in both naming styles, Mixamo, Rigify deform and FK-control bones, MPFB/MakeHuman ``default``,
-the Unreal mannequin = MPFB ``game_engine``; MPFB ``cmu_mb`` uses the CMU names).  Articula's own rigs
-name their bones by role, which is the ``articula`` preset.
-
-Bone names are compared without a namespace prefix (``mixamorig:Hips``, ``mixamorig1:Hips`` and
-``Armature|Hips`` all read as ``Hips``).
+(CMU BVH in both naming styles, Mixamo, Rigify deform, original and FK-control bones, MPFB/MakeHuman
+``default``, the Unreal mannequin = MPFB ``game_engine``; MPFB ``cmu_mb`` uses the CMU names).  Articula's
+own rigs, learned ones included, name their bones by role, which is the ``articula`` preset.  How a rig's
+names are compared with a preset's (namespaces, side conventions): :mod:`.recognise`.
 """
 from __future__ import annotations
 
 import json
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import ArticulaInputError
-from .roles import CORE, ROLES
+from .vocabulary import CORE, ROLES
 
 FORMAT = "articula-rig-preset"
 _DIR = Path(__file__).with_name("presets")
-_NAMESPACE = re.compile(r"^.*[:|]")
 
 
 @dataclass(frozen=True)
@@ -31,11 +27,6 @@ class RigPreset:
     description: str
     roles: dict            # role -> bone name (namespace-free)
     priority: int = 0      # wins ties of coverage (a rig holding two presets' bones, e.g. Rigify)
-
-
-def strip_namespace(bone: str) -> str:
-    """``bone`` without an FBX/Mixamo namespace (``mixamorig:Hips`` → ``Hips``)."""
-    return _NAMESPACE.sub("", bone)
 
 
 def parse_preset(data: dict, where: str) -> RigPreset:
@@ -64,27 +55,8 @@ def builtin_presets() -> list:
     return out
 
 
-def match(preset: RigPreset, bones) -> dict:
-    """``{role: bone}`` of the roles of ``preset`` that armature ``bones`` (names) has."""
-    by_plain = {}
-    for b in bones:
-        by_plain.setdefault(strip_namespace(b), b)
-    return {role: by_plain[name] for role, name in preset.roles.items() if name in by_plain}
-
-
 def coverage(preset: RigPreset, found: dict) -> float:
     """Share of the core roles the preset names that were found (0..1)."""
     wanted = [r for r in CORE if r in preset.roles]
     return sum(r in found for r in wanted) / max(len(wanted), 1)
 
-
-def best_preset(bones, minimum: float = 0.6):
-    """``(preset, {role: bone})`` of the built-in preset that fits ``bones`` best, or ``(None, {})``
-    when none covers at least ``minimum`` of its core roles."""
-    best, best_found, best_key = None, {}, (minimum - 1e-9, 0, 0)
-    for preset in builtin_presets():
-        found = match(preset, bones)
-        key = (coverage(preset, found), preset.priority if found else 0, len(found))
-        if key > best_key:
-            best, best_found, best_key = preset, found, key
-    return best, best_found

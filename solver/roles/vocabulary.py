@@ -1,4 +1,5 @@
-"""The human roles retargeting maps between rigs.
+"""The bone roles of a humanoid: the one vocabulary retargeting, the pose priors, the start poses, learned
+rigs' bone names and gaze share.
 
 A role names one bone of a humanoid by what it does, not by what a rig calls it: ``upper_arm.L`` is the
 bone whose head sits at the left shoulder joint and that reaches towards the elbow.  Roles form a tree
@@ -7,6 +8,7 @@ runs from its joint to the joint of the first primary child both rigs have (e.g.
 ``forearm.L`` → ``hand.L``).  Retargeting makes each segment point where the source's points.
 
 Left/right follow the character (``.L`` = the character's left), as in Blender's naming convention.
+Which bone of a rig plays which role: :mod:`.recognise`.
 """
 SIDES = ("L", "R")
 FINGERS = ("thumb", "index", "middle", "ring", "pinky")

@@ -11,7 +11,7 @@ from articula.sample_scenes.registered import posed_sequence
 from articula.solver.formats.obj import read_obj
 from articula.solver.learn.pipeline import learn_rig
 from articula.solver.learn.role_names import REQUIRED, names_for, recognise, role_names
-from articula.solver.retarget.roles import ROLES
+from articula.solver.roles import ROLES
 from articula.solver.rig.model import Skeleton
 from articula.solver.rig.names import problem
 

@@ -1,4 +1,4 @@
-"""Finding roles (solver.retarget.presets / humanoid / mapping): the preset of each rig family, the
+"""Finding roles (solver.retarget.humanoid / mapping; the names of each rig family: tests/solver/roles): the
 topology/geometry inference on rigs with meaningless names in T- and A-pose, any facing, with twist
 bones and girdles, on MakeHuman's four rigs (against their presets), and the JSON mapping round trip."""
 import json
@@ -8,39 +8,12 @@ import pytest
 
 from articula.sample_scenes import mpfb_armature
 from articula.solver.errors import ArticulaInputError
-from articula.solver.retarget import humanoid, presets
+from articula.solver.retarget import humanoid
 from articula.solver.retarget.armature import ArmatureRest
 from articula.solver.retarget.mapping import Mapping, auto_roles
 from articula.sample_scenes.mpfb_rig import roll_frames
 
 from .humanoids import humanoid as make_humanoid
-
-CMU_01 = ["Hips", "LHipJoint", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase", "RHipJoint", "RightUpLeg",
-          "RightLeg", "RightFoot", "RightToeBase", "LowerBack", "Spine", "Spine1", "Neck", "Neck1", "Head",
-          "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand", "RightShoulder", "RightArm", "RightForeArm",
-          "RightHand"]
-CMU_131 = ["Hips", "LHipJoint", "LeftHip", "LeftKnee", "LeftAnkle", "LeftToe", "RHipJoint", "RightHip",
-           "RightKnee", "RightAnkle", "RightToe", "lowerback", "Chest", "Chest2", "lowerneck", "Neck", "Head",
-           "LeftCollar", "LeftShoulder", "LeftElbow", "LeftWrist", "RightCollar", "RightShoulder", "RightElbow",
-           "RightWrist"]
-
-
-def test_both_cmu_naming_styles_are_told_apart():
-    preset, found = presets.best_preset(CMU_01)
-    assert preset.name == "cmu_bvh" and found["upper_arm.L"] == "LeftArm" and found["shoulder.L"] == "LeftShoulder"
-    preset, found = presets.best_preset(CMU_131)
-    assert preset.name == "cmu_bvh_max" and found["upper_arm.L"] == "LeftShoulder"
-    assert found["shoulder.L"] == "LeftCollar" and found["thigh.R"] == "RightHip"
-
-
-def test_namespaces_are_ignored_and_unknown_rigs_get_no_preset():
-    preset, found = presets.best_preset(["mixamorig7:" + b for b in
-                                         ("Hips", "Spine", "Spine2", "Neck", "Head", "LeftArm", "LeftForeArm",
-                                          "LeftHand", "RightArm", "RightForeArm", "RightHand", "LeftUpLeg",
-                                          "LeftLeg", "LeftFoot", "RightUpLeg", "RightLeg", "RightFoot")])
-    assert preset.name == "mixamo" and found["hips"] == "mixamorig7:Hips"
-    assert presets.best_preset([f"bone{i}" for i in range(30)]) == (None, {})
-
 
 @pytest.mark.parametrize("arm_angle,yaw,twist,clavicle,girdle", [
     (0.0, 0.0, False, True, False), (45.0, 0.0, True, True, True), (30.0, 180.0, False, False, True),
@@ -99,10 +72,3 @@ def test_mapping_json_round_trip_and_errors(tmp_path):
     with pytest.raises(ArticulaInputError, match="more than one role"):
         Mapping([("hips", "a", "x"), ("head", "a", "y")]).check(["a"], ["x", "y"])
 
-
-def test_builtin_presets_are_valid():
-    names = [p.name for p in presets.builtin_presets()]
-    assert {"articula", "cmu_bvh", "cmu_bvh_max", "mixamo", "rigify_deform", "rigify_control", "mpfb_default",
-            "unreal"} <= set(names)
-    with pytest.raises(ArticulaInputError, match="unknown roles"):
-        presets.parse_preset({"format": presets.FORMAT, "roles": {"wing.L": "w"}}, "x.json")
