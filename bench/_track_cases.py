@@ -168,7 +168,7 @@ def report_run(label: str, run: Run, rec: Recording, target_mm: float, surface: 
     _common.report(f"{label}: {what}", out["all"], "mm", f"{_ratio(out['all'], target_mm)}; {lost}")
     _common.report(f"{label}: body only", out["body"], "mm", _ratio(out["body"], target_mm))
     _common.report(f"{label}: extremities (hands, fingers, feet, toes, head)", out["extremities"], "mm",
-                   _ratio(out["extremities"], target_mm))
+                   f"{_ratio(out['extremities'], target_mm)}; {rec.extremities.mean():.0%} of the vertices")
     if posed.shape == rec.truth.shape:
         j, how = joint_errors(rec, res.model, res.poses, posed)
         out["joints"] = float(j.mean() * 1e3)

@@ -1,4 +1,4 @@
-"""Tracking unregistered 4-view captures against issue 33's targets: body, extremity and joint errors vs truth.
+"""Tracking unregistered 4-view captures: body, extremity and joint errors vs truth, lost frames, time.
 
 Every case is outside the sample defaults (cmu_mb female walk): other rigs, shapes, macro seeds and motions,
 including ``sample_scenes.reach`` (arms raised above the head, trunk bending and twisting, turning).
