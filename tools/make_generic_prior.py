@@ -30,7 +30,7 @@ from articula.sample_scenes.poses import rom_poses  # noqa: E402
 from articula.sample_scenes.subjects import make_subject  # noqa: E402
 from articula.sample_scenes.walk import CYCLE_FRAMES, walk_poses  # noqa: E402
 from articula.solver.rig.model import Poses  # noqa: E402
-from articula.solver.track.pose_prior import GENERIC_PATH, PosePrior  # noqa: E402
+from articula.solver.tracking.pose_prior import GENERIC_PATH, PosePrior  # noqa: E402
 
 
 def training_poses(shapes, n_walk: int, n_rom: int, seed: int) -> Poses:

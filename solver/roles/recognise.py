@@ -96,8 +96,26 @@ def bone_roles(names) -> list:
     return out
 
 
-def bone_keys(names) -> list:
-    """Per bone the key under which another rig's data is looked up (the generic pose prior, start
-    poses): its role, else ``"name:" + name_key`` (bones of the same naming with no role, e.g. CMU's
-    ``Neck1``), so a role-named learned rig and an MPFB rig meet on their roles."""
-    return [role or NAME_PREFIX + name_key(n) for role, n in zip(bone_roles(names), names)]
+def bone_keys(names, parents=None) -> list:
+    """Per bone the key under which another rig's data is looked up (the generic pose prior, start poses):
+    its role; else, with ``parents`` (B,) given, ``"<role>+k"`` for the k-th bone of a single-child chain
+    below a role bone (CMU's ``Spine`` and Unreal's ``spine_02`` are both ``spine+1``, ``Neck1`` and
+    MakeHuman's ``neck02`` ``neck+1``); else ``"name:" + name_key``.  So a role-named learned rig and an
+    MPFB rig meet on their roles."""
+    roles = bone_roles(names)
+    out = [role or NAME_PREFIX + name_key(n) for role, n in zip(roles, names)]
+    if parents is None:
+        return out
+    parents = [int(p) for p in parents]
+    children = [0] * len(parents)
+    for p in parents:
+        if p >= 0:
+            children[p] += 1
+    for b, role in enumerate(roles):
+        k, up = 1, parents[b]
+        while role is None and up >= 0 and children[up] == 1:
+            if roles[up] is not None:
+                out[b] = f"{roles[up]}+{k}"
+                break
+            k, up = k + 1, parents[up]
+    return out

@@ -12,7 +12,7 @@ scale is held).  Skinning weights, faces and joint orientations are not adapted.
 with Q^data the mean over frames of each frame's mean Charbonnier distance of its correspondences
 (:mod:`.frame_fit`, :mod:`.correspondences`; point-to-plane for both directions by default), Q^shape the
 Laplacian prior of :mod:`.shape_prior`, Q^sym the squared left/right bone-length differences (mirror
-bones by name; w_sym = 1e10) and Q^pose the pose prior (:mod:`.pose_prior`).  Two terms are not in the
+bones by name; w_sym = 1e10) and Q^pose the pose prior (:mod:`solver.tracking.pose_prior`).  Two terms are not in the
 dissertation: Q^tan = (1/V) Σ_v ‖(I − n_v n_vᵀ)(x_v − x⁰_v)‖², the rest displacement within the input
 model's tangent planes (surface data see only the normal component; without it vertices slide along
 the surface and take up joint offsets, docs/track.md), and Q^joint = Σ_b ‖h_b − h⁰_b‖² with a small κ,
@@ -59,7 +59,7 @@ from ..rig.skinning import AnchorGroups, affine_form, bone_terms, check_pose_sha
 from . import robust
 from .frame_fit import DAMP_FLOOR, MU0, MU_MIN, REJECTIONS, FrameFitOptions, _refresh, pair_residuals, \
     pair_stats, plane_mask
-from .pose_prior import PosePrior
+from ..tracking.pose_prior import PosePrior
 from .shape_prior import MAX_POSES, ShapePrior, block_diagonal, lift
 from .visibility import vertex_normals
 

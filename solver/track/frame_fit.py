@@ -10,7 +10,7 @@ pairs and their IRLS weights ω_c held fixed, the least-squares majoriser of ``Q
 
 where the model point ``m_c = Σ_i β_ci x'_{v_ci}`` is a barycentric combination of skinned vertices, so
 its Jacobian is the same combination of the vertex Jacobians (:func:`solver.rig.jacobians.dense_jacobian`),
-and ``e_p = sqrt(1 − P~_p)`` are the pose prior's residuals (:mod:`.pose_prior`).  Parameters: root
+and ``e_p = sqrt(1 − P~_p)`` are the pose prior's residuals (:mod:`solver.tracking.pose_prior`).  Parameters: root
 translation, optional uniform scale, the root rotation and every joint rotation in the layout of
 :func:`solver.rig.jacobians.pose_layout`.
 
@@ -46,7 +46,7 @@ from ..rig.model import Poses
 from ..rig.skinning import AnchorGroups, check_pose_shapes, hybrid_skin
 from . import robust
 from .correspondences import CorrespondenceOptions, correspondences
-from .pose_prior import PosePrior, rotvec_increment_jacobian
+from ..tracking.pose_prior import PosePrior, rotvec_increment_jacobian
 from .visibility import vertex_normals
 
 DAMP_FLOOR = 1e-9      # ε of the damping matrix diag(H) + ε mean diag(H)
@@ -261,7 +261,7 @@ class _Update(QuadraticSteps):
         return np.array([E])
 
     def _reparametrisation(self):
-        """``dδ/dz (P, P)``: identity, with ``J_r(r_b)⁻¹`` (:func:`.pose_prior.rotvec_increment_jacobian`)
+        """``dδ/dz (P, P)``: identity, with ``J_r(r_b)⁻¹`` (:func:`solver.tracking.pose_prior.rotvec_increment_jacobian`)
         on the blocks of bounded bones."""
         M = np.eye(len(self.free))
         for b in np.flatnonzero(self.bounded):

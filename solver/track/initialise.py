@@ -23,11 +23,11 @@ from ..errors import ArticulaInputError
 from ..geometry.rotations import matrix_to_quat, quat_mul, quat_normalize, quat_to_matrix, rotation_between
 from ..rig.model import Poses
 from ..rig.skinning import hybrid_skin
+from ..roles import bone_keys
 from . import robust
 from .correspondences import nearest_compatible
 from .frame_fit import FrameFitOptions, fit_frame
 from .limb_search import place_limbs
-from .pose_prior import bone_key
 from .visibility import vertex_normals
 
 GENERIC_POSES_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "generic_body_poses.npz")
@@ -69,16 +69,16 @@ def body_poses(skeleton, training_poses: Poses = None, count: int = 24, generic:
 
 def generic_body_poses(skeleton, path: str = GENERIC_POSES_PATH) -> Poses:
     """The shipped generic body poses (walk frames of the cmu_mb rig, ``tools/make_generic_poses.py``)
-    mapped onto ``skeleton`` by bone name (:func:`.pose_prior.bone_key`), each local rotation re-expressed
+    mapped onto ``skeleton`` by bone role (:func:`solver.roles.bone_keys`), each local rotation re-expressed
     in the model's rest frame (``F'ᵀ F R Fᵀ F'``); bones that do not map stay at rest.  None when no bone
     other than the root maps."""
     with np.load(path, allow_pickle=False) as data:
         names, frames, rotations = list(data["names"]), data["frames"], data["rotations"]
-    index = {bone_key(str(n)): i for i, n in enumerate(names)}
+    index = {k: i for i, k in enumerate(bone_keys([str(n) for n in names]))}
     out = Poses.identity(len(rotations), skeleton.num_bones)
     mapped = 0
-    for b, name in enumerate(skeleton.names[1:], start=1):
-        s = index.get(bone_key(name))
+    for b, key in enumerate(bone_keys(skeleton.names)[1:], start=1):
+        s = index.get(key)
         if s is None or s == 0:
             continue
         C = skeleton.frames[b].T @ frames[s]

@@ -36,7 +36,7 @@ from .captures import CaptureSource
 from .frame_fit import fit_frame
 from .initialise import check_units, initialise
 from .options import ADAPT_MIN_FRAMES, MODEL_PRIOR_MIN_POSES, TrackOptions, frame_range
-from .pose_prior import PosePrior, generic_prior, widened
+from ..tracking.pose_prior import PosePrior, generic_prior, widened
 from .temporal import MotionPrior, motion_weight, temporal_weight
 from .windows import fit_windows
 

@@ -5,7 +5,7 @@ Model-adaptive mocap dissertation §4.1.3, Eq. 4.9-4.10:
     Q^temp = 1/(N−2) Σ_{n=1}^{N−2} Q_n^temp,   Q_n^temp = (1/J) Σ_j ‖r_j^n − ½ (r_j^{n−1} + r_j^{n+1})‖²
 
 (frames 0..N−1), an acceleration penalty on the bone-local exp-map vectors ``r = log(q)`` (angle = norm,
-radians) of the pose quaternions, as :mod:`.pose_prior` uses them.  The joints are bones 1..B−1
+radians) of the pose quaternions, as :mod:`solver.tracking.pose_prior` uses them.  The joints are bones 1..B−1
 (J = B − 1): like the equation, the root's rotation and translation and the uniform scale are not part of
 it.  Normalised by the frame count and J as the equation is (§4.1.5's text says J×3; the equation
 divides by J).  Equal frame intervals are assumed.  Fewer than 3 frames: no term (0).
@@ -13,7 +13,7 @@ divides by J).  Equal frame intervals are assumed.  Fewer than 3 frames: no term
 For Levenberg–Marquardt the residuals are ``e = sqrt(1/((N−2) J)) (r_n − ½ r_{n−1} − ½ r_{n+1})`` so that
 ``Q^temp = Σ e²``; their Jacobian with respect to the pose increments of
 :func:`solver.rig.jacobians.pose_layout` (``q_b ← q_b exp(δ_b)`` per frame) chains through
-``d r / d δ`` (:func:`.pose_prior.rotvec_increment_jacobian`, finite at every angle).  A rotation whose
+``d r / d δ`` (:func:`solver.tracking.pose_prior.rotvec_increment_jacobian`, finite at every angle).  A rotation whose
 angle crosses π between frames makes r jump (the log is taken with angles in [0, π]): joints never get
 there.  :func:`temporal_weight` is the weight heuristic of Eq. 4.16.
 """
@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import ArticulaInputError
 from ..geometry.rotations import quat_to_rotvec
-from .pose_prior import rotvec_increment_jacobian
+from ..tracking.pose_prior import rotvec_increment_jacobian
 
 MIN_TEMP = (np.pi / 180.0 * 0.1) ** 2   # floor of Q^temp in temporal_weight (rad²): 0.1° of acceleration
 MIN_MOTION = (np.pi / 180.0) ** 2       # floor of the joints' mean squared motion in motion_weight: 1°/frame
@@ -129,7 +129,7 @@ class MotionPrior:
 
     def system(self, rotations, size):
         """Normal equations ``(H (size, size), g (size,), Q)`` in the pose-layout columns (bone b at
-        ``4 + 3b``), ``d r / d δ`` from :func:`.pose_prior.rotvec_increment_jacobian`."""
+        ``4 + 3b``), ``d r / d δ`` from :func:`solver.tracking.pose_prior.rotvec_increment_jacobian`."""
         e, r = self._residuals(rotations)
         Jr = np.sqrt(self.weight / max(self.J, 1)) * rotvec_increment_jacobian(r)          # (J, 3, 3)
         H, g = np.zeros((size, size)), np.zeros(size)

@@ -44,7 +44,7 @@ from ..rig.skinning import AnchorGroups, check_pose_shapes
 from . import frame_fit as ff
 from . import temporal
 from .correspondences import Correspondences
-from .pose_prior import PosePrior
+from ..tracking.pose_prior import PosePrior
 
 WINDOW, STEP = 11, 5     # the dissertation's window length and increment (frames)
 WINDOW_UPDATES = 10      # updates per window (it starts from the per-frame fits)

@@ -33,7 +33,7 @@ from scipy.spatial import cKDTree
 
 from ..geometry.rotations import quat_conj, quat_mul, quat_to_rotvec
 from ..rig.model import Poses
-from ..track.pose_prior import rotvec_increment_jacobian
+from ..tracking.pose_prior import rotvec_increment_jacobian
 from .icp import MAX_TURN, FrameFit, coverage
 from .normal_equations import System
 from .visibility import facing, in_view

@@ -1,6 +1,6 @@
 """Joint limits of the depth tracker (ours: the dissertation's trackers have none, ch. 5 §5.5 names the
 drift of weakly seen joints as a failure): soft box limits on each joint's bone-local rotation vector,
-from the generic human prior mapped by bone names (:func:`solver.track.pose_prior.generic_prior`), plus a
+from the generic human prior mapped by bone names (:func:`solver.tracking.pose_prior.generic_prior`), plus a
 weak pull towards the middle of the box scaled by 1/width^2, so joints the data hardly sees (hip girdle,
 clavicles, spine segments) do not wander while a limb's wide range is barely pulled."""
 from __future__ import annotations
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.rotations import quat_to_rotvec
-from ..track.pose_prior import generic_prior, rotvec_increment_jacobian
+from ..tracking.pose_prior import generic_prior, rotvec_increment_jacobian
 
 BOX_WEIGHT = 10.0      # m^2 per rad^2 outside the box
 CENTRE_WEIGHT = 0.02   # m^2 per (box width)^2 away from the middle

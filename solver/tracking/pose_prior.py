@@ -16,10 +16,9 @@ quaternions of :class:`solver.rig.model.Poses`.  Joints are bones 1..B-1; bone 0
 
 Stored as a small ``.npz`` (format "articula-pose-prior/1", no pickles).  A generic human prior ships in
 ``data/generic_human_prior.npz`` (built by ``tools/make_generic_prior.py``; docs/track.md) and is mapped to
-another skeleton by bone names (:func:`generic_prior`).
+another skeleton through the bone-role vocabulary (:func:`generic_prior`, :func:`solver.roles.bone_keys`).
 """
 import os
-import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -28,7 +27,7 @@ from ..errors import ArticulaInputError
 from ..geometry.rotations import quat_to_rotvec
 from ..rig.jacobians import pose_layout
 from ..rig.model import Poses
-from ..rig.names import side
+from ..roles import bone_keys
 from . import gmm
 
 FORMAT = "articula-pose-prior/1"
@@ -36,11 +35,6 @@ K_MAX = 8                # largest component count tried (the dissertation found
 RESIDUAL_EPS = 1e-12     # keeps e_p differentiable where P~ = 1
 MIN_POSES = 3            # fewer poses cannot be cross-validated: use the generic prior
 GENERIC_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "generic_human_prior.npz")
-#: Other rigs' bone names (lower case, without side) -> the generic prior's (cmu_mb) names.
-ALIASES = {"thigh": "upleg", "upperleg01": "upleg", "calf": "leg", "lowerleg01": "leg", "ball": "toebase",
-           "clavicle": "shoulder", "upperarm": "arm", "upperarm01": "arm", "lowerarm": "forearm",
-           "lowerarm01": "forearm", "wrist": "hand", "neck_01": "neck", "neck01": "neck", "neck02": "neck1",
-           "spine_01": "lowerback", "spine_02": "spine", "spine_03": "spine1"}
 _ARRAYS = ("frames", "pairs", "weights", "means", "precisions", "lower", "upper", "components", "loo_scores")
 
 
@@ -263,31 +257,21 @@ def rotvec_increment_jacobian(r) -> np.ndarray:
     return np.eye(3) + 0.5 * K + c[..., None, None] * (K @ K)
 
 
-def bone_key(name: str) -> str:
-    """Name under which a bone is looked up in the generic prior: lower-case base name (an alias of
-    :data:`ALIASES` replaced by the cmu_mb name) plus ``.L``/``.R``; MPFB names such as ``LeftUpLeg`` or
-    ``LHipJoint`` give the same key as ``UpLeg.L`` / ``HipJoint.L``."""
-    s = side(name)
-    base = name[:-2] if s else name
-    m = re.match(r"^(Left|Right|L|R)(?=[A-Z])", base) if not s else None
-    if m:
-        s, base = m.group(1)[0], base[m.end():]
-    base = base.lower()
-    base = ALIASES.get(base, base)
-    return f"{base}.{s}" if s else base
-
-
 def generic_prior(skeleton, path: str = GENERIC_PATH) -> PosePrior:
-    """The shipped generic human prior mapped onto ``skeleton`` by :func:`bone_key`.
+    """The shipped generic human prior (cmu_mb bones) mapped onto ``skeleton`` bone by bone through the
+    role vocabulary (:func:`solver.roles.bone_keys`: the bones' roles, so any naming the recogniser knows,
+    a learned rig's role names included; bones without a role by their name).
 
     A pair (parent, child) of ``skeleton`` gets the generic mixture of the matching pair, rotated from the
     generic rig's rest frames into ``skeleton``'s (``r_local' = F'^T F r_local``; both rigs must share the
     world convention, Z up, facing -Y, and a similar rest pose).  Bones or pairs it cannot map get no
     prior term and no bound (their box is the axis-aligned hull of the rotated box when they map)."""
     src = PosePrior.load(path)
-    index = {bone_key(n): i for i, n in enumerate(src.names)}
+    src_parents = np.full(len(src.names), -1)
+    src_parents[src.pairs[:, 1]] = src.pairs[:, 0]          # from the pairs; the root's children stay -1
+    index = {k: i for i, k in enumerate(bone_keys(src.names, src_parents))}
     src_pair = {(int(a), int(c)): p for p, (a, c) in enumerate(src.pairs)}
-    to_src = [index.get(bone_key(n)) for n in skeleton.names]
+    to_src = [index.get(k) for k in bone_keys(skeleton.names, skeleton.parents)]
     to_src[0] = None
     R = [None if s is None else skeleton.frames[b].T @ src.frames[s] for b, s in enumerate(to_src)]
     pairs, mixtures, scores = [], [], []

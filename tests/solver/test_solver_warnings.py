@@ -11,8 +11,8 @@ def _add_infinities(module_name: str):
     return eval(code, {"np": np, "__name__": module_name})
 
 
-@pytest.mark.parametrize("module", ["articula.solver.track.pose_prior",
-                                    "bl_ext.articula_test.articula.solver.track.pose_prior"])
+@pytest.mark.parametrize("module", ["articula.solver.tracking.pose_prior",
+                                    "bl_ext.articula_test.articula.solver.tracking.pose_prior"])
 def test_a_warning_in_the_solver_is_an_error(module):
     with pytest.raises(RuntimeWarning, match="invalid value"):
         _add_infinities(module)

@@ -154,9 +154,16 @@ def test_names_without_a_naming():
 
 
 def test_bone_keys_keep_unnamed_bones_apart_from_roles():
-    names, _ = read_bvh_hierarchy(os.path.join(SHARED_DATA, "mocap", "cmu_01_01.bvh"))
+    names, parents = read_bvh_hierarchy(os.path.join(SHARED_DATA, "mocap", "cmu_01_01.bvh"))
     keys = dict(zip(names, bone_keys(names)))
     assert keys["LowerBack"] == "spine" and keys["Spine"] == "name:spine" and keys["Neck1"] == "name:neck1"
+    # with the hierarchy, single-child chains below a role bone meet across namings
+    keys = dict(zip(names, bone_keys(names, parents)))
+    assert keys["Spine"] == "spine+1" and keys["Neck1"] == "neck+1" and keys["Spine1"] == "chest"
+    assert keys["LThumb"] == "name:thumb.L"                          # the hand has two children: no chain
+    for rig, bone in (("game_engine", "spine_02"), ("mixamo", "Spine1"), ("default", "neck02")):
+        sk = make_subject(rig).skeleton
+        assert bone_keys(sk.names, sk.parents)[sk.names.index(bone)] == ("neck+1" if rig == "default" else "spine+1")
 
 
 def test_builtin_presets_are_valid():

@@ -16,7 +16,7 @@ from articula.solver.rig.model import Poses
 from articula.solver.rig.skinning import AnchorGroups, affine_form, hybrid_skin
 from articula.solver.track import adapt as ad
 from articula.solver.track import frame_fit as ff
-from articula.solver.track.pose_prior import PosePrior
+from articula.solver.tracking.pose_prior import PosePrior
 from articula.solver.track.shape_prior import ShapePrior, lift
 from articula.solver.track.visibility import vertex_normals
 

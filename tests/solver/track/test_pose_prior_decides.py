@@ -1,4 +1,4 @@
-"""The pose prior's effect on a fit (solver.track.frame_fit with solver.track.pose_prior), not only its
+"""The pose prior's effect on a fit (solver.track.frame_fit with solver.tracking.pose_prior), not only its
 gradient: a twist of a round tube's last bone moves its vertices within the tube's surface, so the capture
 barely sees it (from an untwisted start the data alone leaves it there; from the box's edge it stops
 0.04 rad short); the prior learned from poses that all twist the hand by about 0.5 rad decides the fitted
@@ -11,7 +11,7 @@ from articula.solver.geometry.rotations import quat_to_rotvec, rotvec_to_quat
 from articula.solver.rig.model import Poses
 from articula.solver.rig.skinning import hybrid_skin
 from articula.solver.track import frame_fit as ff
-from articula.solver.track.pose_prior import PosePrior
+from articula.solver.tracking.pose_prior import PosePrior
 from articula.solver.track.visibility import vertex_normals
 
 TWIST = 0.5        # radians about the hand's own axis (bone-local +Y)

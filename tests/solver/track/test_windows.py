@@ -12,7 +12,7 @@ from articula.solver.rig.model import Poses
 from articula.solver.rig.skinning import AnchorGroups, hybrid_skin
 from articula.solver.track import frame_fit as ff
 from articula.solver.track import temporal, windows
-from articula.solver.track.pose_prior import PosePrior
+from articula.solver.tracking.pose_prior import PosePrior
 from articula.solver.track.visibility import vertex_normals
 
 

@@ -1,8 +1,8 @@
-"""Gaussian-mixture maths of the pose prior (solver.track.gmm) against closed forms and planted mixtures."""
+"""Gaussian-mixture maths of the pose prior (solver.tracking.gmm) against closed forms and planted mixtures."""
 import numpy as np
 import pytest
 
-from articula.solver.track import gmm
+from articula.solver.tracking import gmm
 
 
 def _clusters(counts, centres, sd, seed=0):

@@ -1,4 +1,5 @@
-"""Pose prior (solver.track.pose_prior): pairs, box limits, residual Jacobians, files, the generic prior."""
+"""Pose prior (solver.tracking.pose_prior): pairs, box limits, residual Jacobians, files, the generic prior and
+its mapping onto other rigs through the role vocabulary (learned rigs' role names included)."""
 import numpy as np
 import pytest
 
@@ -6,8 +7,8 @@ from articula.solver.errors import ArticulaInputError
 from articula.solver.geometry.rotations import quat_mul, quat_to_rotvec, rotvec_to_quat
 from articula.solver.rig.jacobians import pose_layout
 from articula.solver.rig.model import Poses, Skeleton, frames_from_bones
-from articula.solver.track import gmm
-from articula.solver.track.pose_prior import (PosePrior, bone_key, generic_prior, joint_pairs,
+from articula.solver.tracking import gmm
+from articula.solver.tracking.pose_prior import (PosePrior, generic_prior, joint_pairs,
                                               rotvec_increment_jacobian)
 
 PARENTS = [-1, 0, 1, 2, 1, 0]
@@ -148,11 +149,6 @@ def test_switched_off_and_too_few_poses():
         PosePrior.from_poses(_skeleton(), _poses(2))
 
 
-def test_bone_keys():
-    assert bone_key("UpLeg.L") == bone_key("LeftUpLeg") == bone_key("upleg_L") == bone_key("thigh.L") == "upleg.L"
-    assert bone_key("LHipJoint") == "hipjoint.L" and bone_key("Neck1") == "neck1"
-
-
 @pytest.fixture(scope="module")
 def cmu_subject():
     from articula.sample_scenes.subjects import make_subject
@@ -201,7 +197,7 @@ def test_generic_prior_maps_mpfb_names_and_skips_unknown_bones(cmu_subject):
 def test_widened_box_is_the_hull_padded(prior):
     """``widened``: the hull of the prior's box and another's finite bounds, then ``pad`` on each side;
     the mixtures are untouched; a negative or infinite pad is refused."""
-    from articula.solver.track.pose_prior import widened
+    from articula.solver.tracking.pose_prior import widened
     other = PosePrior.from_poses(_skeleton(), _poses(seed=3), k_max=1, sparsify=False)
     other.lower[4], other.upper[4] = -np.inf, np.inf                 # a bone the other prior does not bound
     out = widened(prior, other, pad=0.05)
@@ -229,3 +225,48 @@ def test_generic_prior_on_a_child_bone_named_like_its_root(cmu_subject):
     np.testing.assert_array_equal(prior.lower[2:], generic_prior(sk).lower[1:])
     violated, clamped = prior.box_violations(np.zeros((rooted.num_bones, 3)))
     assert not violated.any() and np.isfinite(clamped).all()
+
+
+def _learned_names(skeleton):
+    """``skeleton`` with the bone names learn_rig gives a humanoid (solver.learn.role_names, from the
+    geometry alone: roles, ``part_NN`` for the rest)."""
+    from articula.solver.learn.role_names import role_names
+    parts = Skeleton([f"part_{b:02d}" for b in range(skeleton.num_bones)], skeleton.parents, skeleton.heads,
+                     skeleton.tails, skeleton.frames)
+    return Skeleton(role_names(parts), skeleton.parents, skeleton.heads, skeleton.tails, skeleton.frames)
+
+
+def test_generic_prior_reaches_a_learned_rigs_role_names(cmu_subject):
+    """On the cmu_mb body renamed as learn_rig names it, the generic prior has the mixtures of the rig's
+    own names on the upper arm, shin, toe and chest pairs (same bones, same rest frames)."""
+    sk = cmu_subject.skeleton
+    learned = _learned_names(sk)
+    truth, mapped = generic_prior(sk), generic_prior(learned)
+    want = {"upper_arm.L", "upper_arm.R", "shin.L", "shin.R", "toe.L", "chest"}
+    pairs = {(learned.names[a], learned.names[c]): p for p, (a, c) in enumerate(mapped.pairs)}
+    roles = {name for pair in pairs for name in pair}
+    assert want <= roles and ("upper_arm.L", "forearm.L") in pairs and ("thigh.R", "shin.R") in pairs
+    assert ("chest", "neck") in pairs and ("shin.L", "foot.L") in pairs and ("foot.L", "toe.L") in pairs
+    same = {tuple(ac): p for p, ac in enumerate(truth.pairs.tolist())}
+    for (a, c), p in pairs.items():
+        q = same[(learned.names.index(a), learned.names.index(c))]
+        k = int(truth.components[q])
+        np.testing.assert_allclose(mapped.means[p, :k], truth.means[q, :k], atol=1e-12)
+        np.testing.assert_allclose(mapped.precisions[p, :k], truth.precisions[q, :k], rtol=1e-9)
+    assert mapped.num_pairs >= 15                                   # 17 of 27: fingers are part_NN
+    bounded = [learned.names.index(r) for r in want]
+    np.testing.assert_allclose(mapped.lower[bounded], truth.lower[bounded])
+
+
+@pytest.mark.parametrize("rig", ["game_engine", "mixamo"])
+def test_generic_prior_on_other_mpfb_rigs_by_role(rig):
+    """The generic (cmu_mb) prior reaches the limb pairs of rigs named otherwise (calf, lowerarm, Leg…)."""
+    from articula.sample_scenes.subjects import make_subject
+    from articula.solver.roles import bone_roles
+    sk = make_subject(rig).skeleton
+    prior = generic_prior(sk)
+    roles = bone_roles(sk.names)
+    pairs = {(roles[a], roles[c]) for a, c in prior.pairs}
+    for side in "LR":
+        assert {(f"upper_arm.{side}", f"forearm.{side}"), (f"thigh.{side}", f"shin.{side}"),
+                (f"shin.{side}", f"foot.{side}"), (f"foot.{side}", f"toe.{side}")} <= pairs
