@@ -1,13 +1,15 @@
-"""Anatomical role of a rig bone, from its ``.L``/``.R`` name (see :mod:`.mpfb_rig`), and the joint
-limits used by the pose generators.
+"""Joint class of a rig bone, from the bone-role vocabulary (:mod:`solver.roles`), and the joint limits
+used by the pose generators.
 
-Roles cover the four MPFB2 rigs (cmu_mb, game_engine, default, mixamo): ``root`` (bone 0), ``spine``,
-``neck``, ``head``, ``clavicle``, ``upper_arm``, ``forearm``, ``wrist``, ``finger``, ``hip_girdle``,
-``hip``, ``knee``, ``ankle``, ``toe``, ``twist_arm`` / ``twist_leg`` (the default rig's second segments
-``upperarm02``/``lowerarm02``/``upperleg02``/``lowerleg02``) and ``other`` (face, eyes, tongue,
-breasts: kept at rest).
+Classes (the keys of :data:`LIMITS`): ``root`` (bone 0); for the bones that play a role, the class of the
+role (:data:`ROLE_CLASS`: ``spine`` for hips/spine/chest below the root, ``neck``, ``head``, ``clavicle``,
+``upper_arm``, ``forearm``, ``wrist``, ``finger``, ``hip_girdle``, ``hip``, ``knee``, ``ankle``, ``toe``);
+for the other bones of the four MPFB2 rigs (cmu_mb, game_engine, default, mixamo), which the vocabulary
+does not name, the chain they extend (:data:`_EXTRA_PATTERNS`): further spine, neck, clavicle, toe and
+finger bones, ``twist_arm`` / ``twist_leg`` (the default rig's second segments ``upperarm02``/
+``lowerarm02``/``upperleg02``/``lowerleg02``), and ``other`` (face, eyes, tongue, breasts: kept at rest).
 
-Limits per role (:data:`LIMITS`, degrees): ``cone`` = largest swing angle (rotation of the bone's Y axis,
+Limits per class (:data:`LIMITS`, degrees): ``cone`` = largest swing angle (rotation of the bone's Y axis,
 about an axis in the local XZ plane), ``twist`` = largest |rotation about local Y|, and for hinges
 ``hinge`` = (min, max) *anatomical* flexion (angle between the two segments, 0 = straight) about the
 hinge axis; the swing is then only about that axis.  Hinge axes are defined anatomically, not by the
@@ -26,23 +28,22 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..solver.errors import ArticulaInputError
+from ..solver.roles import FINGERS, bone_roles
 
-_ROLE_PATTERNS = (
+#: Class of each role of the vocabulary (without side and finger segment).
+ROLE_CLASS = {"hips": "spine", "spine": "spine", "chest": "spine", "neck": "neck", "head": "head",
+              "shoulder": "clavicle", "upper_arm": "upper_arm", "forearm": "forearm", "hand": "wrist",
+              "hip": "hip_girdle", "thigh": "hip", "shin": "knee", "foot": "ankle", "toe": "toe",
+              **{finger: "finger" for finger in FINGERS}}
+#: Classes of the bones no role names (lower-case base name without side), first match wins.
+_EXTRA_PATTERNS = (
     ("twist_arm", r"^(upperarm02|lowerarm02)"),
     ("twist_leg", r"^(upperleg02|lowerleg02)"),
     ("finger", r"finger|thumb|index|middle|ring|pinky|metacarpal"),
-    ("toe", r"toe|ball"),
-    ("forearm", r"^(forearm|lowerarm)"),
-    ("knee", r"^(leg|calf|lowerleg)"),
-    ("upper_arm", r"^(arm|upperarm)"),
-    ("hip", r"^(upleg|thigh|upperleg)"),
-    ("hip_girdle", r"^hipjoint"),
-    ("clavicle", r"^(shoulder|clavicle)"),
-    ("wrist", r"^(hand|wrist)"),
-    ("ankle", r"^foot"),
+    ("toe", r"^toe"),
+    ("clavicle", r"^shoulder"),
     ("neck", r"^neck"),
-    ("head", r"^head$"),
-    ("spine", r"^(spine|lowerback|hips$|pelvis$)"),
+    ("spine", r"^spine"),
 )
 
 
@@ -70,21 +71,28 @@ FLEX_DIRECTION = {"forearm": np.array([0.0, -1.0, 0.0]), "knee": np.array([0.0, 
 
 
 def bone_role(name: str, index: int | None = None) -> str:
-    """Role of a bone called ``name`` (``.L``/``.R`` form); bone ``index`` 0 is always ``root``."""
-    if index == 0:
-        return "root"
-    base = re.sub(r"\.[LR]$", "", name).lower()
-    if base == "pelvis" and base != name.lower():        # default rig: pelvis.L/.R carry the legs
-        return "hip_girdle"
-    for role, pattern in _ROLE_PATTERNS:
-        if re.search(pattern, base):
-            return role
-    return "other"
+    """Class of a bone called ``name`` alone (no rig around it: :func:`solver.roles.bone_roles` of the one
+    name); bone ``index`` 0 is always ``root``."""
+    return _classes([name], [index])[0]
 
 
 def skeleton_roles(names) -> list:
-    """Roles of all bones of a skeleton (bone 0 = root)."""
-    return [bone_role(n, i) for i, n in enumerate(names)]
+    """Classes of all bones of a skeleton with these ``names`` (bone 0 = root), their roles recognised
+    with the rig's naming."""
+    return _classes(list(names), range(len(names)))
+
+
+def _classes(names, indices) -> list:
+    out = []
+    for name, index, role in zip(names, indices, bone_roles(names)):
+        if index == 0:
+            out.append("root")
+        elif role is not None:
+            out.append(ROLE_CLASS[role.split(".", 1)[0]])
+        else:
+            base = re.sub(r"\.[LR]$", "", name).lower()
+            out.append(next((c for c, pattern in _EXTRA_PATTERNS if re.search(pattern, base)), "other"))
+    return out
 
 
 def hinge_geometry(skeleton, roles) -> tuple[np.ndarray, np.ndarray]:
