@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..roles import ARM as ARM_ROLE_NAMES, LEG as LEG_ROLE_NAMES
 from .armature import rest_world
 
 HIP_LATERAL = 0.03      # hip joints lie at least this far from the midline (fraction of the height)
@@ -121,7 +122,7 @@ def infer_roles(arm) -> dict:
         return {}
     a, b, hips = feet
     centre = s.heads[hips]
-    legs = [_limb(s, hips, leaf, ("hip", "thigh", "shin", "foot", "toe"), centre, HIP_LATERAL, LEG)
+    legs = [_limb(s, hips, leaf, LEG_ROLE_NAMES, centre, HIP_LATERAL, LEG)
             for leaf in (a, b)]
     leg_bones = {x for leg in legs for x in leg.values()}
     in_leg = {leaf for leaf in s.leaves if set(_ancestors(s.parents, leaf)) & leg_bones}
@@ -147,7 +148,7 @@ def infer_roles(arm) -> dict:
         roles.update({f"{k}.{side}": v for k, v in leg.items()})
     chest_centre = s.heads[chest]
     for leaf in (d, e):
-        arm_roles = _limb(s, chest, leaf, ("shoulder", "upper_arm", "forearm", "hand"), chest_centre,
+        arm_roles = _limb(s, chest, leaf, ARM_ROLE_NAMES, chest_centre,
                           SHOULDER_LATERAL, ARM)
         side = "L" if float((s.tails[leaf] - centre) @ left) > 0 else "R"
         roles.update({f"{k}.{side}": v for k, v in arm_roles.items()})
