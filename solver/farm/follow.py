@@ -4,13 +4,15 @@ A job is made of units (the chunks of a recording, the subjects of a batch), one
 optionally a finishing task (the merge).  :class:`FarmRun` submits it and follows it one poll at a time
 (:meth:`FarmRun.poll`, for the panel's timer) or to the end (:meth:`FarmRun.wait`, for the batch
 commands).  When the job fails -- with fewer than three Workers one failed task fails the whole job --
-only the units that did not complete are submitted again, a bounded number of times.  The work object
+only the units that did not complete are submitted again, a bounded number of times.  When only the
+finishing task failed, the work's ``repair`` decides what to run again (chunks that started on another
+solution); a finishing task that nothing can repair is never submitted again.  The work object
 (:class:`.track_job.TrackJob`, :class:`.subjects_job.SubjectsJob`) gives ``job_type``, ``unit``,
 ``count``, ``has_finish``, ``outputs_pending(done)`` (the outputs of the units not in ``done`` and of the
 finishing task), ``prepare()`` (makes its folders), ``unit_of(task_name)``, ``body(run)`` and
 ``repair(done)`` (after a failed finish with every unit done: units to run again, removed from ``done``,
-and a line saying why; '' when none), ``is_prep(task_name)`` and ``prep_done()`` (a first task the units
-wait for, e.g. adapting the template)."""
+and a line saying why; '' when none; raises :class:`ArticulaInputError` saying why it cannot),
+``is_prep(task_name)`` and ``prep_done()`` (a first task the units wait for, e.g. adapting the template)."""
 from __future__ import annotations
 
 import os
@@ -45,7 +47,8 @@ class Status:
 
 class FarmRun:
     """Submit ``work`` to ``manager`` and follow it; ``retries``: how many times a failed job's
-    unfinished units are submitted again before giving up."""
+    unfinished units are submitted again before giving up (repairs of a failed finish, bounded by the
+    work, do not count)."""
 
     def __init__(self, manager: Manager, work, retries: int = 2):
         if int(retries) != retries or not 0 <= retries <= 20:
@@ -53,6 +56,7 @@ class FarmRun:
         self.manager, self.work, self.retries = manager, work, int(retries)
         self.done = set()                      # units completed in any submission
         self.attempt, self.job_id, self.jobs, self.last = 0, "", [], None
+        self.repairs = 0                       # submissions that repaired a failed finish (not retries)
         self.prep_status = ""                  # the status of a task the units wait for ("" when none)
 
     def start(self) -> str:
@@ -101,13 +105,28 @@ class FarmRun:
     def _retry_or_raise(self, tasks) -> None:
         failed = [t for t in tasks if t["status"] == "failed"]
         names = ", ".join(t["name"] for t in failed) or "a task"
-        if self.attempt > self.retries:
-            tail = self._log_tail(failed[0]) if failed else ""
-            raise FarmError(f"{names} failed in {self.attempt} submissions (last job {self.job_id}); "
-                            f"{self._outputs_state()}" + (f"; the end of its log:\n{tail}" if tail else ""))
-        repaired = self.work.repair(self.done) if len(self.done) == self.work.count else ""
+        if len(self.done) == self.work.count:          # only the finishing task failed: repair or stop
+            try:
+                repaired = self.work.repair(self.done)
+            except ArticulaInputError as exc:
+                self._give_up(failed, f"{names} failed (job {self.job_id}): {exc}")
+            if not repaired:
+                self._give_up(failed, f"{names} failed with every {self.work.unit} done (job {self.job_id}); not "
+                                      f"submitted again: it would read the same inputs")
+            self.repairs += 1
+            self.start()
+            self.last.text += f"; {repaired}: submitted again as job {self.job_id}"
+            return
+        if self.attempt - self.repairs > self.retries:
+            self._give_up(failed, f"{names} failed in {self.attempt} submissions (last job {self.job_id})")
         self.start()
-        self.last.text += f"; {repaired or names + ' failed'}: submitted again as job {self.job_id}"
+        self.last.text += f"; {names} failed: submitted again as job {self.job_id}"
+
+    def _give_up(self, failed, text: str) -> None:
+        """Raise :class:`FarmError` with ``text``, the outputs' state and the end of the first failed task's
+        log."""
+        tail = self._log_tail(failed[0]) if failed else ""
+        raise FarmError(f"{text}; {self._outputs_state()}" + (f"; the end of its log:\n{tail}" if tail else ""))
 
     def _log_tail(self, task) -> str:
         try:

@@ -14,6 +14,7 @@ from . import chunks as chunk_plan
 JOB_TYPE = "articula-track"
 KINDS = ("depth", "scans")
 AGREE_MM = merge.AGREE_MM     # mm: chunks differing more on a cut frame started on another solution
+MAX_REPAIRS = 3               # rounds of re-tracking disagreeing chunks before the job gives up
 
 
 @dataclass
@@ -24,8 +25,10 @@ class TrackJob:
     tracked bundle; ``blend``: optional .blend to bake into; ``options``: further ``track`` flags
     (no paths); ``name``: the job's name; ``agree_mm``: the merge refuses chunks that differ more than
     this on the frame where it switches between them (0: no check); ``start_from``: ``{chunk: (earlier
-    chunk, pose index)}``, chunks to start from an earlier chunk's pose (``track --start-pose``).  Paths
-    absolute, as this machine sees the shared storage."""
+    chunk, pose index)}``, chunks to start from an earlier chunk's pose (``track --start-pose``);
+    ``max_repairs``: rounds of :meth:`repair` at most; ``repairs``: rounds done; ``tracked_in``: ``{chunk:
+    round}`` in which a chunk was last tracked (0, absent: the first submission).  Paths absolute, as
+    this machine sees the shared storage."""
     model: str
     input: str
     kind: str
@@ -38,6 +41,9 @@ class TrackJob:
     agree_mm: float = AGREE_MM
     start_from: dict = field(default_factory=dict)
     adapt_frames: int = 300
+    max_repairs: int = MAX_REPAIRS
+    repairs: int = 0
+    tracked_in: dict = field(default_factory=dict)
 
     job_type = JOB_TYPE
     unit = "chunk"
@@ -104,20 +110,45 @@ class TrackJob:
                 "metadata": {"articula.out": self.out}}
 
     def repair(self, done: set) -> str:
-        """After a failed merge with every chunk tracked: when a chunk started on another solution than the
-        chunk before it (:func:`solver.track.merge.disagreements`), mark it to be tracked again from that
-        chunk's pose at its first frame (capture tracking only: ``track --start-pose``) and return a line
-        saying so; '' when there is nothing to repair."""
+        """After a failed merge with every chunk tracked: each cut where the later chunk started on another
+        solution than the earlier one (:func:`solver.track.merge.disagreements`) gets its later chunk
+        tracked again from the earlier chunk's pose at its first frame (capture tracking only: ``track
+        --start-pose``), unless the earlier chunk is itself tracked again now (the next round sees its new
+        pose).  Marks those chunks (removed from ``done``) and returns a line saying so; '' when no cut
+        disagrees (the merge failed for another reason).  Raises :class:`ArticulaInputError` when a cut
+        still disagrees after its later chunk was started from the earlier chunk as it is now, or after
+        ``max_repairs`` rounds: the same merge submitted again would fail the same way."""
         if self.kind != "scans" or not self.agree_mm or len(self.ranges) < 2:
             return ""
         chunks = merge.load_chunks([self.chunk_path(k) for k in range(len(self.ranges))])
         bad = merge.disagreements(chunks, self.agree_mm)   # indices by start: the plan's order
         if not bad:
             return ""
-        i, j = bad[0]["indices"]
-        if j in self.start_from:
-            return ""                                  # already started from its neighbour: give up
-        self.start_from[j] = (i, self.ranges[j][0] - self.ranges[i][0])
-        done.discard(j)
-        return (f"chunk {j} disagreed with chunk {i} on frame {bad[0]['frame']} by {bad[0]['max_vertex_mm']:.0f} mm: "
-                f"tracked again from chunk {i}'s pose")
+        stuck = next((c for c in bad if not self._can_restart(*c["indices"])), None)
+        if stuck is not None or self.repairs >= self.max_repairs:
+            raise ArticulaInputError(self._unrepaired_text(stuck or bad[0], stuck is not None))
+        self.repairs += 1
+        lines = []
+        for cut in bad:
+            i, j = cut["indices"]
+            if self.tracked_in.get(i) == self.repairs:
+                continue                                   # its earlier chunk changes in this round
+            self.start_from[j] = (i, self.ranges[j][0] - self.ranges[i][0])
+            self.tracked_in[j] = self.repairs
+            done.discard(j)
+            lines.append(f"chunk {j} disagreed with chunk {i} on frame {cut['frame']} by {cut['max_vertex_mm']:.0f} "
+                         f"mm: tracked again from chunk {i}'s pose")
+        return "; ".join(lines)
+
+    def _can_restart(self, i: int, j: int) -> bool:
+        """Whether chunk ``j`` may be tracked again from chunk ``i``: it was not started from ``i``, or
+        ``i`` was tracked again after ``j`` was."""
+        return self.start_from.get(j, (None,))[0] != i or self.tracked_in.get(i, 0) > self.tracked_in.get(j, 0)
+
+    def _unrepaired_text(self, cut: dict, stuck: bool) -> str:
+        i, j = cut["indices"]
+        how = (f"after it was tracked again from chunk {i}'s pose at frame {self.ranges[j][0]}" if stuck else
+               f"after {self.repairs} repair round(s) (at most {self.max_repairs})")
+        return (f"chunk {j} still disagrees with chunk {i} on frame {cut['frame']} by {cut['max_vertex_mm']:.0f} mm "
+                f"{how}; the merge is not submitted again (it would fail the same way): give a longer --overlap, "
+                f"or accept the join with --agree 0")

@@ -74,8 +74,8 @@ function startPoses(settings, chunks) {
         const t = item.trim();
         if (!t) continue;
         const m = t.match(/^(\d+):(\d+):(\d+)$/);
-        if (!m || Number(m[1]) >= chunks.length || Number(m[2]) >= chunks.length)
-            throw `start_from "${t}": expected CHUNK:EARLIER_CHUNK:POSE with chunks 0..${chunks.length - 1}`;
+        if (!m || Number(m[1]) >= chunks.length || Number(m[2]) >= Number(m[1]))
+            throw `start_from "${t}": expected CHUNK:EARLIER_CHUNK:POSE with 0 <= EARLIER_CHUNK < CHUNK < ${chunks.length}`;
         const from = Number(m[2]);
         out[Number(m[1])] = chunkFile(settings, from, chunks[from], chunks.length) + ":" + m[3];
     }

@@ -283,3 +283,81 @@ def test_without_a_model_a_first_task_adapts_the_template_and_the_chunks_share_i
     assert len(merged.poses) == FRAMES and merged.model.skeleton.num_bones == adapted.model.skeleton.num_bones
     chunks = [load_bundle(job.chunk_path(k)) for k in range(2)]
     assert {c.provenance["model_sha256"] for c in chunks} == {model_digest(adapted.model)}
+
+
+
+SCAN_FRAMES, SCAN_CHUNK, SCAN_OVERLAP = 15, 5, 2
+FAST = ["--adapt", "off", "--prior", "none", "--no-temporal"]      # the capture tracker's quick settings
+
+
+@pytest.fixture(scope="module")
+def captures(tmp_path_factory):
+    """The tube body's captures (tests/blender/track), its model bundle and a one-process ``./run track``."""
+    from articula.solver.formats.bundle import save_bundle
+    from articula.solver.rig.model import Poses
+    from ..track.test_track import make_truth, write_captures
+    root = tmp_path_factory.mktemp("captures")
+    model, poses, scans = make_truth(SCAN_FRAMES, seed=2)
+    person = str(root / "person.npz")
+    save_bundle(person, model, Poses(poses.rotations[:3], poses.translations[:3], poses.scales[:3]))
+    folder = write_captures(root / "scans", scans)
+    one = str(root / "one.npz")
+    subprocess.run([RUN, "track", "--model", person, "--scans", folder, "--out", one, *FAST], check=True,
+                   timeout=JOB_SECONDS, capture_output=True)
+    return {"model": model, "poses": poses, "person": person, "folder": folder, "one": one, "root": root}
+
+
+def _track_from_a_wrong_start(captures, job, k, axis):
+    """Track chunk ``k`` of ``job`` here, started from its first frame's true pose with the root turned
+    half a turn about ``axis``: the chunk settles on another solution (metres from the truth)."""
+    from articula.solver.formats.bundle import save_bundle
+    from articula.solver.geometry.rotations import quat_mul, rotvec_to_quat
+    from articula.solver.rig.model import Poses
+    a, b = job.ranges[k]
+    rot = captures["poses"].rotations[a:a + 1].copy()
+    rot[0, 0] = quat_mul(rotvec_to_quat(np.pi * np.asarray(axis, float)), rot[0, 0])
+    wrong = str(captures["root"] / f"wrong_start_{k}.npz")
+    save_bundle(wrong, captures["model"], Poses(rot, captures["poses"].translations[a:a + 1], np.ones(1)))
+    subprocess.run([RUN, "track", "--model", captures["person"], "--scans", captures["folder"], "--frames",
+                    f"{a}:{b}", "--start-pose", wrong, "--out", job.chunk_path(k), *FAST], check=True,
+                   timeout=JOB_SECONDS, capture_output=True)
+
+
+def test_chunks_on_other_solutions_are_tracked_again_and_the_merge_matches_one_process(farm, captures, tmp_path):
+    """Chunks 1 and 2 tracked on two other solutions (planted: a resumed job whose chunks 1 and 2 were
+    tracked from wrong starts): each refused cut gets its later chunk tracked again from the earlier
+    chunk's pose where they overlap (chunk 1, then chunk 2 from chunk 1's new pose), no job re-runs a
+    merge of unchanged chunks, a repair is not one of the retries, and the job ends with one track equal
+    to the one process within the capture tracker's tolerance (tests/blender/track: 5 mm)."""
+    from articula.solver.farm import chunks
+    from articula.solver.farm.flamenco import Manager
+    from articula.solver.farm.follow import FarmRun
+    from articula.solver.farm.track_job import TrackJob
+    from articula.solver.formats.bundle import load_bundle
+    from articula.solver.rig.skinning import hybrid_skin
+    out = str(tmp_path / "shared" / "scans.npz")
+    job = TrackJob(captures["person"], captures["folder"], "scans", chunks.plan(SCAN_FRAMES, SCAN_CHUNK, SCAN_OVERLAP),
+                   str(tmp_path / "shared" / "work"), out, options=list(FAST))
+    assert job.ranges == [(0, 5), (3, 10), (8, 15)]
+    job.prepare()
+    _track_from_a_wrong_start(captures, job, 1, (0, 0, 1))
+    _track_from_a_wrong_start(captures, job, 2, (1, 0, 0))
+    run = FarmRun(Manager(farm.url), job, retries=1)
+    run.done.update({1, 2})                           # resumed: chunks 1 and 2 are tracked already
+    lines = []
+    run.start()
+    status = _follow(run, lambda run, status: lines.append(status.text))
+    assert status.unit_status == ["completed"] * 3
+    names = [[t["name"] for t in run.manager.tasks(j)] for j in run.jobs]
+    assert names == [["chunk-0000 frames 0:5", "merge"], ["chunk-0001 frames 3:10", "merge"],
+                     ["chunk-0002 frames 8:15", "merge"]], names
+    assert job.start_from == {1: (0, 3), 2: (1, 5)}, job.start_from
+    assert any("chunk 1 disagreed with chunk 0" in line for line in lines), lines
+    assert any("chunk 2 disagreed with chunk 1" in line for line in lines), lines
+    merged, one = load_bundle(out), load_bundle(captures["one"])
+    model = captures["model"]
+    diff = 1000 * np.linalg.norm(hybrid_skin(model, merged.poses) - hybrid_skin(model, one.poses), axis=2)
+    assert len(merged.poses) == SCAN_FRAMES and diff.max() < 5.0 and diff.mean() < 2.0, diff.max(axis=1)
+    assert diff[:4].max() < 1e-6                       # chunk 0's frames: the same computation as one process
+    cuts = merged.provenance["report"]["merge"]["cuts"]
+    assert [c["frame"] for c in cuts] == [4, 9] and max(c["max_vertex_mm"] for c in cuts) < 5.0, cuts

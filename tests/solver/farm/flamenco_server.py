@@ -57,9 +57,9 @@ class Farm:
         paths = [f"{settings['work_dir']}/{chunk_plan.file_name(k, r)}" for k, r in enumerate(ranges)]
         try:
             merged = merge.merge_chunks(merge.load_chunks(paths), float(settings["agree_mm"]) or None)
-        except ArticulaInputError as exc:
+            save_bundle(settings["out"], merged.model, merged.poses, merged.provenance)
+        except (ArticulaInputError, OSError) as exc:
             return f"articula merge-tracks: error: {exc}"
-        save_bundle(settings["out"], merged.model, merged.poses, merged.provenance)
         return ""
 
 

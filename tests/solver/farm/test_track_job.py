@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from articula.sample_scenes import synthetic
+from articula.solver.errors import ArticulaInputError
 from articula.solver.farm.track_job import TrackJob
 from articula.solver.formats.bundle import save_bundle
 from articula.solver.rig.model import Poses
@@ -43,7 +44,32 @@ def test_a_chunk_on_another_solution_is_tracked_again_from_its_neighbours_pose(m
     assert "chunk 1 disagreed with chunk 0" in text
     assert job.start_from == {1: (0, 8)} and done == {0}
     assert job.body([1])["settings"]["start_from"] == "1:0:8"
-    assert job.repair({0, 1}) == ""                     # started from its neighbour already: no second repair
+    with pytest.raises(ArticulaInputError, match="chunk 1 still disagrees with chunk 0 on frame 10 by .* after it "
+                                                 "was tracked again from chunk 0's pose at frame 8"):
+        job.repair({0, 1})                       # started from its neighbour already: no second repair
+
+
+def test_a_chunk_started_from_a_neighbour_that_changed_since_may_be_repaired_again(model, tmp_path):
+    job = TrackJob(str(tmp_path / "m.npz"), str(tmp_path / "rec"), "scans", [(0, 8), (5, 14), (11, 20)],
+                   str(tmp_path), str(tmp_path / "out.npz"))
+    write_chunks(model, job, twisted=2)
+    assert "chunk 2 disagreed with chunk 1" in job.repair({0, 1, 2}) and job.tracked_in == {2: 1}
+    job.start_from[1], job.tracked_in[1] = (0, 5), 2          # chunk 1 tracked again after chunk 2 was
+    job.repairs = 2
+    assert "chunk 2 disagreed with chunk 1" in job.repair({0, 1, 2}) and job.tracked_in == {1: 2, 2: 3}
+    job.tracked_in[1] = 4
+    with pytest.raises(ArticulaInputError, match="still disagrees .* after 3 repair round"):
+        job.repair({0, 1, 2})
+
+
+def test_a_later_cut_waits_while_its_earlier_chunk_is_tracked_again(model, tmp_path):
+    job = TrackJob(str(tmp_path / "m.npz"), str(tmp_path / "rec"), "scans", [(0, 8), (5, 14), (11, 20)],
+                   str(tmp_path), str(tmp_path / "out.npz"))
+    write_chunks(model, job, twisted=1)                        # cuts 0|1 and 1|2 both disagree
+    done = {0, 1, 2}
+    text = job.repair(done)
+    assert "chunk 1 disagreed with chunk 0" in text and "chunk 2" not in text
+    assert job.start_from == {1: (0, 5)} and done == {0, 2}
 
 
 def test_agreeing_chunks_and_depth_chunks_are_not_repaired(model, tmp_path):
