@@ -47,10 +47,10 @@ REGION_OF_ROLE = {"hips": "trunk", "spine": "trunk", "chest": "trunk", "shoulder
                   "thigh": "thigh", "shin": "shin", "foot": "foot", "toe": "foot", "thumb": "hand",
                   "index": "hand", "middle": "hand", "ring": "hand", "pinky": "hand"}
 CHECK_POINTS = 6000     # capture points (a fixed random subset) tested for being explained by the model
-KNN = 8                 # neighbours of the k-NN area of a capture point (area ~ pi r_k^2 / k)
+KNN = 5                 # neighbours of the k-NN area of a capture point and of the naming of a region
+SUPPORT_RINGS = 2       # a vertex this many edges from one a capture point matched is supported (~3 cm)
 JOINT_REACH = 0.12      # m: capture this close to a limb's joint hangs from that joint (joint-to-skin ~5-8 cm)
-SPARSE = 3.0            # the k-NN radius is at most this many capture spacings (uniform sampling: ~1.6)
-AREA_SAMPLE = 2000      # unexplained points whose k-NN area and neighbours are computed (a random subset)
+AREA_SAMPLE = 2000      # unexplained points whose neighbours name their region (a random subset)
 NORMAL_OFFSET = 0.5     # an offset counts as inside only when mostly along the surface normal (cos >= this)
 HINGE_BENT_DEG = 15.0   # a rest bend above this gives the hinge axis (the bones' plane), else body forward
 
@@ -300,16 +300,17 @@ def check_frame(model, pose: Poses, posed, capture, body: Body = None,
         rng = np.random.default_rng(0)
         sample = points if len(points) <= CHECK_POINTS else points[rng.choice(len(points), CHECK_POINTS, False)]
         model_tree, sample_tree = _tree(posed), _tree(sample)
-        spacing = _spacing(sample, sample_tree)
+        spacing, point_area = sampling(sample, sample_tree)
         numbers["capture_points_checked"] = len(sample)
         joints = region_joints(body, model.skeleton, Rm, tm)
-        found, nums = _unexplained(body, joints, sample, model_tree, sample_tree, spacing, options)
+        found, nums, matched = _unexplained(body, joints, sample, model_tree, sample_tree, spacing, point_area,
+                                            options)
         findings += found
         numbers.update(nums)
         normals = _vertex_normals(posed, body)
         if cameras:
             full_spacing = spacing * np.sqrt(len(sample) / len(points))
-            found, nums = _unsupported(body, posed, normals, points, sample_tree, cameras, full_spacing, options)
+            found, nums = _unsupported(body, posed, normals, points, matched, cameras, full_spacing, options)
             findings += found
             numbers.update(nums)
         else:
@@ -354,14 +355,6 @@ def _tree(points):
     return cKDTree(points, balanced_tree=False, compact_nodes=False)
 
 
-def _spacing(points, tree):
-    """Median distance (m) from a capture point to its nearest other point (a sample of 500)."""
-    rng = np.random.default_rng(0)
-    sample = points if len(points) <= 500 else points[rng.choice(len(points), 500, replace=False)]
-    d, _ = tree.query(sample, k=2)
-    return float(np.median(d[:, 1])) if len(points) > 1 else 0.01
-
-
 def _vertex_normals(vertices, body):
     """Unit area-weighted vertex normals (V, 3) of the posed mesh (zero on vertices of no triangle)."""
     f = body.faces
@@ -393,12 +386,17 @@ def voxel_components(points, size):
     return count, labels[np.ravel(inverse)]
 
 
-def knn_areas(points, tree, queries, largest):
-    """Surface area (m²) each of ``queries`` (indices into ``points``) stands for: ``pi r² / k`` with r the
-    distance to its k-th other neighbour (k = :data:`KNN`), at most ``largest`` (m: a few stray points do not
-    stand for the empty space around them), and those neighbours' indices (Q, k)."""
-    d, idx = tree.query(points[queries], k=KNN + 1)
-    return np.pi * np.minimum(d[:, -1], largest) ** 2 / KNN, idx[:, 1:]
+def sampling(points, tree, size=500):
+    """``(spacing, area)``: the median distance (m) from a capture point to its nearest other point and the
+    median surface area (m²) a point stands for, ``pi r² / (k - 1/3)`` with r the distance to its k-th
+    other neighbour (k = :data:`KNN`; for uniform samples pi r² times the density has the Gamma(k) law,
+    whose median is about k - 1/3), over ``size`` random points."""
+    rng = np.random.default_rng(0)
+    sample = points if len(points) <= size else points[rng.choice(len(points), size, replace=False)]
+    d, _ = tree.query(sample, k=min(KNN + 1, len(points)))
+    if d.shape[1] < KNN + 1:
+        return 0.01, 1e-4
+    return float(np.median(d[:, 1])), float(np.median(np.pi * d[:, -1] ** 2 / (KNN - 1.0 / 3.0)))
 
 
 def _extent_cm(points):
@@ -419,25 +417,24 @@ def _level(area, body, options):
     return "doubtful" if area >= options.region_doubtful * body.area else None
 
 
-def _unexplained(body, joints, points, model_tree, capture_tree, spacing, options):
+def _unexplained(body, joints, points, model_tree, capture_tree, spacing, point_area, options):
     """Findings on capture regions farther than ``explain_mm`` from the posed model, and the numbers.
-    ``joints`` (R, 3): the posed joint each region hangs from (:func:`region_joints`)."""
+    ``joints`` (R, 3): the posed joint each region hangs from (:func:`region_joints`); a region's area is
+    its points times ``point_area`` (m², :func:`sampling`: a small region's own k-NN areas would be
+    inflated by its border).  Also returns the model vertices nearest to an explained point."""
     tau = options.explain_mm / 1000.0
     d, near = model_tree.query(points, distance_upper_bound=tau + 0.5 * body.edge)
     explained = np.isfinite(d)
     far = np.flatnonzero(~explained)
     numbers = {"unexplained_fraction": len(far) / len(points), "unexplained_regions": []}
     if not len(far):
-        return [], numbers
+        return [], numbers, near[explained]
     rng = np.random.default_rng(0)
     sample = far if len(far) <= AREA_SAMPLE else np.sort(rng.choice(far, AREA_SAMPLE, replace=False))
-    area, neighbours = knn_areas(points, capture_tree, sample, SPARSE * spacing)
+    neighbours = capture_tree.query(points[sample], k=KNN + 1)[1][:, 1:]
     count, labels = voxel_components(points[far], max(2.0 * spacing, 0.01))
     sample_label = labels[np.searchsorted(far, sample)]
-    sizes = np.bincount(labels, minlength=count)
-    mean_area = np.bincount(sample_label, area, count) / np.maximum(np.bincount(sample_label, minlength=count), 1)
-    mean_area[mean_area == 0] = np.median(area)
-    region_area = sizes * mean_area
+    region_area = np.bincount(labels, minlength=count) * point_area
     numbers["unexplained_area_cm2"] = float(region_area.sum() * 1e4)
     findings = []
     for c in np.argsort(-region_area):
@@ -456,7 +453,7 @@ def _unexplained(body, joints, points, model_tree, capture_tree, spacing, option
             "unexplained", level, part,
             f"capture region of {len(mine)} points ({small:.0f} x {large:.0f} cm, {region_area[c] * 1e4:.0f} cm²)"
             f" near the {part} not explained by the model ({dist:.0f} mm away)", nums))
-    return findings, numbers
+    return findings, numbers, near[explained]
 
 
 def _region_part(body, joints, near, explained, neighbours, cluster_points, model_tree):
@@ -514,11 +511,16 @@ def _seen_through(vertices, normals, points, cam_to_world, intr, pixel, tau, fac
     return out
 
 
-def _unsupported(body, posed, normals, points, sample_tree, cameras, spacing, options):
-    """Findings on model regions the cameras saw through (:func:`_seen_through`) among the vertices with
-    no sampled capture point within ``explain_mm``, and the numbers.  ``spacing``: of all the points."""
+def _unsupported(body, posed, normals, points, matched, cameras, spacing, options):
+    """Findings on model regions the cameras saw through (:func:`_seen_through`), and the numbers.  Only
+    vertices farther than :data:`SUPPORT_RINGS` edges from every ``matched`` vertex (nearest to a sampled
+    capture point) are tested: the others have capture on them.  ``spacing``: of all the points."""
     tau = options.explain_mm / 1000.0
-    lonely = np.flatnonzero(~np.isfinite(sample_tree.query(posed, distance_upper_bound=tau)[0]))
+    near = np.zeros(len(posed))
+    near[matched] = 1.0
+    for _ in range(SUPPORT_RINGS):
+        near += body.graph @ near
+    lonely = np.flatnonzero(near == 0)
     pixel = max(3.0 * spacing, 0.01)
     seen = np.array([_seen_through(posed[lonely], normals[lonely], points, c2w, intr, pixel, tau,
                                    options.facing_cos) for c2w, intr in cameras]).reshape(len(cameras), -1)
