@@ -1,0 +1,160 @@
+"""The body a tracker fits: a model evaluated exactly (hybrid skin) with its pose Jacobian on the
+vertices a fit needs, and the closest points of its posed surface.
+
+Parameters of one frame (``P = 3 + 3B``): the root translation (world metres, additive) and one
+rotation increment per bone (rotation vector in the bone's local axes, applied on the right:
+``q_b <- q_b exp(delta_b)``), the layout of :func:`solver.rig.jacobians.pose_layout` without the scale
+column; the subject's scale stays what the pose says.  Shapes: posed vertices ``(V, 3)``, Jacobians
+``(n, 3, P)``.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..errors import ArticulaInputError
+from ..rig.jacobians import apply_pose_increment, pose_jacobian
+from ..rig.model import Model, Poses
+from ..rig.skinning import AnchorGroups, hybrid_skin
+
+JACOBIAN_REUSE_RAD = 0.08    # a vertex Jacobian serves poses this close (per bone, radians)
+
+
+class Body:
+    """A model ready for tracking: anchor groups, the one-ring of every vertex, parameter layout."""
+
+    def __init__(self, model: Model):
+        self.model = model
+        self.groups = AnchorGroups(model)
+        self.num_bones = model.skeleton.num_bones
+        self.size = 3 + 3 * self.num_bones
+        self.columns = np.r_[0:3, 4:4 + 3 * self.num_bones]     # of the rig's full layout (no scale)
+        self.faces = np.asarray(model.faces, dtype=np.int64)
+        self.ring = one_ring(self.faces, model.num_vertices)
+        self._J, self._J_pose = None, None
+
+    def jacobian_near(self, pose: Poses, vertices, tolerance: float = JACOBIAN_REUSE_RAD) -> np.ndarray:
+        """``(n, 3, P)`` derivatives of ``vertices`` taken from one evaluation of every vertex's Jacobian
+        at a pose within ``tolerance`` radians (per bone) of ``pose``, evaluated anew when none is.
+        Why: a fit moves the pose by little between its later iterations, and a Jacobian a few
+        hundredths of a radian old changes only the Gauss–Newton steps, not the residuals, so not the
+        pose the fit converges to."""
+        if self._J is None or _turned(self._J_pose, pose) > tolerance:
+            self._J = pose_jacobian(self.model, pose, self.groups)[1][0]      # (V, 3, 4 + 3B)
+            self._J_pose = pose
+        return self._J[np.asarray(vertices, dtype=np.int64)][..., self.columns]
+
+    def pose(self, pose: Poses) -> np.ndarray:
+        """Posed vertices ``(V, 3)`` of one frame."""
+        return hybrid_skin(self.model, pose, self.groups)[0]
+
+    def jacobian(self, pose: Poses, vertices) -> np.ndarray:
+        """``(n, 3, P)`` derivatives of the posed ``vertices`` (n,) by the frame's parameters."""
+        vertices = np.asarray(vertices, dtype=np.int64)
+        m = self.model
+        sub = Model(m.rest_vertices[vertices], np.zeros((0, 3), np.int32), m.skeleton, m.anchor[vertices],
+                    m.twist_weights[vertices], m.swing_weights[vertices])
+        _, J = pose_jacobian(sub, pose, AnchorGroups(sub))
+        return J[0][..., self.columns]
+
+    def moved(self, pose: Poses, step) -> Poses:
+        """The pose after the increment ``step`` (P,)."""
+        full = np.zeros((1, 4 + 3 * self.num_bones))
+        full[0, self.columns] = step
+        return apply_pose_increment(pose, full)
+
+    def surface(self, posed) -> "Surface":
+        """The posed surface's closest-point queries."""
+        return Surface(posed, self.faces, self.ring)
+
+
+def _turned(a: Poses, b: Poses) -> float:
+    """Largest rotation angle (radians) between the bones of two one-frame poses."""
+    dot = np.abs(np.sum(a.rotations[0] * b.rotations[0], axis=1))
+    return float(2.0 * np.arccos(np.clip(dot.min(), 0.0, 1.0)))
+
+
+class Surface:
+    """Closest points on a posed mesh: nearest vertex by a k-d tree, then the closest point on the
+    triangles around it (exact point-triangle distance, edges and corners included)."""
+
+    def __init__(self, vertices, faces, ring):
+        self.vertices, self.faces, self.ring = vertices, faces, ring
+        self.tree = cKDTree(vertices)
+        a, b, c = (vertices[faces[:, k]] for k in range(3))
+        n = np.cross(b - a, c - a)
+        self.face_normals = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+    def closest(self, queries):
+        """``(face (Q,), barycentric (Q, 3), foot (Q, 3), vertex (Q,))`` of each query ``(Q, 3)``: the
+        closest point on the one-ring of its nearest vertex."""
+        _, vertex = self.tree.query(queries)
+        tris = self.ring[vertex]                                         # (Q, R), -1 padding
+        valid = tris >= 0
+        tri = self.faces[np.maximum(tris, 0)]                            # (Q, R, 3)
+        bary = closest_barycentric(queries[:, None, :], *(self.vertices[tri[..., k]] for k in range(3)))
+        foot = np.einsum("qrk,qrkj->qrj", bary, self.vertices[tri])
+        d2 = np.where(valid, np.sum((foot - queries[:, None, :]) ** 2, axis=2), np.inf)
+        best = np.argmin(d2, axis=1)
+        rows = np.arange(len(queries))
+        return tris[rows, best], bary[rows, best], foot[rows, best], vertex
+
+
+def one_ring(faces, num_vertices: int) -> np.ndarray:
+    """``(V, R)`` the triangles around each vertex, padded with -1 (R = largest valence)."""
+    corner = np.asarray(faces, dtype=np.int64).ravel()
+    if len(corner) == 0:
+        raise ArticulaInputError("model: the mesh has no faces; tracking needs its surface")
+    order = np.argsort(corner, kind="stable")
+    counts = np.bincount(corner, minlength=num_vertices)
+    starts = np.cumsum(counts) - counts
+    table = np.full((num_vertices, max(int(counts.max()), 1)), -1, dtype=np.int64)
+    v = corner[order]
+    table[v, np.arange(len(order)) - starts[v]] = order // 3
+    return table
+
+
+def closest_barycentric(p, a, b, c):
+    """Barycentric coordinates ``(..., 3)`` of the closest point to ``p`` on triangles ``(a, b, c)``
+    (all ``(..., 3)``, broadcast): the region tests of the point-triangle distance (Ericson,
+    Real-Time Collision Detection §5.1.5), vectorised.  Degenerate triangles give a corner or an edge."""
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = _dot(ab, ap), _dot(ac, ap)
+    bp = p - b
+    d3, d4 = _dot(ab, bp), _dot(ac, bp)
+    cp = p - c
+    d5, d6 = _dot(ab, cp), _dot(ac, cp)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    den = va + vb + vc
+    inside = np.where(np.abs(den) > 1e-300, 1.0 / np.where(den == 0, 1.0, den), 0.0)
+    v, w = vb * inside, vc * inside
+    out = np.stack([1.0 - v - w, v, w], axis=-1)
+    cases = (
+        ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), _edge(d4 - d3, (d4 - d3) + (d5 - d6), 1, 2)),
+        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), _edge(d2, d2 - d6, 0, 2)),
+        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), _edge(d1, d1 - d3, 0, 1)),
+        ((d6 >= 0) & (d5 <= d6), _corner(2, d1.shape)),
+        ((d3 >= 0) & (d4 <= d3), _corner(1, d1.shape)),
+        ((d1 <= 0) & (d2 <= 0), _corner(0, d1.shape)),
+    )
+    for mask, value in cases:                 # later cases take precedence, as in the sequential tests
+        out = np.where(mask[..., None], value, out)
+    return out
+
+
+def _dot(x, y):
+    return np.sum(x * y, axis=-1)
+
+
+def _edge(num, den, i, j):
+    """Barycentrics of the point ``t = num/den`` along the edge from corner i to corner j."""
+    t = np.clip(num / np.where(den == 0, 1.0, den), 0.0, 1.0)
+    out = np.zeros(t.shape + (3,))
+    out[..., i], out[..., j] = 1.0 - t, t
+    return out
+
+
+def _corner(i, shape):
+    out = np.zeros(shape + (3,))
+    out[..., i] = 1.0
+    return out

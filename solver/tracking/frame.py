@@ -1,0 +1,84 @@
+"""One frame's fit on the core: stages of terms minimised by :func:`.lm.minimise`.
+
+A stage is a Charbonnier scale, a reach and whether the coverage term (model to capture) takes part.
+The default schedule first fits with coverage (parts the capture does not yet explain are pulled
+towards it; it keeps a limb off the wrong surface) and then with capture-to-model pairs alone, whose
+minimum is unbiased: the coverage pairs' residual runs along the noisy capture's normal, so it is left
+out of the final stage (docs/track.md "Design").  Every stage also holds the pose near ``target`` along
+the directions the data barely constrain (:func:`.priors.weak_directions`) and adds the caller's priors.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .lm import State, Stopping, minimise
+from .priors import TowardPose, weak_directions
+from .terms import ModelToScan, ScanToModel, sample
+
+
+@dataclasses.dataclass(frozen=True)
+class Stage:
+    """eps: Charbonnier scale (m); reach: pairs farther than this are left out (m); coverage: weight of
+    the model-to-capture term (0: none); iterations: at most this many linearisations."""
+    eps: float
+    reach: float
+    coverage: float
+    iterations: int
+
+
+TRACKING = (Stage(0.004, 0.05, 1.0, 6), Stage(0.002, 0.04, 0.0, 10))
+SEARCH = (Stage(0.02, 0.25, 1.0, 12), Stage(0.006, 0.08, 1.0, 10), Stage(0.002, 0.04, 0.0, 12))
+
+
+@dataclasses.dataclass(frozen=True)
+class FrameSettings:
+    """samples: capture points used per frame (a fixed seeded sample); coverage_vertices: model vertices
+    of the coverage term (spread); weak_ratio: eigenvalues of the data's normal matrix below this share
+    of the largest are held towards the target (:func:`.priors.weak_directions`); hold: weight of a
+    pull towards the target on every parameter, relative to the largest eigenvalue (0: none)."""
+    samples: int = 4000
+    coverage_vertices: int = 1500
+    weak_ratio: float = 1e-3
+    hold: float = 0.0
+    step_rad: float = 2e-4
+    step_m: float = 5e-5
+
+
+@dataclasses.dataclass
+class FrameFit:
+    """The fitted pose (one frame), its data energy per capture point (m^2), linearisations used."""
+    pose: object
+    energy: float
+    iterations: int
+    state: State
+
+
+def fit_frame(body, points, normals, start, target=None, priors=(), stages=TRACKING,
+              settings: FrameSettings = FrameSettings(), cancel=None, seed: int = 0) -> FrameFit:
+    """Fit one frame of capture ``points``/``normals`` ``(N, 3)`` from ``start`` (Poses, one frame);
+    ``target``: the pose the weak directions are held to (default ``start``); ``priors``: extra terms."""
+    target = start if target is None else target
+    spread = sample(body.model.num_vertices, settings.coverage_vertices, seed + 1)
+    pose, used, hold = start, 0, None
+    for stage in stages:
+        data = [ScanToModel(points, normals, settings.samples, stage.eps, stage.reach, seed=seed)]
+        if stage.coverage:
+            data.append(ModelToScan(points, normals, spread, stage.eps, stage.reach, weight=stage.coverage))
+        if hold is None:
+            hold = _hold(body, pose, data, target, settings)
+        fit = minimise(body, pose, data + [hold] + list(priors),
+                       Stopping(stage.iterations, settings.step_rad, settings.step_m), cancel)
+        pose, used = fit.pose, used + fit.iterations
+    final = data[0].energy(body, fit.data)
+    return FrameFit(pose, final, used, fit.data)
+
+
+def _hold(body, pose, data, target, settings):
+    """The pull towards ``target`` along the data's weak directions at ``pose`` (fixed for the frame)."""
+    lin = State(body, pose).linearise(body, data)
+    W = weak_directions(lin.H, settings.weak_ratio)
+    if settings.hold:
+        W = W + settings.hold * float(np.linalg.eigvalsh(lin.H)[-1]) * np.eye(len(W))
+    return TowardPose(target, W)

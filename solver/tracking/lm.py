@@ -1,0 +1,116 @@
+"""One robust Levenberg–Marquardt over a frame's parameters, for any list of terms (:mod:`.terms`,
+:mod:`.priors`).
+
+Each iteration linearises every term at the current pose (IRLS weights, correspondences found at that
+pose), solves ``(H + mu diag(H)) step = -g``, and accepts the step when the energy re-evaluated at the
+trial pose (correspondences re-found there) is lower; mu falls on acceptance and rises on rejection
+(Nielsen's rule on the gain ratio).  It stops when an accepted step moves no bone by more than
+``step_rad`` and the root by no more than ``step_m``, or after ``max_iterations`` linearisations.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import os
+
+import numpy as np
+
+_TRACE = bool(os.environ.get('ARTICULA_LM_TRACE'))
+REJECTED_SLACK = 5.0     # a rejected step this close to the tolerance ends the fit
+
+
+@dataclasses.dataclass(frozen=True)
+class Stopping:
+    """When the fit stops: ``max_iterations`` linearisations; an accepted step below ``step_rad``
+    (largest bone rotation, radians) and ``step_m`` (root translation, metres), or lowering the energy
+    by less than ``rel_energy`` of it; a rejected step within ``REJECTED_SLACK`` times those."""
+    max_iterations: int = 15
+    step_rad: float = 2e-4
+    step_m: float = 5e-5
+    rel_energy: float = 1e-4
+    mu: float = 1e-4
+
+
+@dataclasses.dataclass
+class Fit:
+    """Result of :func:`minimise`: the pose, its energy, iterations used, whether the step test stopped it."""
+    pose: object
+    energy: float
+    iterations: int
+    converged: bool
+    data: object = None
+
+
+class State:
+    """A pose with its posed mesh and surface, evaluated once."""
+
+    def __init__(self, body, pose):
+        self.pose = pose
+        self.posed = body.pose(pose)
+        self.surface = body.surface(self.posed)
+        self.cache = {}
+
+    def energy(self, body, terms) -> float:
+        return sum(t.energy(body, self) for t in terms)
+
+    def linearise(self, body, terms):
+        lin = None
+        for t in terms:
+            one = t.linearise(body, self)
+            lin = one if lin is None else lin + one
+        return lin
+
+
+def minimise(body, pose, terms, stopping: Stopping = Stopping(), cancel=None) -> Fit:
+    """Minimise the sum of ``terms`` over one frame's parameters from ``pose`` (one frame)."""
+    state = State(body, pose)
+    mu, nu, it, converged = stopping.mu, 2.0, 0, False
+    lin = state.linearise(body, terms)
+    energy = lin.energy
+    while it < stopping.max_iterations:
+        it += 1
+        if cancel is not None:
+            cancel()
+        step = damped_step(lin.H, lin.g, mu)
+        trial = State(body, body.moved(state.pose, step))
+        e_trial = trial.energy(body, terms)
+        predicted = -(step @ lin.g) - 0.5 * step @ lin.H @ step
+        gain = (energy - e_trial) / max(predicted, 1e-300)
+        if _TRACE:
+            print(f"    it {it} E {energy:.4g} trial {e_trial:.4g} gain {gain:.3f} mu {mu:.3g} step {np.abs(step).max():.3g}")
+        if e_trial < energy:
+            state, done = trial, small_step(step, stopping) or energy - e_trial <= stopping.rel_energy * energy
+            energy = e_trial
+            mu *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
+            nu = 2.0
+            if done:
+                converged = True
+                break
+            lin = state.linearise(body, terms)
+            energy = lin.energy
+        else:
+            mu *= nu
+            nu *= 2.0
+            if small_step(step, stopping, REJECTED_SLACK):
+                converged = True       # the energy's kinks (pairs switching) are below the step tolerance
+                break
+    return Fit(state.pose, energy, it, converged, state)
+
+
+def damped_step(H, g, mu):
+    """``-(H + mu (diag(H) + tiny)) ^-1 g``, by Cholesky when it factors, else least squares."""
+    d = np.diag(H).copy()
+    A = H + np.diag(mu * (d + 1e-12 * max(float(d.max(initial=0.0)), 1e-30)))
+    try:
+        L = np.linalg.cholesky(A)
+        return -np.linalg.solve(L.T, np.linalg.solve(L, g))
+    except np.linalg.LinAlgError:
+        return -np.linalg.lstsq(A, g, rcond=None)[0]
+
+
+def small_step(step, stopping: Stopping, slack: float = 1.0) -> bool:
+    """True when no bone turns by more than ``slack * step_rad`` and the root moves less than
+    ``slack * step_m``."""
+    rot = step[3:].reshape(-1, 3)
+    return (np.linalg.norm(rot, axis=1).max(initial=0.0) <= slack * stopping.step_rad
+            and np.linalg.norm(step[:3]) <= slack * stopping.step_m)
