@@ -1,0 +1,254 @@
+"""The first frame's start hypotheses from any pose and any world orientation (issue 33, build item 3).
+
+The dissertation places the first frame by hand (model-adaptive mocap dissertation §4.1.2); here the
+start-pose set (:mod:`.start_poses`) is put on the rig and searched against one capture KD-tree:
+
+1. **Samples**: model vertices spread over the surface (drawn with probability proportional to their
+   area), all of them and the trunk's (not anchored in an arm or leg), and capture points.  Nothing
+   assumes the world's up: the model's up is its rest body frame's (hips to head), the capture's one
+   of its principal axes.
+2. **Orientations**: ``TRUNK_POSES`` trunk shapes of the set (farthest points on the trunk's
+   directions), the model's up on each signed principal axis of the capture, ``SPINS`` facings about
+   it; placed by the whole body's centroid and ``SHIFTS`` median shifts of the trunk; scored by the mean
+   truncated distance of the trunk samples to the capture.  The best ``REFINE`` get a rigid ICP of the
+   trunk and are ranked again.
+3. **Limbs**: for the best ``RECOMBINE`` distinct orientations, each limb (legs, arms, head) in turn takes
+   the direction set, relative to its root joint, of each of the first ``LIMB_CANDIDATES`` start poses
+   (or stays), chosen by a robust symmetric score: the mean of ``min(d, TRUNCATE_M)`` from the model
+   samples to the capture (the KD-tree) plus from the capture samples to the model samples, so a limb
+   where the capture has none costs as much as capture left unexplained.  A rigid ICP of the whole body
+   on the pairs of both directions ends it.
+
+:func:`start_hypotheses` returns them best first as one-frame :class:`Poses` in the capture's world.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..errors import ArticulaInputError
+from ..geometry.rotations import matrix_to_quat, quat_mul, rotation_between
+from ..rig.model import Model, Poses
+from ..rig.skinning import hybrid_skin
+from .start_poses import POSE_ROLES, PoseSet, RigPoser, role_direction, load_pose_set
+
+MODEL_SAMPLES = 200      # model vertices scoring a hypothesis
+CAPTURE_SAMPLES = 200    # capture points scoring a hypothesis
+SPINS = 12               # turns about the capture's major axis (30 deg apart)
+TRUNK_POSES = 12         # trunk shapes tried in the orientation stage
+TRUNK_SAMPLES = 48       # trunk vertices scoring an orientation
+SHIFTS = 2               # median shifts placing an orientation
+TRUNCATE_M = 0.10        # a distance counts at most this much (metres)
+COARSE_TRUNCATE_M = 0.25 # capture points farther than this do not move an orientation's placement
+REFINE = 24              # orientations refined by a rigid ICP of the trunk
+ICP_ROUNDS = 6
+DISTINCT_DEG = 20.0      # recombined orientations differ by more than this
+RECOMBINE = 3            # refined hypotheses whose limbs are recombined
+LIMB_CANDIDATES = 48     # start poses whose limbs are tried (the set is in farthest-point order)
+TRUNK_SEGMENTS = (("hips", "chest"), ("chest", "neck"), ("neck", "head.end"), ("upper_arm.R", "upper_arm.L"),
+                  ("thigh.R", "thigh.L"))
+LIMBS = (("thigh.L", ("thigh.L", "shin.L", "foot.L", "toe.L", "toe.L.end")),
+         ("thigh.R", ("thigh.R", "shin.R", "foot.R", "toe.R", "toe.R.end")),
+         ("upper_arm.L", ("upper_arm.L", "forearm.L", "hand.L", "hand.L.end")),
+         ("upper_arm.R", ("upper_arm.R", "forearm.R", "hand.R", "hand.R.end")),
+         ("neck", ("neck", "head", "head.end")))
+
+
+def start_hypotheses(model: Model, points, normals=None, count: int = 8, pose_set: PoseSet = None,
+                     seed: int = 0) -> list:
+    """``[(Poses (one frame, the capture's world), score (m))]``, best first, at most ``count``: start
+    hypotheses of ``model`` on the capture ``points (N, 3)`` (metres; ``normals`` are accepted for the
+    caller's convenience and not used).  ``pose_set``: the start poses (default: the shipped set)."""
+    points = _check(points, count)
+    pose_set = load_pose_set() if pose_set is None else pose_set
+    rng = np.random.default_rng(seed)
+    poser = RigPoser(model.skeleton)
+    sample = _Sampled(model, _area_sample(model, MODEL_SAMPLES, rng))
+    trunk = _Sampled(model, _area_sample(model, TRUNK_SAMPLES, rng, _trunk_vertices(model, poser)))
+    tree = cKDTree(points)
+    cap = points[rng.choice(len(points), min(CAPTURE_SAMPLES, len(points)), replace=False)]
+    shapes = pose_set.take(_trunk_poses(pose_set, TRUNK_POSES))
+    bodies = poser.poses(shapes)
+    Xt = trunk.posed(bodies)                                   # (T, St, 3) model coordinates
+    found = _orientations(Xt, sample.posed(bodies).mean(axis=1), points, tree, poser.frame[:, 2])
+    refined = []
+    for _, k, R, t in found[:REFINE]:
+        R, t = _icp(Xt[k], None, tree, R, t)
+        d = np.minimum(tree.query(Xt[k] @ R.T + t, distance_upper_bound=TRUNCATE_M)[0], TRUNCATE_M)
+        refined.append((float(d.mean()), k, R, t))
+    refined.sort(key=lambda item: item[0])
+    out = [_recombined(poser, sample, pose_set, shapes.joints[k], R, t, cap, tree)
+           for _, k, R, t in _distinct(refined, RECOMBINE)]
+    out.sort(key=lambda item: item[0])
+    return [(_placed(model.skeleton, body, R, t), float(s)) for s, body, R, t in out[:count]]
+
+
+def _distinct(found, count) -> list:
+    """The first ``count`` of ``found [(score, k, R, t)]`` whose rotations differ from every earlier one's
+    by more than ``DISTINCT_DEG``."""
+    out = []
+    for item in found:
+        if all(np.trace(item[2].T @ o[2]) < 1 + 2 * np.cos(np.radians(DISTINCT_DEG)) for o in out):
+            out.append(item)
+        if len(out) == count:
+            break
+    return out
+
+
+def _check(points, count):
+    points = np.asarray(points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3 or len(points) < 50:
+        raise ArticulaInputError(f"start search: the capture needs at least 50 points (N, 3), got {points.shape}")
+    if not np.isfinite(points).all():
+        raise ArticulaInputError("start search: the capture has NaN or infinite coordinates")
+    if int(count) != count or count < 1:
+        raise ArticulaInputError(f"start search: count must be a positive integer, got {count}")
+    return points
+
+
+def _area_sample(model, n, rng, mask=None) -> np.ndarray:
+    """Indices of ``n`` distinct vertices (among ``mask (V,)`` if given) drawn with probability
+    proportional to their area (a third of their triangles'), so dense hands and faces do not outweigh
+    the body."""
+    v, f = model.rest_vertices, model.faces
+    area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    w = np.bincount(f.ravel(), np.repeat(area / 3.0, 3), minlength=len(v)) + 1e-12
+    if mask is not None:
+        w = w * mask
+    return np.sort(rng.choice(len(v), min(n, int(np.count_nonzero(w))), replace=False, p=w / w.sum()))
+
+
+def _trunk_vertices(model, poser) -> np.ndarray:
+    """``(V,)`` bool: vertices anchored outside the arms and legs (from the thighs and upper arms down)."""
+    below = poser.below
+    limbs = np.zeros(model.skeleton.num_bones, dtype=bool)
+    for role in ("thigh.L", "thigh.R", "upper_arm.L", "upper_arm.R"):
+        limbs |= below[poser.roles[role]]
+    return ~limbs[model.anchor]
+
+
+def _trunk_poses(pose_set, count) -> np.ndarray:
+    """Indices of ``count`` start poses whose trunks differ most (farthest points on the directions of
+    the hips-chest-neck-head line and the shoulder line), the first pose first."""
+    f = np.concatenate([role_direction(pose_set.joints, a, b) for a, b in TRUNK_SEGMENTS], axis=1)
+    chosen = [0]
+    d = np.linalg.norm(f - f[0], axis=1)
+    while len(chosen) < min(count, len(f)):
+        chosen.append(int(np.argmax(d)))
+        d = np.minimum(d, np.linalg.norm(f - f[chosen[-1]], axis=1))
+    return np.array(chosen)
+
+
+class _Sampled:
+    """The model restricted to sample vertices ``index`` (skinning only those)."""
+
+    def __init__(self, model, index):
+        self.sub = Model(model.rest_vertices[index], np.zeros((0, 3), np.int32), model.skeleton,
+                         model.anchor[index], model.twist_weights[index], model.swing_weights[index])
+
+    def posed(self, poses: Poses) -> np.ndarray:
+        return hybrid_skin(self.sub, poses)
+
+
+def _axes(X):
+    """Centroid ``(3,)``, principal axes ``(3, 3)`` (columns, major last) and spreads ``(3,)`` of ``X (N, 3)``."""
+    c = X.mean(axis=-2)
+    Y = X - c[..., None, :]
+    w, V = np.linalg.eigh(np.swapaxes(Y, -1, -2) @ Y / X.shape[-2])
+    return c, V, np.sqrt(np.maximum(w, 1e-12))
+
+
+def _spin(axis, angles):
+    """``(A, 3, 3)`` rotations by ``angles (A,)`` about unit ``axis (3,)``."""
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    s, c = np.sin(angles)[:, None, None], np.cos(angles)[:, None, None]
+    return np.eye(3) + s * K + (1 - c) * (K @ K)
+
+
+def _orientations(Xt, centres, points, tree, up) -> list:
+    """``[(score, trunk pose, R, t)]``, best first: every trunk pose ``Xt (T, S, 3)`` (model coordinates)
+    with the model's ``up (3,)`` on each signed principal axis of the capture, turned ``SPINS`` times
+    about it, placed (the whole body's centroid ``centres (T, 3)`` on the capture's, then ``SHIFTS``
+    median shifts) and scored by the mean truncated distance of its samples to the capture."""
+    cc, Vc, _ = _axes(points)
+    axes = np.concatenate([Vc.T, -Vc.T])                                   # (6, 3)
+    R = np.concatenate([_spin(u, 2 * np.pi * np.arange(SPINS) / SPINS) @ rotation_between(up, u) for u in axes])
+    T = len(Xt)
+    R = np.repeat(R[None], T, axis=0).reshape(-1, 3, 3)
+    pose = np.repeat(np.arange(T), len(axes) * SPINS)
+    Y = np.einsum("hij,hsj->hsi", R, Xt[pose])
+    t = cc - np.einsum("hij,hj->hi", R, centres[pose])
+    for _ in range(SHIFTS):
+        d, i = tree.query((Y + t[:, None]).reshape(-1, 3), distance_upper_bound=COARSE_TRUNCATE_M)
+        near = np.where(np.isfinite(d)[:, None], tree.data[np.minimum(i, len(tree.data) - 1)], np.nan).reshape(Y.shape)
+        step = np.nanmedian(near - Y - t[:, None], axis=1)
+        t += np.nan_to_num(step)
+    d = np.minimum(tree.query((Y + t[:, None]).reshape(-1, 3), distance_upper_bound=TRUNCATE_M)[0], TRUNCATE_M)
+    scores = d.reshape(Y.shape[:2]).mean(axis=1)
+    return [(float(scores[h]), int(pose[h]), R[h], t[h]) for h in np.argsort(scores)]
+
+
+def _scores(Y, cap, tree, truncate: float = TRUNCATE_M) -> np.ndarray:
+    """``(H,)`` robust symmetric scores of posed samples ``Y (H, S, 3)`` against the capture (metres)."""
+    d_model = np.minimum(tree.query(Y.reshape(-1, 3), distance_upper_bound=truncate)[0], truncate)
+    out = d_model.reshape(Y.shape[:2]).mean(axis=1)
+    cc = (cap * cap).sum(axis=1)
+    for h0 in range(0, len(Y), 256):
+        block = Y[h0:h0 + 256]
+        d2 = cc[None, :, None] + (block * block).sum(axis=2)[:, None, :] - 2.0 * (cap @ np.swapaxes(block, 1, 2))
+        out[h0:h0 + 256] += np.minimum(np.sqrt(np.maximum(d2.min(axis=2), 0.0)), truncate).mean(axis=1)
+    return out
+
+
+def _score(Y, cap, tree) -> float:
+    return float(_scores(Y[None], cap, tree)[0])
+
+
+def _icp(X, cap, tree, R, t, rounds: int = ICP_ROUNDS):
+    """Rigid ICP of model samples ``X (S, 3)`` (model coordinates) on the capture from ``(R, t)``: Kabsch
+    on the pairs closer than ``TRUNCATE_M``, model to capture and, when ``cap`` is given, capture samples
+    to the model."""
+    for _ in range(rounds):
+        Y = X @ R.T + t
+        d, i = tree.query(Y, distance_upper_bound=TRUNCATE_M)
+        ok = np.isfinite(d)
+        src, dst = X[ok], tree.data[i[ok]]
+        if cap is not None:
+            j = np.argmin(((cap[:, None] - Y[None]) ** 2).sum(axis=2), axis=1)
+            near = np.linalg.norm(cap - Y[j], axis=1) < TRUNCATE_M
+            src, dst = np.concatenate([src, X[j[near]]]), np.concatenate([dst, cap[near]])
+        if len(src) < 10:
+            break
+        ms, md = src.mean(axis=0), dst.mean(axis=0)
+        U, _, Vt = np.linalg.svd((dst - md).T @ (src - ms))
+        R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+        t = md - R @ ms
+    return R, t
+
+
+def _recombined(poser, sample, pose_set, joints, R, t, cap, tree):
+    """``(score, Poses, R, t)``: pose ``joints (R, 3)`` placed by ``(R, t)`` with each limb (:data:`LIMBS`)
+    in turn given the direction set, relative to its root joint, of the first ``LIMB_CANDIDATES`` start
+    poses (or kept), each choice by the symmetric score; then a rigid ICP of the whole body."""
+    tried = pose_set.take(slice(0, LIMB_CANDIDATES))
+    joints = joints.copy()
+    for root, roles in LIMBS:
+        cols, r = [POSE_ROLES.index(x) for x in roles], POSE_ROLES.index(root)
+        cand = np.repeat(joints[None], len(tried) + 1, axis=0)
+        cand[1:, cols] = tried.joints[:, cols] - tried.joints[:, r:r + 1] + joints[r]
+        Y = sample.posed(poser.poses(PoseSet(cand, np.zeros(len(cand)), np.zeros(len(cand))))) @ R.T + t
+        joints = cand[int(np.argmin(_scores(Y, cap, tree)))]
+    body = poser.poses(PoseSet(joints[None], np.zeros(1), np.zeros(1)))
+    X = sample.posed(body)[0]
+    R, t = _icp(X, cap, tree, R, t)
+    return _score(X @ R.T + t, cap, tree), body, R, t
+
+
+def _placed(sk, body: Poses, G, offset) -> Poses:
+    """``body`` (one frame, model coordinates, translation 0) moved rigidly: x -> ``G x + offset``."""
+    F0, h0 = sk.frames[0], sk.heads[0]
+    rot = body.rotations.copy()
+    rot[:, 0] = quat_mul(matrix_to_quat(F0.T @ G @ F0)[None], rot[:, 0])
+    trans = (G @ h0 + offset - h0)[None] + body.translations @ G.T
+    return Poses(rot, trans, body.scales.copy())
+
