@@ -48,11 +48,13 @@ REGION_OF_ROLE = {"hips": "trunk", "spine": "trunk", "chest": "trunk", "shoulder
                   "index": "hand", "middle": "hand", "ring": "hand", "pinky": "hand"}
 CHECK_POINTS = 6000     # capture points (a fixed random subset) tested for being explained by the model
 KNN = 5                 # neighbours of the k-NN area of a capture point and of the naming of a region
+RIM_RINGS = 3           # a region's rim: vertices this many edges from a neighbouring region (~4 cm)
 SUPPORT_RINGS = 2       # a vertex this many edges from one a capture point matched is supported (~3 cm)
 JOINT_REACH = 0.12      # m: capture this close to a limb's joint hangs from that joint (joint-to-skin ~5-8 cm)
 AREA_SAMPLE = 2000      # unexplained points whose neighbours name their region (a random subset)
 NORMAL_OFFSET = 0.5     # an offset counts as inside only when mostly along the surface normal (cos >= this)
-HINGE_BENT_DEG = 15.0   # a rest bend above this gives the hinge axis (the bones' plane), else body forward
+HINGE_BENT_DEG = 25.0   # a rest bend above this gives the hinge axis (the bones' plane; joints 1-2 cm off
+                        # turn it by < 5 deg), else the foot's forward
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,9 +67,10 @@ class CheckOptions:
     one unexplained capture region or unsupported model region as a fraction of S (0.5 %: a palm; 1.5 %:
     about a hand or half a forearm).  contact_mm: surfaces this close touch; inside_mm: deeper than this
     counts as inside (skin compressed at a real contact, skinning at folds).  lies_on: fraction of a
-    part's area on or in another part (a limb resting on the trunk touches along a strip, a limb fitted
-    onto the trunk's capture sinks in); intersect / intersect_lost / intersect_mm: fraction of a part inside
-    another and the 95th percentile of that depth.  knee_back / elbow_back: hyperextension (deg) allowed,
+    part's area on or in another part, at least ``intersect`` of it inside and ``intersect_mm`` deep (a
+    limb resting on the trunk touches along a strip, a hand laid flat on the chest with its palm; a limb
+    fitted onto the trunk's capture sinks in); intersect / intersect_lost / intersect_mm: fraction of a
+    part inside another and the 95th percentile of that depth.  knee_back / elbow_back: hyperextension (deg) allowed,
     then doubtful, and lost past the second value; side_bend: sideways bend of a hinge; head_turn: the
     head's rotation from the chest (deg); facing_cos: vertices facing a camera at least this much."""
     explain_mm: float = 35.0
@@ -112,12 +115,14 @@ class FrameCheck:
 @dataclasses.dataclass
 class Hinge:
     """A knee or elbow: three joints as ``(bone, rest point)`` (posed by that bone's map), the bone whose
-    map carries the rest flexion ``axis`` (3,) (positive rotation about it bends the joint)."""
+    map carries the rest flexion ``axis`` (3,) (positive rotation about it bends the joint), and whether
+    the axis is sure enough to measure a ``sideways`` bend (it came from the rest bend)."""
     name: str
     kind: str
     points: tuple
     axis_bone: int
     axis: np.ndarray
+    sideways: bool
 
 
 @dataclasses.dataclass
@@ -127,7 +132,8 @@ class Body:
     (-1 at the root) and ``joint_bone`` (the bone whose head joins the region to its parent; -1) (R,), vertex areas
     (V,) and region areas (R,) m², the body area ``area`` m², ``edge`` (95th percentile edge length, m), the
     ``faces`` (F, 3), ``corners`` (V, F) CSR (1 where a vertex is a face's corner), the mesh ``graph`` (V, V)
-    CSR, ``hinges``, ``head_chest`` bones or None, and ``notes`` on checks left out."""
+    CSR, ``hinges``, ``members`` (the vertex indices of each region), ``near_region`` (V, R) bool (within
+    :data:`RIM_RINGS` edges of the region),, ``head_chest`` bones or None, and ``notes`` on checks left out."""
     regions: list
     vertex_region: np.ndarray
     adjacent: np.ndarray
@@ -144,11 +150,8 @@ class Body:
     hinges: list
     head_chest: tuple
     notes: list
-
-    def region_vertices(self) -> list:
-        """The vertex indices of every region."""
-        order = np.argsort(self.vertex_region, kind="stable")
-        return np.split(order, np.cumsum(np.bincount(self.vertex_region, minlength=len(self.regions)))[:-1])
+    members: list
+    near_region: np.ndarray
 
 
 # ----------------------------------------------------------------------------- the model, once
@@ -214,16 +217,21 @@ def prepare(model) -> Body:
     e = edges_of(model.faces)
     edge = float(np.percentile(np.linalg.norm(model.rest_vertices[e[:, 0]] - model.rest_vertices[e[:, 1]], axis=1),
                                95)) if len(e) else 0.0
-    hinges, notes = _hinges(sk, roles)
+    hinges, notes = _hinges(sk, roles, _toes(model, roles, vertex_region, regions))
     head_chest = (roles["head"], roles["chest"]) if "head" in roles and "chest" in roles else None
     if head_chest is None:
         notes.append("head rotation: the rig has no head or chest role")
     faces = np.asarray(model.faces, dtype=np.int64)
     corners = sp.csr_matrix((np.ones(faces.size), (faces.ravel(), np.repeat(np.arange(len(faces)), 3))),
                             shape=(model.num_vertices, len(faces)))
-    return Body(regions, vertex_region, adjacent, depth, parent_region, joint_bone, areas, np.bincount(vertex_region, areas, R),
-                float(areas.sum()), edge, faces, corners, adjacency(model.faces, model.num_vertices),
-                hinges, head_chest, notes)
+    graph = adjacency(model.faces, model.num_vertices)
+    near = (vertex_region[:, None] == np.arange(R)).astype(np.float64)
+    for _ in range(RIM_RINGS):
+        near += graph @ near
+    members = [np.flatnonzero(vertex_region == r) for r in range(R)]
+    return Body(regions, vertex_region, adjacent, depth, parent_region, joint_bone, areas,
+                np.bincount(vertex_region, areas, R), float(areas.sum()), edge, faces, corners, graph,
+                hinges, head_chest, notes, members, near > 0)
 
 
 def _joint(sk, roles, role, fallback_tail_of=None):
@@ -236,28 +244,31 @@ def _joint(sk, roles, role, fallback_tail_of=None):
     return None
 
 
-def _forward(sk, roles):
-    """The body's rest forward (3,): where the feet point, across the hips-to-head direction; None without
-    feet."""
-    top = roles.get("head", roles.get("neck", roles.get("chest")))
-    if top is None or "hips" not in roles:
-        return None
-    up = sk.heads[top] - sk.heads[roles["hips"]]
-    up /= np.linalg.norm(up)
-    dirs = []
+def _toes(model, roles, vertex_region, regions):
+    """``{side: unit (3,)}``: where each foot points at rest, from the ankle to the foot vertex farthest
+    from the lower leg's line, across that line (toes reach farther forward than the heel backward; a
+    learned foot bone's tail may point anywhere)."""
+    sk, out = model.skeleton, {}
     for s in "LR":
-        foot = roles.get(f"foot.{s}")
-        if foot is not None:
-            tip = sk.heads[roles[f"toe.{s}"]] if f"toe.{s}" in roles else sk.tails[foot]
-            d = tip - sk.heads[foot]
-            dirs.append(d - (d @ up) * up)
-    f = np.sum(dirs, axis=0) if dirs else None
-    return None if f is None or np.linalg.norm(f) < 1e-6 else f / np.linalg.norm(f)
+        ankle, knee = _joint(sk, roles, f"foot.{s}", f"shin.{s}"), _joint(sk, roles, f"shin.{s}")
+        if ankle is None or knee is None or f"foot.{s}" not in regions:
+            continue
+        shin = (ankle[1] - knee[1]) / np.linalg.norm(ankle[1] - knee[1])
+        d = model.rest_vertices[vertex_region == regions.index(f"foot.{s}")] - ankle[1]
+        d -= np.outer(d @ shin, shin)
+        if len(d):
+            tip = d[np.argmax(np.linalg.norm(d, axis=1))]
+            out[s] = tip / max(np.linalg.norm(tip), 1e-12)
+    return out
 
 
-def _hinges(sk, roles):
-    """Knees and elbows with their rest flexion axes, and notes on those that cannot be checked."""
-    forward, out, notes = _forward(sk, roles), [], []
+def _hinges(sk, roles, toes):
+    """Knees and elbows with their rest flexion axes, and notes on those that cannot be checked.  The axis
+    of a joint bent at rest is normal to its two segments; a straight knee flexes away from its foot's
+    toes (``toes``: :func:`_toes`), a straight elbow towards where the feet point; those axes can be off
+    by the ankle's rest rotation (a learned rig rests in a scanned pose), which keeps the sign of a flexion
+    but not a sideways bend."""
+    out, notes = [], []
     chains = (("knee", "thigh", "shin", "foot", -1.0), ("elbow", "upper_arm", "forearm", "hand", 1.0))
     for kind, top, mid, end, sign in chains:
         for s in "LR":
@@ -270,12 +281,15 @@ def _hinges(sk, roles):
             t, u = pts[1][1] - pts[0][1], pts[2][1] - pts[1][1]
             t, u = t / np.linalg.norm(t), u / np.linalg.norm(u)
             axis = np.cross(t, u)
-            if np.degrees(np.arccos(np.clip(t @ u, -1.0, 1.0))) < HINGE_BENT_DEG:
-                if forward is None:
-                    notes.append(f"{name}: straight at rest and no feet to tell forward")
+            bent = np.degrees(np.arccos(np.clip(t @ u, -1.0, 1.0))) >= HINGE_BENT_DEG
+            if not bent:
+                forward = toes.get(s) if kind == "knee" else sum(toes.values(), np.zeros(3))
+                axis = np.cross(t, sign * forward) if forward is not None else np.zeros(3)
+                if np.linalg.norm(axis) < 0.3:
+                    notes.append(f"{name}: straight at rest and no foot to tell forward")
                     continue
-                axis = np.cross(t, sign * forward)
-            out.append(Hinge(name, kind, pts, int(sk.parents[pts[1][0]]), axis / np.linalg.norm(axis)))
+                notes.append(f"{name}: straight at rest, its sideways bend is not checked")
+            out.append(Hinge(name, kind, pts, int(sk.parents[pts[1][0]]), axis / np.linalg.norm(axis), bent))
     return out, notes
 
 
@@ -550,12 +564,14 @@ def _unsupported(body, posed, normals, points, matched, cameras, spacing, option
 def _contacts(body, posed, normals, options):
     """Findings on parts lying on or intersecting non-adjacent parts, and the numbers: per ordered pair of
     regions (A, B) the area of A on B (closer than ``contact_mm`` to B's surface or inside it) and inside
-    B (deeper than ``inside_mm``), by the signed distance along the normal of A's nearest vertex of B."""
+    B (deeper than ``inside_mm``), by the signed distance along the normal of A's nearest vertex of B.
+    Nearest vertices on B's rim towards A's own chain (near a region adjacent to A) tell nothing: B's
+    surface is open there, and a learned rig's parts overlap there."""
     R = len(body.regions)
     on, inside, depth = np.zeros((R, R)), np.zeros((R, R)), np.zeros((R, R))
     contact, deep = options.contact_mm / 1000.0, options.inside_mm / 1000.0
     reach = contact + 0.5 * body.edge
-    groups = body.region_vertices()
+    groups = body.members
     lo = np.array([posed[g].min(axis=0) if len(g) else np.full(3, np.inf) for g in groups]) - reach
     hi = np.array([posed[g].max(axis=0) if len(g) else np.full(3, -np.inf) for g in groups]) + reach
     for b, verts in enumerate(groups):
@@ -569,10 +585,12 @@ def _contacts(body, posed, normals, options):
         dist, j = _tree(posed[verts]).query(posed[cand])
         off = posed[cand] - posed[verts[j]]
         signed = np.einsum("ij,ij->i", off, normals[verts[j]])
-        along = -signed >= NORMAL_OFFSET * dist
+        a = body.vertex_region[cand]
+        rim = body.adjacent[a] & body.near_region[verts[j]]
+        rim[:, b] = False
+        along = (-signed >= NORMAL_OFFSET * dist) & ~rim.any(axis=1)
         is_on = (signed < contact) & ((dist < reach) | along)
         is_in = (signed < -deep) & along
-        a = body.vertex_region[cand]
         on[:, b] = np.bincount(a[is_on], body.vertex_area[cand[is_on]], R)
         inside[:, b] = np.bincount(a[is_in], body.vertex_area[cand[is_in]], R)
         for r in np.unique(a[is_in]):
@@ -597,7 +615,7 @@ def _contact_finding(body, a, b, on, inside, depth_mm, options):
     part, other = region_name(body.regions[a]), region_name(body.regions[b])
     nums = {"part": part, "other": other, "on_fraction": float(on), "inside_fraction": float(inside),
             "depth_mm": float(depth_mm)}
-    if on >= options.lies_on:
+    if on >= options.lies_on and inside >= options.intersect and depth_mm >= options.intersect_mm:
         return Finding("lies_on", "lost", part, f"{part} lies on the {other} ({100 * on:.0f}% of it on or inside "
                                                 f"it, up to {depth_mm:.0f} mm deep)", nums)
     if inside >= options.intersect and depth_mm >= options.intersect_mm:
@@ -631,7 +649,8 @@ def _joint_limits(body, Rm, tm, options):
         flexion, side = hinge_angles(h, Rm, tm)
         numbers["hinges"][h.name] = {"flexion_deg": flexion, "sideways_deg": side}
         back = options.knee_back if h.kind == "knee" else options.elbow_back
-        checks = (("backwards", -flexion, back), ("sideways", abs(side), options.side_bend))
+        checks = (("backwards", -flexion, back),) + ((("sideways", abs(side), options.side_bend),) if h.sideways
+                                                     else ())
         for how, angle, (doubt, lost) in checks:
             if angle > doubt:
                 findings.append(Finding("joint_limit", "lost" if angle > lost else "doubtful", h.name,

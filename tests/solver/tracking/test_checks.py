@@ -311,7 +311,7 @@ def test_hinge_angles_closed_form(subject):
     knee = next(h for h in body.hinges if h.name == "left knee")
     rest_flexion, rest_side = checks.hinge_angles(knee, *(a[0] for a in forward_kinematics(model.skeleton,
                                                                                            rest(model))))
-    assert abs(rest_side) < 1.0
+    assert abs(rest_side) < 3.0
     pose = turned(model, rest(model), "Leg.L", knee.axis, 50)
     Rm, tm = (a[0] for a in forward_kinematics(model.skeleton, pose))
     assert checks.hinge_angles(knee, Rm, tm) == pytest.approx((rest_flexion + 50, rest_side), abs=0.1)
@@ -377,3 +377,24 @@ def test_empty_capture_is_lost(subject):
     result = checks.check_frame(model, pose, posed_of(model, pose), Capture(np.zeros((0, 3)), np.zeros((0, 3))),
                                 body=body)
     assert result.verdict == "lost" and result.reasons == ["the capture has no points"]
+
+
+def test_stray_part_labels_do_not_make_parts_intersect():
+    """A learned rig's parts overlap at their borders: 13 upper-arm vertices by the right armpit that the
+    README rig learned into its chest part (these vertex indices) made the right forearm "intersect the
+    trunk" up to 12-14 cm deep in range-of-motion poses where it is nowhere inside (winding numbers of
+    the whole mesh about 0.4 at those vertices); the rim of the trunk towards the arm is not evidence."""
+    _, _, gt = registered.posed_sequence(shape={"gender": 0.0, "weight": 0.9}, n_poses=22, motion="rom",
+                                         skin="hybrid", seed=0)
+    sk = Skeleton(list(gt["bone_names"]), gt["parents"], gt["heads"], gt["tails"], gt["frames"])
+    anchor = gt["anchor"].copy()
+    anchor[[1701, 1702, 1718, 1735, 1736, 1752, 1753, 1756, 3318, 3319, 3322, 3335, 3336]] = sk.names.index("Spine1")
+    model = Model(gt["rest_vertices"], gt["faces"], sk, anchor, gt["twist_weights"], gt["swing_weights"])
+    body = checks.prepare(model)
+    forearm = body.members[body.regions.index("forearm.R")]
+    for k in (9, 11, 21):
+        pose = Poses(gt["pose_rotations"][k:k + 1], gt["pose_translations"][k:k + 1], gt["pose_scales"][k:k + 1])
+        posed = gt["posed_vertices"][k]
+        result = checks.check_frame(model, pose, posed, Capture(posed, np.zeros_like(posed)), body=body)
+        assert result.findings == [], result.reasons
+        assert np.mean(winding_numbers(posed[forearm[::4]], posed, model.faces) > 1.0) < 0.05
