@@ -48,6 +48,7 @@ import scipy.sparse.linalg as spla
 
 from ..errors import ArticulaInputError
 from ..fit.least_squares import ArmijoLineSearch, FixedRatioDamping, Limits, levenberg_marquardt
+from ..geometry.normals import vertex_normals
 from ..geometry.rotations import quat_canonical, quat_normalize
 from ..learn.joints_poses import symmetry_residuals
 from ..learn.symmetry import continuing_pairs
@@ -61,7 +62,6 @@ from .frame_fit import DAMP_FLOOR, MU0, MU_MIN, REJECTIONS, FrameFitOptions, _re
     pair_stats, plane_mask
 from ..tracking.pose_prior import PosePrior
 from .shape_prior import MAX_POSES, ShapePrior, block_diagonal, lift
-from .visibility import vertex_normals
 
 X_FLOOR = 1e-9        # Tikhonov floor of the rest-vertex block, relative to its mean diagonal
 SCHUR_CHUNK = 64      # right-hand sides per sparse solve when forming the Schur complement

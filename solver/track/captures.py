@@ -20,8 +20,8 @@ from ..depth.frames import pca_normals, voxel_groups
 from ..errors import ArticulaInputError
 from ..formats.mesh_files import MESH_EXTENSIONS, read_mesh
 from ..formats.point_files import read_point_file
+from ..geometry.normals import vertex_normals
 from .frame_fit import Capture
-from .visibility import vertex_normals
 
 POINT_EXTENSIONS = (".npy", ".xyz", ".txt")
 CLOUD_NEIGHBOURS = 12       # neighbours of a point-cloud normal estimate

@@ -47,7 +47,8 @@ from ..rig.skinning import AnchorGroups, check_pose_shapes, hybrid_skin
 from . import robust
 from .correspondences import CorrespondenceOptions, correspondences
 from ..tracking.pose_prior import PosePrior, rotvec_increment_jacobian
-from .visibility import vertex_normals
+from ..geometry.normals import vertex_normals
+from ..tracking.limbs import bone_depths
 
 DAMP_FLOOR = 1e-9      # ε of the damping matrix diag(H) + ε mean diag(H)
 MU0, MU_MIN = 1e-3, 1e-8   # damping relative to diag H (Marquardt's scaling): start and floor
@@ -162,14 +163,6 @@ def _point_system(J, posed, pairs, scale):
     b = np.stack([np.bincount(local.ravel(), (sb[:, :, None] * e[:, None, :])[..., k].ravel(), U)
                   for k in range(3)], axis=1)
     return H, np.einsum("ukp,uk->p", Ju, b), float(np.einsum("c,cj,cj->", scale, e, e))
-
-
-def bone_depths(parents):
-    """``(B,)`` depth of every bone in the tree (roots 0); parents listed before their children."""
-    depth = np.zeros(len(parents), dtype=np.int64)
-    for b, p in enumerate(parents):
-        depth[b] = 0 if p < 0 else depth[p] + 1
-    return depth
 
 
 def pose_columns(num_bones, fit_scale):

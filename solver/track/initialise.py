@@ -28,7 +28,7 @@ from . import robust
 from .correspondences import nearest_compatible
 from .frame_fit import FrameFitOptions, fit_frame
 from .limb_search import place_limbs
-from .visibility import vertex_normals
+from ..geometry.normals import vertex_normals
 
 GENERIC_POSES_PATH = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "generic_body_poses.npz")
 UP = np.array([0.0, 0.0, 1.0])     # the model's up axis (Blender world Z)

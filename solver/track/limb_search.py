@@ -20,7 +20,7 @@ from ..geometry.rotations import matrix_to_quat, rotation_between
 from ..rig.kinematics import forward_kinematics
 from ..rig.model import Poses
 from ..rig.skinning import hybrid_skin
-from .frame_fit import bone_depths
+from ..tracking.limbs import bone_depths, sphere_directions, subtrees
 
 DIRECTIONS = 64          # directions tried per bone (Fibonacci sphere, about 25 deg apart)
 TRUNCATE_M = 0.05        # a vertex farther than this from the capture counts as this far
@@ -29,23 +29,6 @@ MIN_GAIN = 0.8           # a new direction must bring the score below this fract
 SAMPLE = 400             # vertices scoring a candidate (spread over the bone's subtree)
 PASSES = 1               # sweeps over the bones (more measured no better, docs/track.md)
 MIN_VERTICES = 20        # bones carrying fewer vertices (with their descendants) are not searched
-
-
-def sphere_directions(n: int) -> np.ndarray:
-    """``(n, 3)`` unit vectors spread evenly over the sphere (Fibonacci lattice)."""
-    k = np.arange(n) + 0.5
-    z = 1.0 - 2.0 * k / n
-    phi = np.pi * (1.0 + np.sqrt(5.0)) * k
-    rho = np.sqrt(1.0 - z * z)
-    return np.stack([rho * np.cos(phi), rho * np.sin(phi), z], axis=1)
-
-
-def subtrees(parents) -> list:
-    """``[bones of b's subtree]`` for every bone (b first); parents listed before their children."""
-    out = [[b] for b in range(len(parents))]
-    for b in range(len(parents) - 1, 0, -1):
-        out[parents[b]].extend(out[b])
-    return out
 
 
 def search_order(parents) -> list:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 
 from ..errors import ArticulaInputError
-from .frame_fit import FrameFitOptions
 
 ADAPT_CHOICES = ("auto", "on", "off")
 PRIOR_CHOICES = ("auto", "model", "generic", "none")
@@ -16,35 +15,36 @@ MODEL_PRIOR_MIN_POSES = 3    # "auto" learns the prior from the model's own pose
 @dataclasses.dataclass(frozen=True)
 class TrackOptions:
     """adapt: refine the rest mesh and joints from the recording ("auto": when the range has at least
-    ``ADAPT_MIN_FRAMES`` frames; the default is "off" until adaptation inside the tracker is measured to
-    help: on a planted subject it still moves the surface more than it recovers, docs/track.md); adapt_every: the model is refined on every this many-th tracked frame
-    (dissertation §4.2: every 25th); w_motion: the share of the data term that pass 1's pull towards the
-    previous frame's joint rotations costs at their latest motion (:func:`.temporal.motion_weight`; 0: none,
-    as in the dissertation); temporal: the sliding-window pass with the temporal prior
-    (``window`` frames, ``step``, weight ``w_temp``; 0 = Eq. 4.16's heuristic); prior: which pose prior
-    ("auto": the model's own poses when it has ``MODEL_PRIOR_MIN_POSES``, else the generic human
-    prior); fit_scale: also fit one uniform scale; frames: ``(a, b)`` tracks input frames a..b−1 only
-    (None: all); max_points: captures are thinned to about this many points (0: never);
-    hypotheses: starting poses tried on the first frame and on lost frames; lost_factor, lost_mm: a
-    frame is lost when its median scan-to-model distance exceeds both ``lost_factor`` times the running
-    median of the frames before and ``lost_mm``; poor_fit_mm: a median above it is reported as a poor
-    fit (another person, wrong model); frame: the per-frame fit's settings."""
+    ``ADAPT_MIN_FRAMES`` frames); adapt_every: the model is refined on every this many-th tracked frame
+    (dissertation §4.2: every 25th); temporal: the sliding-window pass (``window`` frames, ``step``,
+    temporal weight ``w_temp`` per frame and rad^2, relative to the data's normal matrix); prior: which
+    pose prior ("auto": the model's own poses when it has ``MODEL_PRIOR_MIN_POSES``, else the generic
+    human prior; it guides the first frame and re-initialised frames); fit_scale: also fit one uniform
+    scale on the first frame; frames: ``(a, b)`` tracks input frames a..b-1 only (None: all);
+    max_points: captures are thinned to about this many points (0: never); samples: capture points
+    fitted per frame (a fixed seeded sample); weak_ratio: directions whose data curvature is below this
+    share of the largest are held to the predicted pose (:func:`solver.tracking.priors.weak_directions`);
+    hypotheses: start poses refined on the first frame and on lost frames; lost_factor, lost_mm: a frame
+    whose median capture-to-model distance exceeds both ``lost_factor`` times the running median and
+    ``lost_mm`` is re-initialised, and lost if that does not help; poor_fit_mm: a median above it is
+    reported as a poor fit; checks: the truth-free checks of every frame (:mod:`solver.tracking.checks`)."""
     adapt: str = "off"
     adapt_every: int = 25
     temporal: bool = True
-    window: int = 11
-    step: int = 5
-    w_temp: float = 0.0
-    w_motion: float = 0.05
+    window: int = 9
+    step: int = 4
+    w_temp: float = 1e-4
     prior: str = "auto"
     fit_scale: bool = False
     frames: tuple = None
     max_points: int = 20_000
-    hypotheses: int = 24
+    samples: int = 4000
+    weak_ratio: float = 1e-4
+    hypotheses: int = 4
     lost_factor: float = 3.0
     lost_mm: float = 15.0
     poor_fit_mm: float = 10.0
-    frame: FrameFitOptions = FrameFitOptions()
+    checks: bool = True
 
     def validate(self) -> "TrackOptions":
         """Raise :class:`ArticulaInputError` naming the first setting out of range; returns self."""
@@ -53,7 +53,7 @@ class TrackOptions:
         if self.prior not in PRIOR_CHOICES:
             raise ArticulaInputError(f"prior: expected one of {', '.join(PRIOR_CHOICES)}, got {self.prior!r}")
         for name, lo, hi in (("adapt_every", 1, 10_000), ("window", 3, 101), ("hypotheses", 1, 64),
-                             ("max_points", 0, 10_000_000)):
+                             ("max_points", 0, 10_000_000), ("samples", 200, 1_000_000)):
             value = getattr(self, name)
             if int(value) != value or not lo <= value <= hi:
                 raise ArticulaInputError(f"{name}: expected a whole number in {lo}..{hi}, got {value}")
@@ -62,7 +62,7 @@ class TrackOptions:
         if 0 < self.max_points < 500:
             raise ArticulaInputError(f"max_points: {self.max_points} is too few to track a body (at least 500, "
                                      f"or 0 to keep every point)")
-        for name in ("w_temp", "w_motion", "lost_factor", "lost_mm", "poor_fit_mm"):
+        for name in ("w_temp", "weak_ratio", "lost_factor", "lost_mm", "poor_fit_mm"):
             value = getattr(self, name)
             if not (value == value and 0 <= value < 1e12):
                 raise ArticulaInputError(f"{name}: expected a finite value >= 0, got {value}")

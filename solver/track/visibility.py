@@ -22,19 +22,6 @@ NEAR = 1e-3         # triangles with a vertex closer than this (m) to the camera
 MIN_COS = 0.2       # grazing vertices get the depth tolerance of a 78 deg slant, no more
 
 
-def vertex_normals(vertices, triangles):
-    """Unit area-weighted vertex normals ``(V, 3)`` of a mesh (``vertices (V, 3)``, ``triangles (F, 3)``,
-    counter-clockwise seen from outside); zero for vertices in no (non-degenerate) triangle."""
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    area_normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    out = np.zeros_like(v)
-    for corner in range(3):
-        out += np.stack([np.bincount(f[:, corner], area_normals[:, i], len(v)) for i in range(3)], axis=1)
-    norm = np.linalg.norm(out, axis=1, keepdims=True)
-    return np.divide(out, norm, out=np.zeros_like(out), where=norm > 0)
-
-
 def depth_buffer(vertices_cam, triangles, intr):
     """Z-buffer ``(H, W)`` of a mesh given in the camera frame (``vertices_cam (V, 3)`` m, ``triangles
     (F, 3)``): the smallest depth Z of the surface at each pixel centre, ``inf`` where nothing is drawn.

@@ -31,18 +31,23 @@ class Body:
         self.columns = np.r_[0:3, 4:4 + 3 * self.num_bones]     # of the rig's full layout (no scale)
         self.faces = np.asarray(model.faces, dtype=np.int64)
         self.ring = one_ring(self.faces, model.num_vertices)
-        self._J, self._J_pose = None, None
+        self._jacobians = {}                                           # slot -> (pose, J float32)
 
-    def jacobian_near(self, pose: Poses, vertices, tolerance: float = JACOBIAN_REUSE_RAD) -> np.ndarray:
+    def jacobian_near(self, pose: Poses, vertices, slot=0, tolerance: float = JACOBIAN_REUSE_RAD) -> np.ndarray:
         """``(n, 3, P)`` derivatives of ``vertices`` taken from one evaluation of every vertex's Jacobian
-        at a pose within ``tolerance`` radians (per bone) of ``pose``, evaluated anew when none is.
-        Why: a fit moves the pose by little between its later iterations, and a Jacobian a few
-        hundredths of a radian old changes only the Gauss–Newton steps, not the residuals, so not the
-        pose the fit converges to."""
-        if self._J is None or _turned(self._J_pose, pose) > tolerance:
-            self._J = pose_jacobian(self.model, pose, self.groups)[1][0]      # (V, 3, 4 + 3B)
-            self._J_pose = pose
-        return self._J[np.asarray(vertices, dtype=np.int64)][..., self.columns]
+        at a pose within ``tolerance`` radians (per bone) of ``pose``, evaluated anew when none is;
+        ``slot`` keeps one such evaluation per frame of a window.  Why: a fit moves the pose by little
+        between its later iterations, and a Jacobian a few hundredths of a radian old changes only the
+        Gauss–Newton steps, not the residuals, so not the pose the fit converges to."""
+        held = self._jacobians.get(slot)
+        if held is None or _turned(held[0], pose) > tolerance:
+            J = pose_jacobian(self.model, pose, self.groups)[1][0][..., self.columns]
+            held = self._jacobians[slot] = (pose, J.astype(np.float32))
+        return held[1][np.asarray(vertices, dtype=np.int64)].astype(np.float64)
+
+    def forget(self) -> None:
+        """Drop the held Jacobians (memory: V x 3 x P float32 each)."""
+        self._jacobians.clear()
 
     def pose(self, pose: Poses) -> np.ndarray:
         """Posed vertices ``(V, 3)`` of one frame."""

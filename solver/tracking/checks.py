@@ -2,11 +2,12 @@
 only because parts lie on the wrong surfaces (a hand fitted onto the face, an arm onto the trunk)?
 
 Checks, each naming the body part (regions from the bone roles: trunk, head and per side upper arm,
-forearm, hand, thigh, lower leg, foot; docs/track.md "Checks"):
+forearm, hand, thigh, lower leg, foot; docs/track.md):
 
 * unexplained capture: capture points farther than ``explain_mm`` from the posed model, grouped into
-  regions by voxel connectivity; a region's area (k-nearest-neighbour area per point, so overlapping
-  views count once) relative to the body's surface area makes the frame doubtful or lost.  The region is
+  regions by voxel connectivity; a region's area (its points times the capture's area per point, the
+  median k-nearest-neighbour area, so overlapping views count once) relative to the body's surface area
+  makes the frame doubtful or lost.  The region is
   named by the limb it hangs from: the part explaining the capture next to it, or that part's child
   whose joint is there; else the nearest part.
 * unsupported model (needs cameras): model vertices facing a camera and in front of every capture point
@@ -70,9 +71,10 @@ class CheckOptions:
     part's area on or in another part, at least ``intersect`` of it inside and ``intersect_mm`` deep (a
     limb resting on the trunk touches along a strip, a hand laid flat on the chest with its palm; a limb
     fitted onto the trunk's capture sinks in); intersect / intersect_lost / intersect_mm: fraction of a
-    part inside another and the 95th percentile of that depth.  knee_back / elbow_back: hyperextension (deg) allowed,
-    then doubtful, and lost past the second value; side_bend: sideways bend of a hinge; head_turn: the
-    head's rotation from the chest (deg); facing_cos: vertices facing a camera at least this much."""
+    part inside another and the 95th percentile of that depth.  knee_back / elbow_back: hyperextension
+    (deg) allowed, then doubtful, and lost past the second value; side_bend: sideways bend of a hinge;
+    head_turn: the head's rotation from the chest (deg); facing_cos: vertices facing a camera at least
+    this much."""
     explain_mm: float = 35.0
     region_doubtful: float = 0.005
     region_lost: float = 0.015
@@ -111,6 +113,11 @@ class FrameCheck:
     skipped: list
     numbers: dict
 
+    def report(self) -> dict:
+        """JSON-serialisable: verdict, reasons, skipped, numbers and per finding its check, level and part."""
+        return {"verdict": self.verdict, "reasons": self.reasons, "skipped": self.skipped, "numbers": self.numbers,
+                "findings": [{"check": f.check, "level": f.level, "part": f.part} for f in self.findings]}
+
 
 @dataclasses.dataclass
 class Hinge:
@@ -129,11 +136,12 @@ class Hinge:
 class Body:
     """What the checks need of a model, computed once (:func:`prepare`): region names, ``vertex_region``
     (V,), ``adjacent`` (R, R) bool (same or neighbouring region), region tree ``depth``, ``parent_region``
-    (-1 at the root) and ``joint_bone`` (the bone whose head joins the region to its parent; -1) (R,), vertex areas
-    (V,) and region areas (R,) m², the body area ``area`` m², ``edge`` (95th percentile edge length, m), the
-    ``faces`` (F, 3), ``corners`` (V, F) CSR (1 where a vertex is a face's corner), the mesh ``graph`` (V, V)
-    CSR, ``hinges``, ``members`` (the vertex indices of each region), ``near_region`` (V, R) bool (within
-    :data:`RIM_RINGS` edges of the region),, ``head_chest`` bones or None, and ``notes`` on checks left out."""
+    (-1 at the root) and ``joint_bone`` (the bone whose head joins the region to its parent; -1) (R,),
+    vertex areas (V,) and region areas (R,) m², the body area ``area`` m², ``edge`` (95th percentile edge
+    length, m), ``faces`` (F, 3), ``corners`` (V, F) CSR (1 where a vertex is a face's corner), the mesh
+    ``graph`` (V, V) CSR, ``hinges``, ``head_chest`` bones or None, ``notes`` on checks left out,
+    ``members`` (each region's vertex indices) and ``near_region`` (V, R) bool (within :data:`RIM_RINGS`
+    edges of the region)."""
     regions: list
     vertex_region: np.ndarray
     adjacent: np.ndarray
@@ -245,16 +253,19 @@ def _joint(sk, roles, role, fallback_tail_of=None):
 
 
 def _toes(model, roles, vertex_region, regions):
-    """``{side: unit (3,)}``: where each foot points at rest, from the ankle to the foot vertex farthest
-    from the lower leg's line, across that line (toes reach farther forward than the heel backward; a
-    learned foot bone's tail may point anywhere)."""
+    """``{side: unit (3,)}``: where each foot points at rest, from the ankle to the vertex of the lower leg
+    or foot beyond the ankle farthest from the lower leg's line, across that line (toes reach farther
+    forward than the heel backward; a learned foot bone's tail may point anywhere, and a learned lower leg
+    part may hold most of the foot)."""
     sk, out = model.skeleton, {}
     for s in "LR":
         ankle, knee = _joint(sk, roles, f"foot.{s}", f"shin.{s}"), _joint(sk, roles, f"shin.{s}")
-        if ankle is None or knee is None or f"foot.{s}" not in regions:
+        if ankle is None or knee is None:
             continue
         shin = (ankle[1] - knee[1]) / np.linalg.norm(ankle[1] - knee[1])
-        d = model.rest_vertices[vertex_region == regions.index(f"foot.{s}")] - ankle[1]
+        leg = [regions.index(r) for r in (f"shin.{s}", f"foot.{s}") if r in regions]
+        d = model.rest_vertices[np.isin(vertex_region, leg)] - ankle[1]
+        d = d[d @ shin > 0]
         d -= np.outer(d @ shin, shin)
         if len(d):
             tip = d[np.argmax(np.linalg.norm(d, axis=1))]
@@ -460,8 +471,8 @@ def _unexplained(body, joints, points, model_tree, capture_tree, spacing, point_
                                                      points[mine], model_tree)])
         dist = float(np.median(model_tree.query(points[mine[:: max(1, len(mine) // 500)]])[0])) * 1000.0
         small, large = _extent_cm(points[mine])
-        nums = {"points": int(len(mine)), "area_cm2": float(region_area[c] * 1e4), "extent_cm": (small, large),
-                "median_distance_mm": dist, "part": part, "centre": points[mine].mean(axis=0)}
+        nums = {"points": int(len(mine)), "area_cm2": float(region_area[c] * 1e4), "extent_cm": [small, large],
+                "median_distance_mm": dist, "part": part, "centre": points[mine].mean(axis=0).tolist()}
         numbers["unexplained_regions"].append(nums)
         findings.append(Finding(
             "unexplained", level, part,

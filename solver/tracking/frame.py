@@ -1,10 +1,10 @@
 """One frame's fit on the core: stages of terms minimised by :func:`.lm.minimise`.
 
 A stage is a Charbonnier scale, a reach and whether the coverage term (model to capture) takes part.
-The default schedule first fits with coverage (parts the capture does not yet explain are pulled
-towards it; it keeps a limb off the wrong surface) and then with capture-to-model pairs alone, whose
-minimum is unbiased: the coverage pairs' residual runs along the noisy capture's normal, so it is left
-out of the final stage (docs/track.md "Design").  Every stage also holds the pose near ``target`` along
+A frame tracked from its predecessor's prediction fits capture-to-model pairs alone, whose minimum is
+unbiased (the coverage pairs' residual runs along the noisy capture's normal, docs/track.md "Design");
+a frame searched from a start hypothesis first fits coarse-to-fine with coverage (parts the capture
+does not yet explain are pulled towards it, so a limb leaves the wrong surface) and ends the same way.  Every stage also holds the pose near ``target`` along
 the directions the data barely constrain (:func:`.priors.weak_directions`) and adds the caller's priors.
 """
 from __future__ import annotations
@@ -28,7 +28,7 @@ class Stage:
     iterations: int
 
 
-TRACKING = (Stage(0.004, 0.05, 1.0, 6), Stage(0.002, 0.04, 0.0, 10))
+TRACKING = (Stage(0.002, 0.05, 0.0, 12),)
 SEARCH = (Stage(0.02, 0.25, 1.0, 12), Stage(0.006, 0.08, 1.0, 10), Stage(0.002, 0.04, 0.0, 12))
 
 

@@ -44,8 +44,8 @@ class Fit:
 class State:
     """A pose with its posed mesh and surface, evaluated once."""
 
-    def __init__(self, body, pose):
-        self.pose = pose
+    def __init__(self, body, pose, slot=0):
+        self.pose, self.slot = pose, slot
         self.posed = body.pose(pose)
         self.surface = body.surface(self.posed)
         self.cache = {}

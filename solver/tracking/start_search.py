@@ -6,7 +6,8 @@ start-pose set (:mod:`.start_poses`) is put on the rig and searched against one 
 1. **Samples**: model vertices spread over the surface (drawn with probability proportional to their
    area), all of them and the trunk's (not anchored in an arm or leg), and capture points.  Nothing
    assumes the world's up: the model's up is its rest body frame's (hips to head), the capture's one
-   of its principal axes.
+   of its principal axes, both signs (the least one only when its spread is near the middle one's: a
+   body is rarely up along its depth).
 2. **Orientations**: ``TRUNK_POSES`` trunk shapes of the set (farthest points on the trunk's
    directions), the model's up on each signed principal axis of the capture, ``SPINS`` facings about
    it; placed by the whole body's centroid and ``SHIFTS`` median shifts of the trunk; scored by the mean
@@ -37,6 +38,7 @@ CAPTURE_SAMPLES = 200    # capture points scoring a hypothesis
 SPINS = 12               # turns about the capture's major axis (30 deg apart)
 TRUNK_POSES = 12         # trunk shapes tried in the orientation stage
 TRUNK_SAMPLES = 48       # trunk vertices scoring an orientation
+MINOR_UP = 0.7           # the least principal axis is tried as up when its spread is this near the middle's
 SHIFTS = 2               # median shifts placing an orientation
 TRUNCATE_M = 0.10        # a distance counts at most this much (metres)
 COARSE_TRUNCATE_M = 0.25 # capture points farther than this do not move an orientation's placement
@@ -143,11 +145,17 @@ class _Sampled:
     """The model restricted to sample vertices ``index`` (skinning only those)."""
 
     def __init__(self, model, index):
+        self.anchor = model.anchor[index]
         self.sub = Model(model.rest_vertices[index], np.zeros((0, 3), np.int32), model.skeleton,
                          model.anchor[index], model.twist_weights[index], model.swing_weights[index])
 
-    def posed(self, poses: Poses) -> np.ndarray:
-        return hybrid_skin(self.sub, poses)
+    def posed(self, poses: Poses, mask=None) -> np.ndarray:
+        """``(N, S, 3)`` the samples (those where ``mask (S,)``, if given) in each of ``poses``."""
+        if mask is None:
+            return hybrid_skin(self.sub, poses)
+        m = self.sub
+        return hybrid_skin(Model(m.rest_vertices[mask], m.faces, m.skeleton, m.anchor[mask],
+                                 m.twist_weights[mask], m.swing_weights[mask]), poses)
 
 
 def _axes(X):
@@ -170,8 +178,9 @@ def _orientations(Xt, centres, points, tree, up) -> list:
     with the model's ``up (3,)`` on each signed principal axis of the capture, turned ``SPINS`` times
     about it, placed (the whole body's centroid ``centres (T, 3)`` on the capture's, then ``SHIFTS``
     median shifts) and scored by the mean truncated distance of its samples to the capture."""
-    cc, Vc, _ = _axes(points)
-    axes = np.concatenate([Vc.T, -Vc.T])                                   # (6, 3)
+    cc, Vc, spread = _axes(points)
+    keep = [2, 1] + ([0] if spread[0] > MINOR_UP * spread[1] else [])      # the depth axis is up rarely
+    axes = np.concatenate([Vc.T[keep], -Vc.T[keep]])
     R = np.concatenate([_spin(u, 2 * np.pi * np.arange(SPINS) / SPINS) @ rotation_between(up, u) for u in axes])
     T = len(Xt)
     R = np.repeat(R[None], T, axis=0).reshape(-1, 3, 3)
@@ -191,13 +200,8 @@ def _orientations(Xt, centres, points, tree, up) -> list:
 def _scores(Y, cap, tree, truncate: float = TRUNCATE_M) -> np.ndarray:
     """``(H,)`` robust symmetric scores of posed samples ``Y (H, S, 3)`` against the capture (metres)."""
     d_model = np.minimum(tree.query(Y.reshape(-1, 3), distance_upper_bound=truncate)[0], truncate)
-    out = d_model.reshape(Y.shape[:2]).mean(axis=1)
-    cc = (cap * cap).sum(axis=1)
-    for h0 in range(0, len(Y), 256):
-        block = Y[h0:h0 + 256]
-        d2 = cc[None, :, None] + (block * block).sum(axis=2)[:, None, :] - 2.0 * (cap @ np.swapaxes(block, 1, 2))
-        out[h0:h0 + 256] += np.minimum(np.sqrt(np.maximum(d2.min(axis=2), 0.0)), truncate).mean(axis=1)
-    return out
+    d_cap = np.minimum(np.sqrt(_nearest_sq(cap, Y)), truncate)
+    return d_model.reshape(Y.shape[:2]).mean(axis=1) + d_cap.mean(axis=1)
 
 
 def _score(Y, cap, tree) -> float:
@@ -232,16 +236,48 @@ def _recombined(poser, sample, pose_set, joints, R, t, cap, tree):
     poses (or kept), each choice by the symmetric score; then a rigid ICP of the whole body."""
     tried = pose_set.take(slice(0, LIMB_CANDIDATES))
     joints = joints.copy()
+    Y = sample.posed(_one(poser, joints))[0] @ R.T + t
     for root, roles in LIMBS:
         cols, r = [POSE_ROLES.index(x) for x in roles], POSE_ROLES.index(root)
         cand = np.repeat(joints[None], len(tried) + 1, axis=0)
         cand[1:, cols] = tried.joints[:, cols] - tried.joints[:, r:r + 1] + joints[r]
-        Y = sample.posed(poser.poses(PoseSet(cand, np.zeros(len(cand)), np.zeros(len(cand))))) @ R.T + t
-        joints = cand[int(np.argmin(_scores(Y, cap, tree)))]
-    body = poser.poses(PoseSet(joints[None], np.zeros(1), np.zeros(1)))
+        limb = poser.below[poser.roles[root]][sample.anchor]
+        if not limb.any():
+            continue
+        Yl = sample.posed(poser.poses(PoseSet(cand, np.zeros(len(cand)), np.zeros(len(cand)))), limb) @ R.T + t
+        k = int(np.argmin(_limb_scores(Y[~limb], Yl, cap, tree)))
+        joints, Y[limb] = cand[k], Yl[k]
+    body = _one(poser, joints)
     X = sample.posed(body)[0]
     R, t = _icp(X, cap, tree, R, t)
     return _score(X @ R.T + t, cap, tree), body, R, t
+
+
+def _one(poser, joints) -> Poses:
+    return poser.poses(PoseSet(joints[None], np.zeros(1), np.zeros(1)))
+
+
+def _limb_scores(fixed, Yl, cap, tree) -> np.ndarray:
+    """``(H,)`` the symmetric score (:func:`_scores`) of the samples ``fixed (F, 3)`` with each of the
+    limb's sample sets ``Yl (H, L, 3)``, computed from the limb's distances only."""
+    S = len(fixed) + Yl.shape[1]
+    d_fixed = np.minimum(tree.query(fixed, distance_upper_bound=TRUNCATE_M)[0], TRUNCATE_M).sum()
+    d_limb = np.minimum(tree.query(Yl.reshape(-1, 3), distance_upper_bound=TRUNCATE_M)[0], TRUNCATE_M)
+    out = (d_fixed + d_limb.reshape(Yl.shape[:2]).sum(axis=1)) / S
+    to_fixed = _nearest_sq(cap, fixed[None])[0] if len(fixed) else np.full(len(cap), np.inf)
+    to_limb = _nearest_sq(cap, Yl)
+    return out + np.minimum(np.sqrt(np.minimum(to_limb, to_fixed[None])), TRUNCATE_M).mean(axis=1)
+
+
+def _nearest_sq(cap, Y) -> np.ndarray:
+    """``(H, C)`` squared distance of each capture sample ``cap (C, 3)`` to the nearest of ``Y (H, S, 3)``."""
+    out = np.empty((len(Y), len(cap)))
+    cc = (cap * cap).sum(axis=1)
+    for h0 in range(0, len(Y), 256):
+        block = Y[h0:h0 + 256]
+        d2 = cc[None, :, None] + (block * block).sum(axis=2)[:, None, :] - 2.0 * (cap @ np.swapaxes(block, 1, 2))
+        out[h0:h0 + 256] = np.maximum(d2.min(axis=2), 0.0)
+    return out
 
 
 def _placed(sk, body: Poses, G, offset) -> Poses:

@@ -71,7 +71,7 @@ class ScanToModel:
     def linearise(self, body, state) -> Linear:
         vertex, face, r, kept = self.pairs(state)
         vertex, face, r = vertex[kept], face[kept], r[kept]
-        nJ = normal_jacobian(body, state.pose, vertex, state.surface.face_normals[face])
+        nJ = normal_jacobian(body, state, vertex, state.surface.face_normals[face])
         # residual = n . (point - foot): its derivative is minus n . d(foot)
         pen, w = charbonnier(r, self.eps)
         s = self._scale()
@@ -87,12 +87,12 @@ class ScanToModel:
         return r, kept
 
 
-def normal_jacobian(body, pose, vertex, normals):
+def normal_jacobian(body, state, vertex, normals):
     """``(K, P)`` derivative of ``normals[k] . x(vertex[k])`` with the unit ``normals (K, 3)`` held
     fixed (Jacobians from :meth:`.body.Body.jacobian_near`).  The foot point of a pair moves with its
     nearest vertex in this Gauss–Newton model (the residual itself is exact, so a pose that explains
     the capture is still a fixed point)."""
-    J = body.jacobian_near(pose, vertex)                                 # (K, 3, P)
+    J = body.jacobian_near(state.pose, vertex, state.slot)               # (K, 3, P)
     return np.einsum("kj,kjp->kp", normals, J)
 
 
@@ -130,7 +130,7 @@ class ModelToScan:
 
     def linearise(self, body, state) -> Linear:
         n, r, kept = self.pairs(state)
-        nJ = normal_jacobian(body, state.pose, self.vertices[kept], n[kept])
+        nJ = normal_jacobian(body, state, self.vertices[kept], n[kept])
         pen, w = charbonnier(r[kept], self.eps)
         s = self._scale()
         A = nJ * np.sqrt(w)[:, None]

@@ -1,0 +1,79 @@
+"""The pose of a frame with nothing to start from: the first frame, or a frame whose fit was lost.
+
+Start hypotheses from the broad pose set in any world orientation (:func:`solver.tracking.start_search.
+start_hypotheses`), plus the caller's own (the user's start pose, the last good pose), each fitted
+with the coarse-to-fine search stages of the core (:data:`solver.tracking.frame.SEARCH`), the pose
+prior guiding the limbs; the fit that leaves the least of the capture and of the model unexplained
+(:func:`coverage_score`) wins.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ArticulaInputError
+from ..rig.model import Poses
+from ..tracking.frame import SEARCH, FrameSettings, fit_frame
+from ..tracking.start_search import start_hypotheses
+from ..tracking.terms import ModelToScan, ScanToModel, sample
+
+SCORE_EPS = 0.01        # Charbonnier scale of the score (m): a limb in the wrong place counts fully
+SCORE_REACH = 0.2       # pairs farther than this count as this far (m)
+
+
+def check_units(model, points) -> None:
+    """Refuse a capture whose size is not a body's size (likely a unit mistake), naming the unit."""
+    if len(points) < 10:
+        return
+    lo, hi = np.percentile(points, [1, 99], axis=0)
+    ext = float(np.linalg.norm(hi - lo))
+    rest = model.rest_vertices
+    height = float(np.linalg.norm(rest.max(axis=0) - rest.min(axis=0)))
+    ratio = ext / max(height, 1e-9)
+    if 0.4 <= ratio <= 2.5:
+        return
+    guess = min((("millimetres", 1000.0), ("centimetres", 100.0), ("inches", 39.37), ("metres", 1.0)),
+                key=lambda u: abs(np.log(ratio / u[1])))
+    raise ArticulaInputError(
+        f"capture: it spans {ext:.3g} units but the model's body {height:.3g} m ({ratio:.3g} x); "
+        f"are the captures in {guess[0]}? Convert them to metres (Import > Scale) or pick the right model")
+
+
+def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: FrameSettings = FrameSettings(),
+              cancel=None):
+    """``(pose, score, candidates tried)``: the best fitted start on ``capture`` (module docstring);
+    ``extra``: more one-frame Poses to try; ``count``: hypotheses from the pose set."""
+    starts = [pose for pose, _ in start_hypotheses(body.model, capture.points, capture.normals, count=count)]
+    starts += list(extra)
+    best = None
+    for start in starts:
+        fit = fit_frame(body, capture.points, capture.normals, start, priors=priors, stages=SEARCH,
+                        settings=settings, cancel=cancel)
+        score = coverage_score(body, capture, fit.state)
+        if best is None or score < best[1]:
+            best = (fit.pose, score)
+    return best[0], best[1], len(starts)
+
+
+def coverage_score(body, capture, state) -> float:
+    """Robust two-way distance (m^2 units of the Charbonnier penalty) between the capture and the
+    posed model: what a limb on the wrong surface leaves unexplained either way."""
+    scan = ScanToModel(capture.points, capture.normals, 2000, SCORE_EPS, SCORE_REACH, min_cos=-1.0, seed=7)
+    model = ModelToScan(capture.points, capture.normals, sample(body.model.num_vertices, 1500, 8), SCORE_EPS,
+                        SCORE_REACH, min_cos=-1.0)
+    return scan.energy(body, state) + model.energy(body, state) + _unreached(scan, model, state)
+
+
+def _unreached(scan, model, state) -> float:
+    """Pairs beyond the reach are left out of the energies; count each as a pair at the reach."""
+    _, _, _, kept = scan.pairs(state)
+    _, _, kept_m = model.pairs(state)
+    far = SCORE_EPS * SCORE_EPS * (np.sqrt(1.0 + (SCORE_REACH / SCORE_EPS) ** 2) - 1.0)
+    return far * (float((~kept).mean()) + float((~kept_m).mean()))
+
+
+def as_start(model, pose: Poses) -> Poses:
+    """A user's start pose checked against the model (one frame, its bones)."""
+    pose.validate(model.skeleton.num_bones)
+    if len(pose) != 1:
+        raise ArticulaInputError(f"start pose: expected one frame, got {len(pose)}")
+    return pose

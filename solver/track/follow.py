@@ -1,0 +1,86 @@
+"""Pass 1 of the scan tracker: every frame in order from its constant-velocity prediction.
+
+Frame n starts at the pose predicted from the last two good frames (``q_n = q_{n-1} (q_{n-2}^-1
+q_{n-1})`` per bone, the root moving on as it moved) and is held to that prediction only along the
+directions its data barely constrain (:func:`solver.tracking.priors.weak_directions`).  A frame whose
+median capture-to-model distance jumps (above ``lost_factor`` x the running median and ``lost_mm``) is
+searched again from the start hypotheses and the last good pose (:func:`.first_frame.find_pose`) and
+listed as lost when that does not bring it back; the next frame then starts from the last good pose.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..geometry.rotations import quat_conj, quat_mul, quat_normalize
+from ..rig.model import Poses
+from ..tracking.frame import TRACKING, FrameSettings, fit_frame
+from .first_frame import find_pose
+
+RUNNING = 10            # frames in the running median that lost-frame detection compares with
+
+
+def predict(history) -> Poses:
+    """The next pose from the last one or two good poses (one frame each)."""
+    if len(history) < 2:
+        return history[-1]
+    a, b = history[-2], history[-1]
+    rot = quat_normalize(quat_mul(b.rotations, quat_mul(quat_conj(a.rotations), b.rotations)))
+    return Poses(rot, 2 * b.translations - a.translations, b.scales.copy())
+
+
+def median_mm(state, points) -> float:
+    """Median distance (mm) of ``points`` to the state's posed surface (one-ring closest points)."""
+    _, _, foot, _ = state.surface.closest(points)
+    return float(np.median(np.linalg.norm(points - foot, axis=1)) * 1e3)
+
+
+def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings, priors=(), say=None,
+           cancel=None) -> dict:
+    """``{tracked frame: pose}`` of pass 1 from tracked frame ``first`` at ``pose``; fills the report
+    entries (median, lost, re-initialised, reason, seconds).  ``say(i)`` reports progress."""
+    history, medians, out = [pose], [], {first: pose}
+    for i in range(first + 1, len(rec)):
+        t0 = time.perf_counter()
+        capture = rec.capture(i)
+        if rec.too_few(i):
+            continue
+        guess = predict(history)
+        fit = fit_frame(body, capture.points, capture.normals, guess, settings=settings, stages=TRACKING,
+                        cancel=cancel, seed=i)
+        med = median_mm(fit.state, _sample(capture.points))
+        limit = max(options.lost_factor * float(np.median(medians[-RUNNING:])) if medians else 0.0,
+                    options.lost_mm)
+        if med > limit:
+            fit_pose, med = _again(body, capture, history[-1], options, settings, priors, cancel)
+            rec.entries[i]["reinitialised"] = True
+            if med > limit:
+                rec.entries[i].update(lost=True, median_mm=med, reason=f"median {med:.1f} mm after "
+                                      f"re-initialisation (limit {limit:.1f} mm)")
+                rec.entries[i]["seconds"] = round(time.perf_counter() - t0, 3)
+                history = history[-1:]
+                continue
+        else:
+            fit_pose = fit.pose
+        rec.entries[i].update(median_mm=med, seconds=round(time.perf_counter() - t0, 3))
+        medians.append(med)
+        history = (history + [fit_pose])[-2:]
+        out[i] = fit_pose
+        if say is not None:
+            say(i)
+    return out
+
+
+def _again(body, capture, last, options, settings, priors, cancel):
+    """A lost frame searched again: ``(pose, median mm)``."""
+    pose, _, _ = find_pose(body, capture, priors, extra=[last], count=options.hypotheses, settings=settings,
+                           cancel=cancel)
+    from ..tracking.lm import State
+    return pose, median_mm(State(body, pose), _sample(capture.points))
+
+
+def _sample(points, count: int = 4000):
+    if len(points) <= count:
+        return points
+    return points[np.random.default_rng(0).choice(len(points), count, replace=False)]

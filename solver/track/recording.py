@@ -1,0 +1,60 @@
+"""The frames one tracking run works on: captures read on demand and one report entry per frame.
+
+Captures are thinned to the run's ``max_points`` whatever the source was made with, and only the last
+few are kept in memory (a window's worth), so a long recording is never held whole.
+"""
+from __future__ import annotations
+
+import collections
+
+from .captures import CaptureSource
+from .options import TrackOptions, frame_range
+
+MIN_POINTS = 100        # a frame with fewer points (after cleaning) is skipped
+KEEP = 24               # captures kept in memory
+
+
+class Recording:
+    """``len(rec)`` tracked frames; ``rec.capture(i)`` the capture of tracked frame i (input frame
+    ``rec.range[i]``); ``rec.entries[i]`` its report entry (a dict, filled by the stages)."""
+
+    def __init__(self, source, options: TrackOptions):
+        if isinstance(source, CaptureSource) and source.max_points != options.max_points:
+            source = source.with_max_points(options.max_points)      # the options decide the thinning
+        self.source = source
+        self.range = frame_range(options.frames, len(source))
+        self._cache = collections.OrderedDict()
+        self.entries = [None] * len(self.range)
+
+    def __len__(self):
+        return len(self.range)
+
+    def capture(self, i):
+        if i not in self._cache:
+            self._cache[i] = self.source[self.range[i]]
+            while len(self._cache) > KEEP:
+                self._cache.popitem(last=False)
+            if self.entries[i] is None:
+                self.entries[i] = self._entry(i, self._cache[i])
+        self._cache.move_to_end(i)
+        return self._cache[i]
+
+    def _entry(self, i, capture):
+        names = getattr(self.source, "names", None)
+        info = self.source.info(self.range[i]) if hasattr(self.source, "info") else None
+        return {"frame": self.range[i], "name": names[self.range[i]] if names else str(self.range[i]),
+                "points": int(len(capture.points)), "dropped_nan": int(info.dropped_nan) if info else 0,
+                "mean_mm": None, "median_mm": None, "mad_mm": None, "iqr_mm": None,
+                "lost": False, "skipped": False, "reinitialised": False, "reason": "", "seconds": 0.0,
+                "verdict": None, "checks": []}
+
+    def usable(self) -> list:
+        """Tracked frames that were neither skipped nor lost."""
+        return [i for i, e in enumerate(self.entries) if e is not None and not (e["skipped"] or e["lost"])]
+
+    def too_few(self, i) -> bool:
+        """Skip frame i (and say so in its entry) when its capture has fewer than ``MIN_POINTS``."""
+        n = len(self.capture(i).points)
+        if n < MIN_POINTS:
+            self.entries[i].update(skipped=True, reason=f"{n} points (fewer than {MIN_POINTS})")
+        return n < MIN_POINTS

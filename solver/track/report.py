@@ -1,0 +1,61 @@
+"""The tracker's report on each frame: capture-to-model distances and the truth-free checks.
+
+Distances: every capture point to the closest point of the posed model's triangles, exact
+(:func:`.metrics.point_to_mesh`), summarised by mean, median, MAD and IQR (dissertation §4.2, Eq.
+4.17-4.18).  Checks (:func:`solver.tracking.checks.check_frame`): capture regions the model leaves
+unexplained, model parts the cameras saw through, limbs lying on or in other parts, joints past their
+limits; a frame that fails them is "doubtful" or "lost" whatever its residual.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..tracking.checks import check_frame, prepare
+from . import metrics
+
+
+def assess(body, rec, poses, options) -> list:
+    """Fill every usable frame's entry with its distances and, when ``options.checks``, its verdict and
+    reasons; frames the checks call lost are marked lost.  Returns the input frames called doubtful."""
+    checked = prepare(body.model) if options.checks else None
+    doubtful = []
+    for i in rec.usable():
+        pose = poses.take(i)
+        posed = body.pose(pose)
+        capture = rec.capture(i)
+        d = metrics.point_to_mesh(capture.points, posed, body.model.faces) * 1e3
+        stats = metrics.robust_stats(d)
+        entry = rec.entries[i]
+        entry.update(mean_mm=stats["mean"], median_mm=stats["median"], mad_mm=stats["mad"], iqr_mm=stats["iqr"])
+        if checked is None:
+            continue
+        verdict = check_frame(body.model, pose, posed, capture, checked)
+        entry.update(verdict=verdict.verdict, checks=list(verdict.reasons))
+        if verdict.verdict == "lost":
+            entry.update(lost=True, reason="; ".join(verdict.reasons[:2]))
+        elif verdict.verdict == "doubtful":
+            doubtful.append(rec.range[i])
+    return doubtful
+
+
+def notes(rec, prior_name, options, doubtful) -> list:
+    """Summary notes: which prior ran, poor fits, frames lost or doubtful by the checks."""
+    out = []
+    if prior_name == "generic":
+        out.append("pose prior: the generic human prior (the model has fewer than 3 poses of its own)"
+                   if options.prior == "auto" else "pose prior: the generic human prior")
+    entries = [e for e in rec.entries if e is not None]
+    poor = [e["frame"] for e in entries
+            if not e["skipped"] and e["median_mm"] is not None and e["median_mm"] > options.poor_fit_mm]
+    if poor:
+        out.append(f"poor fit: {len(poor)} frame(s) have a median scan-to-model distance above "
+                   f"{options.poor_fit_mm:g} mm (first: frame {poor[0]}); is it the same person and the right model?")
+    lost = [e for e in entries if e["lost"]]
+    if lost:
+        out.append(f"lost: {len(lost)} frame(s) (first: frame {lost[0]['frame']}: {lost[0]['reason']}); their poses "
+                   f"are interpolated")
+    if doubtful:
+        first = next(e for e in entries if e["frame"] == doubtful[0])
+        out.append(f"doubtful: {len(doubtful)} frame(s) fail a check (first: frame {doubtful[0]}: "
+                   f"{first['checks'][0] if first['checks'] else ''})")
+    return out

@@ -1,0 +1,146 @@
+"""Frames fitted together in overlapping windows with a temporal term (model-adaptive mocap
+dissertation §4.1.5, Eq. 4.9-4.10, on the core's terms).
+
+A window of consecutive tracked frames is one Levenberg–Marquardt problem over all their parameters:
+each frame's capture-to-model term (:class:`.terms.ScanToModel`) gives a diagonal block, and the
+temporal term ``w/2 sum_n |a_n|^2`` couples neighbours, with ``a_n`` the second difference of the
+frames' parameters (root translation; per bone ``log(q_{n}^-1 q_{n+1}) - log(q_{n-1}^-1 q_n)``, zero for
+constant velocity).  Its weight is ``w_temp`` times the frames' largest data curvature, so it decides
+only the directions the data leave free.
+
+Windows are anchored at input frame numbers (a window starts where the input frame number is a multiple
+of ``step``), and each frame keeps the pose of the window it is most central in: a frame's result
+depends on the data of its own window only, so a recording cut into overlapping chunks gives what one
+run gives (docs/track.md "Farm").
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..geometry.rotations import quat_conj, quat_mul, quat_to_rotvec
+from ..rig.model import Poses
+from .lm import State, damped_step
+from .terms import ScanToModel
+
+FINAL_EPS = 0.002       # Charbonnier scale of the windows' data term (m), as the frame fit's last stage
+FINAL_REACH = 0.04
+
+
+def schedule(frames, numbers, size: int, step: int) -> list:
+    """Windows (lists of positions into ``frames``, consecutive) over the tracked ``frames`` whose
+    input frame numbers are ``numbers``: one starting at every frame whose number is a multiple of
+    ``step`` (and at the first), ``size`` frames long; the last one ends at the last frame."""
+    n = len(frames)
+    if n <= size:
+        return [list(range(n))]
+    starts = [k for k in range(n) if k == 0 or numbers[k] % step == 0]
+    out = []
+    for s in starts:
+        s = min(s, n - size)
+        if not out or out[-1][0] != s:
+            out.append(list(range(s, s + size)))
+        if s == n - size:
+            break
+    return out
+
+
+def owner(windows, n: int) -> list:
+    """For each position 0..n-1 the window it is most central in (ties: the earlier window)."""
+    best = [None] * n
+    for w, win in enumerate(windows):
+        centre = 0.5 * (win[0] + win[-1])
+        for k in win:
+            d = abs(k - centre)
+            if best[k] is None or d < best[k][0] - 1e-9:
+                best[k] = (d, w)
+    return [b[1] for b in best]
+
+
+def fit_windows(body, rec, poses: dict, frames, options, settings, say=None) -> dict:
+    """``{frame: pose}`` of ``frames`` (sorted tracked frames of ``rec`` with poses in ``poses``)
+    refined in windows (module docstring)."""
+    numbers = [rec.range[i] for i in frames]
+    windows = schedule(frames, numbers, options.window, options.step)
+    keep = owner(windows, len(frames))
+    out = dict(poses)
+    for w, win in enumerate(windows):
+        mine = [k for k in win if keep[k] == w]
+        if not mine:
+            continue
+        idx = [frames[k] for k in win]
+        fitted = fit_window(body, [rec.capture(i) for i in idx], [poses[i] for i in idx], options.w_temp,
+                            settings)
+        for k in mine:
+            out[frames[k]] = fitted[win.index(k)]
+        body.forget()
+        if say is not None:
+            say((w + 1) / len(windows))
+    return out
+
+
+def fit_window(body, captures, starts, w_temp: float, settings, iterations: int = 5) -> list:
+    """One window: the frames' poses (list of one-frame Poses) fitted together from ``starts``."""
+    terms = [ScanToModel(c.points, c.normals, settings.samples, FINAL_EPS, FINAL_REACH, seed=k)
+             for k, c in enumerate(captures)]
+    states = [State(body, p, slot=('window', k)) for k, p in enumerate(starts)]
+    P, n = body.size, len(starts)
+    lins = [t.linearise(body, s) for t, s in zip(terms, states)]
+    weight = w_temp * float(np.mean([np.linalg.eigvalsh(l.H)[-1] for l in lins]))
+    energy = sum(l.energy for l in lins) + temporal_energy(states, weight)
+    mu = 1e-4
+    for _ in range(iterations):
+        H, g = _system(lins, states, weight, P)
+        step = damped_step(H, g, mu).reshape(n, P)
+        trial = [State(body, body.moved(s.pose, d), s.slot) for s, d in zip(states, step)]
+        e_trial = sum(t.energy(body, s) for t, s in zip(terms, trial)) + temporal_energy(trial, weight)
+        if e_trial < energy:
+            done = energy - e_trial <= 1e-4 * energy
+            states, energy, mu = trial, e_trial, mu / 3.0
+            if done:
+                break
+            lins = [t.linearise(body, s) for t, s in zip(terms, states)]
+            energy = sum(l.energy for l in lins) + temporal_energy(states, weight)
+        else:
+            mu *= 4.0
+            if mu > 1e4:
+                break
+    return [s.pose for s in states]
+
+
+def second_differences(states) -> np.ndarray:
+    """``(n-2, P)`` second differences of the frames' parameters (module docstring)."""
+    rot = np.stack([s.pose.rotations[0] for s in states])
+    trans = np.stack([s.pose.translations[0] for s in states])
+    rel = quat_to_rotvec(_short(quat_mul(quat_conj(rot[:-1]), rot[1:])))        # (n-1, B, 3)
+    vel = np.concatenate([trans[1:] - trans[:-1], rel.reshape(len(rel), -1)], axis=1)
+    return vel[1:] - vel[:-1]
+
+
+def _short(q):
+    return np.where(q[..., :1] < 0, -q, q)
+
+
+def temporal_energy(states, weight) -> float:
+    if len(states) < 3 or not weight:
+        return 0.0
+    a = second_differences(states)
+    return 0.5 * weight * float(np.sum(a * a))
+
+
+def _system(lins, states, weight, P):
+    """The window's normal equations: data blocks on the diagonal, the temporal term's second
+    differences with unit Jacobians (each frame's increment enters its neighbours' differences)."""
+    n = len(lins)
+    H = np.zeros((n * P, n * P))
+    g = np.zeros(n * P)
+    for k, lin in enumerate(lins):
+        H[k * P:(k + 1) * P, k * P:(k + 1) * P] = lin.H
+        g[k * P:(k + 1) * P] = lin.g
+    if n >= 3 and weight:
+        a = second_differences(states)
+        D = np.zeros((n - 2, n))
+        for m in range(n - 2):
+            D[m, m:m + 3] = (1.0, -2.0, 1.0)
+        H += weight * np.kron(D.T @ D, np.eye(P))
+        g += weight * (D.T @ a).ravel()
+    return H, g
