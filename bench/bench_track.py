@@ -7,8 +7,8 @@ the mean over frames and vertices, then body only, extremities (hands, fingers, 
 14 major joints separately, lost frames and seconds per frame, each line with its target and ratio.
 Captures (``_track_cases``): "clean" (no noise, no outliers), "1mm" (1 mm depth noise) at 4 x 640x480,
 thinned by the tracker to 20,000 points; "kinect" the samples' default Kinect-like scans.  First frame
-automatic (``--start truth``: the true first pose instead); tracker options are ``TrackOptions()``'s
-defaults except ``adapt`` in the adaptation scenario.
+automatic (``--start truth``: the true first pose instead, for the exact models of clean, noisy, worlds
+and speed); tracker options are ``TrackOptions()``'s defaults except ``adapt`` in the adaptation scenario.
 
 Scenarios (``--only`` picks some; default frames in brackets, ``--frames`` overrides):
 
