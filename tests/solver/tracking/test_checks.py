@@ -2,6 +2,8 @@
 hybrid skin, captures sampled from the TRUE posed surface (1 mm noise) or scanned by four Kinect-like depth
 cameras (sample_scenes.unregistered.scan_frame, default noise); the model is posed in the true pose (must
 be "good") or in a wrong one (must be flagged, naming the part that is wrong)."""
+import json
+
 import numpy as np
 import pytest
 from scipy.sparse.csgraph import connected_components
@@ -171,6 +173,8 @@ def test_arm_laid_onto_the_trunk(subject, capture):
     assert "left forearm lies on the trunk" in lying[0].text
     assert _parts(result, "unexplained") == {"left upper arm"}
     assert _parts(result) <= LEFT_ARM
+    report = json.loads(json.dumps(result.report()))       # the tracker's report takes it as it is
+    assert report["verdict"] == "lost" and report["reasons"] == result.reasons
 
 
 @pytest.mark.parametrize("capture", ["sampled", "scanned"])
