@@ -57,7 +57,7 @@ def main(argv=()) -> int:
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args(list(argv))
     from articula.sample_scenes import registered
-    from articula.solver.track.visibility import vertex_normals
+    from articula.solver.geometry.normals import vertex_normals
     frames, faces, _ = registered.posed_sequence(n_poses=2, motion="rom", seed=1)
     model = frames[1]
     normals = vertex_normals(model, faces)

@@ -31,7 +31,7 @@ import _common  # noqa: E402
 import numpy as np  # noqa: E402
 
 from articula.solver.geometry.procrustes import fit_rigid  # noqa: E402
-from articula.solver.track.visibility import vertex_normals  # noqa: E402  (area-weighted)
+from articula.solver.geometry.normals import vertex_normals  # noqa: E402  (area-weighted)
 
 
 PKG = []

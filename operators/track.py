@@ -23,6 +23,7 @@ from ..addon.track_depth import inputs as depth_inputs
 from ..addon.track_depth import result as depth_result
 from ..addon.track_depth import solve as depth_solve
 from ..addon.track_depth.report import summary_text as depth_summary
+from ..addon.tracking.result import check_output_path
 from ..solver.errors import ArticulaInputError
 from ..solver.track.options import TrackOptions
 from ..solver.track_depth.options import TRACKERS, DepthTrackOptions
@@ -136,7 +137,7 @@ class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
     def prepare(self, context):
         ob = inputs.find_captures(context, self.captures)
         out = bpy.path.abspath(self.output_bundle) if self.output_bundle else ""
-        result.check_output_path(out)
+        check_output_path(out)
         self._output = out
         if depth_inputs.uses_depth_tracker(ob, self.method):
             return self._prepare_depth(context, ob)

@@ -31,6 +31,8 @@ from ...solver.track.options import ADAPT_CHOICES, PRIOR_CHOICES, TrackOptions
 from .. import jobs
 from ..track import inputs, result, solve
 from ..track.report import report_document, summary_text
+from ..tracking.inputs import parse_frames
+from ..tracking.result import check_output_path
 from . import track_depth
 from .common import call_operator, check_blend_output, editing, finish, write_json
 from .scans import add_axis_arguments, axis_props
@@ -43,7 +45,7 @@ def _options(args, count: int) -> TrackOptions:
     options = TrackOptions(adapt="off" if args.no_adapt else args.adapt, prior=args.prior,
                            temporal=not args.no_temporal, fit_scale=args.fit_scale, max_points=args.max_points)
     if args.frames is not None:
-        options = replace(options, frames=inputs.parse_frames(args.frames, count))
+        options = replace(options, frames=parse_frames(args.frames, count))
     try:
         return options.validate()
     except ArticulaInputError as exc:
@@ -81,7 +83,7 @@ def run(args) -> int:
         raise ArticulaInputError("--scans needs --model MODEL.npz (the person's model bundle); only --depth can "
                                  "track with the built-in template body")
     for path in (args.out, args.report):
-        result.check_output_path(path or "")
+        check_output_path(path or "")
     check_blend_output(args.blend)
     paths = inputs.capture_paths(args.scans)
     if args.blend and os.path.splitext(paths[0])[1].lower() in POINT_EXTENSIONS:
@@ -112,7 +114,7 @@ def run(args) -> int:
 
 def run_merge(args) -> int:
     for path in (args.out, args.report):
-        result.check_output_path(path or "")
+        check_output_path(path or "")
     if args.agree < 0 or not np.isfinite(args.agree):
         raise ArticulaInputError(f"--agree: expected millimetres >= 0 (0: no check), got {args.agree}")
     merged = merge.merge_chunks(merge.load_chunks([os.path.abspath(p) for p in args.chunks]), args.agree)

@@ -25,10 +25,10 @@ from ...solver.track.options import TrackOptions
 from ...solver.track_depth.options import TRACKERS, DepthTrackOptions
 from .. import jobs
 from ..track import inputs
-from ..track.result import check_output_path
 from ..track_depth import inputs as depth_inputs
 from ..track_depth import result, solve
 from ..track_depth.report import report_document, summary_text
+from ..tracking.result import check_output_path
 from .common import call_operator, check_blend_output, editing, finish, write_json
 
 # --camera: the names of solver.depth.camera.CAMERA_PRESETS (older spellings read by cam.preset_key)

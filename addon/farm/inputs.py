@@ -10,8 +10,8 @@ from ...solver.farm import chunks
 from ...solver.farm.track_job import TrackJob
 from ..cli.common import check_blend_output
 from ..track import inputs as track_inputs
-from ..track.result import check_output_path
 from ..track_depth import inputs as depth_inputs
+from ..tracking.result import check_output_path
 
 # kind -> (chunk size, overlap) in frames (docs/farm.md "Chunk size and overlap")
 DEFAULT_CHUNK = {"depth": (300, 60), "scans": (60, 10)}

@@ -7,9 +7,7 @@ import dataclasses
 import numpy as np
 
 from ..learn.report import jsonable
-
-REPORT_PROPERTY = "articula_track_report"      # armature ID property: the report (JSON)
-
+from ..tracking.result import residuals_mm
 
 def options_dict(options) -> dict:
     """The tracking options as JSON types, without the frame range (what chunks of one run share)."""
@@ -40,15 +38,6 @@ def report_document(outcome) -> dict:
             doc["point_error_mm"] = {"median": float(np.median(e)), "mean": float(np.mean(e)),
                                      "p95": float(np.percentile(e, 95))}
     return doc
-
-
-def residuals_mm(result, key: str = "median_mm") -> np.ndarray:
-    """Per tracked frame the report's ``key`` (mm), NaN where a frame has none (skipped)."""
-    out = []
-    for row in result.frames:
-        value = row.get(key) if isinstance(row, dict) else None
-        out.append(float(value) if isinstance(value, (int, float)) and value is not None else np.nan)
-    return np.array(out, np.float64)
 
 
 def summary_text(outcome) -> str:

@@ -20,12 +20,12 @@ import numpy as np
 from ...solver.depth import camera as cam
 from ...solver.depth.recording import DEPTH_EXTENSIONS, list_frames
 from ...solver.errors import ArticulaInputError
-from ...solver.track.merge import model_digest
+from ...solver.tracking.provenance import model_digest
 from ...solver.track_depth.source import DepthRecording, PointsRecording
 from ..depth import images
 from ..rig import bundle_io, reader
 from ..sequences import playback, points
-from ..track.inputs import ModelInput, parse_frames
+from ..tracking.inputs import ModelInput, parse_frames
 
 METHOD_ITEMS = (('AUTO', "Auto", "The depth tracker for a depth recording (a point cloud imported with its camera), "
                                  "the capture tracker for scans and other point clouds"),

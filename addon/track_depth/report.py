@@ -6,7 +6,7 @@ import dataclasses
 
 import numpy as np
 
-from ...solver.track.merge import model_digest
+from ...solver.tracking.provenance import model_digest
 from ..learn.report import jsonable
 
 STATUSES = ("tracked", "initialised", "lost", "no person")

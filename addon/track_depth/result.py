@@ -16,9 +16,9 @@ import bpy
 
 from ...solver.errors import ArticulaInputError
 from ...solver.formats.bundle import save_bundle
-from ...solver.track.merge import track_provenance
+from ...solver.tracking.provenance import track_provenance
 from ..rig import actions
-from ..track.result import bake, check_output_path, tracking_rig
+from ..tracking.result import bake, check_output_path, tracking_rig
 from .report import options_dict, report_document
 
 RESIDUAL_PROPERTIES = (("articula_residual_mean_mm", "mean_mm"),)
@@ -58,7 +58,7 @@ def look_through(context, camera_name: str) -> bool:
 
 
 def provenance(outcome) -> dict:
-    """The tracked bundle's provenance (:func:`solver.track.merge.track_provenance`, the model digest of
+    """The tracked bundle's provenance (:func:`solver.tracking.provenance.track_provenance`, the model digest of
     the model given, "" for the template) with the report, the tracker and the poses' coordinates."""
     cap, first = outcome.captures, outcome.first_frame
     prov = track_provenance(outcome.model_input.sha256, cap.object_name or cap.label, cap.total, first,

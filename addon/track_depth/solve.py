@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from ...solver.rig.model import Poses
 from ...solver.track_depth.options import DepthTrackOptions
 from ...solver.track_depth.pipeline import track_recording
-from ..track.inputs import ModelInput
+from ..tracking.inputs import ModelInput
 from .inputs import DepthCaptures
 
 

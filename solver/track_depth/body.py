@@ -15,10 +15,10 @@ import dataclasses
 import numpy as np
 
 from ..errors import ArticulaInputError
+from ..geometry.normals import vertex_normals
 from ..geometry.rotations import quat_mul, quat_normalize, rotvec_to_quat
 from ..rig.kinematics import forward_kinematics
 from ..rig.model import Model, Poses
-from ..track.visibility import vertex_normals
 
 MAX_INFLUENCES = 4
 SUBSET_SIZE = 1500      # model points used for correspondences (the dissertation's ch. 6 samples ~1000)

@@ -13,8 +13,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..geometry.rotations import matrix_to_quat, quat_to_rotvec, rotation_between
-from ..track.frame_fit import bone_depths
-from ..track.limb_search import sphere_directions, subtrees
+from ..tracking.limbs import bone_depths, sphere_directions, subtrees
 
 DIRECTIONS = 64
 PAIRED = 6               # a limb's best directions for which its child's direction is searched too

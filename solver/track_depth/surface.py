@@ -17,9 +17,9 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
 from ..geometry.mesh_graph import adjacency
+from ..geometry.normals import vertex_normals
 from ..rig.kinematics import forward_kinematics
 from ..rig.model import Model
-from ..track.visibility import vertex_normals
 from .body import linear_blend_weights
 
 EDGE_WEIGHT = 2.0        # lambda_e of Eq. 6.20 for the tracker's subset spacing (ours)

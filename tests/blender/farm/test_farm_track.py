@@ -268,7 +268,7 @@ def test_without_a_model_a_first_task_adapts_the_template_and_the_chunks_share_i
     from articula.solver.farm.flamenco import Manager
     from articula.solver.farm.follow import FarmRun
     from articula.solver.formats.bundle import load_bundle
-    from articula.solver.track.merge import model_digest
+    from articula.solver.tracking.provenance import model_digest
     out = str(tmp_path / "template.npz")
     job = track_job("", recording["out_dir"], "depth", out, chunk=CHUNK, overlap=OVERLAP)
     job.adapt_frames = 20

@@ -7,7 +7,7 @@ from scipy.spatial import cKDTree
 
 import bpy
 from articula.solver.geometry.procrustes import fit_rigid
-from articula.solver.track.visibility import vertex_normals
+from articula.solver.geometry.normals import vertex_normals
 
 from ..rig_helpers import bbox_diagonal, subject
 

@@ -16,7 +16,7 @@ from articula.solver.formats.bundle import load_bundle, save_bundle
 from articula.solver.geometry.surface_distance import distance_to_surface
 from articula.solver.rig.model import Model, Poses, Skeleton
 from articula.solver.rig.skinning import hybrid_skin
-from articula.solver.track.merge import model_digest
+from articula.solver.tracking.provenance import model_digest
 from ...conftest import REPO
 from .test_track import make_truth, write_captures
 

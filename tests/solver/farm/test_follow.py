@@ -15,7 +15,7 @@ from articula.solver.farm.follow import FarmRun
 from articula.solver.farm.track_job import TrackJob
 from articula.solver.formats.bundle import load_bundle, save_bundle, temporary_path
 from articula.solver.rig.model import Poses
-from articula.solver.track import merge
+from articula.solver.tracking.provenance import model_digest, track_provenance
 from .flamenco_server import Farm, Server
 
 N = 20
@@ -57,7 +57,7 @@ class Worker:
         started = {int(item.split(":")[0]) for item in settings["start_from"].split(",") if item}
         if k in self.twisted and (k not in started or self.stubborn):
             rot[:, 1:] = np.array([np.cos(k * np.pi / 8), np.sin(k * np.pi / 8), 0, 0])
-        prov = merge.track_provenance(merge.model_digest(self.model), "scans", N, a,
+        prov = track_provenance(model_digest(self.model), "scans", N, a,
                                       [f"s{f}" for f in range(a, b)], {"adapt": "off"}, False)
         path = os.path.join(settings["work_dir"], chunk_plan.file_name(k, (a, b)))
         save_bundle(path, self.model, Poses(rot, self.truth.translations[a:b], self.truth.scales[a:b]), prov)

@@ -8,7 +8,7 @@ from articula.solver.errors import ArticulaInputError
 from articula.solver.farm.track_job import TrackJob
 from articula.solver.formats.bundle import save_bundle
 from articula.solver.rig.model import Poses
-from articula.solver.track import merge
+from articula.solver.tracking.provenance import model_digest, track_provenance
 
 N = 20
 
@@ -22,12 +22,12 @@ def write_chunks(model, job, twisted=None):
     """Save each chunk of ``job`` as a tracked bundle of one motion; chunk ``twisted`` gets its arms'
     rotations turned by 90 degrees (another solution)."""
     poses = synthetic.random_poses(N, model.skeleton.num_bones, seed=0, max_angle=0.5)
-    digest = merge.model_digest(model)
+    digest = model_digest(model)
     for k, (a, b) in enumerate(job.ranges):
         rot = poses.rotations[a:b].copy()
         if k == twisted:
             rot[:, 1:] = np.array([np.cos(np.pi / 4), np.sin(np.pi / 4), 0, 0])
-        prov = merge.track_provenance(digest, "scans", N, a, [f"s{f}" for f in range(a, b)], {"adapt": "off"}, False)
+        prov = track_provenance(digest, "scans", N, a, [f"s{f}" for f in range(a, b)], {"adapt": "off"}, False)
         save_bundle(job.chunk_path(k), model, Poses(rot, poses.translations[a:b], poses.scales[a:b]), prov)
 
 

@@ -18,7 +18,7 @@ from articula.solver.track import adapt as ad
 from articula.solver.track import frame_fit as ff
 from articula.solver.tracking.pose_prior import PosePrior
 from articula.solver.track.shape_prior import ShapePrior, lift
-from articula.solver.track.visibility import vertex_normals
+from articula.solver.geometry.normals import vertex_normals
 
 from .arm_body import arm_body
 

@@ -5,7 +5,7 @@ import pytest
 import trimesh
 
 from articula.solver.track import correspondences as corr
-from articula.solver.track.visibility import vertex_normals
+from articula.solver.geometry.normals import vertex_normals
 
 
 def _unit(x):

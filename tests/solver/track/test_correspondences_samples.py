@@ -10,7 +10,8 @@ from articula.sample_scenes.depth_render import render_depth
 from articula.solver.depth import camera
 from articula.solver.geometry.surface_distance import distance_to_surface
 from articula.solver.track import correspondences as corr
-from articula.solver.track.visibility import vertex_normals, visible_vertices
+from articula.solver.geometry.normals import vertex_normals
+from articula.solver.track.visibility import visible_vertices
 
 
 @pytest.fixture(scope="module")

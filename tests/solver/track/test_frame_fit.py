@@ -11,7 +11,7 @@ from articula.solver.rig.model import Model, Poses, Skeleton
 from articula.solver.rig.skinning import AnchorGroups, hybrid_skin
 from articula.solver.track import frame_fit as ff
 from articula.solver.tracking.pose_prior import PosePrior
-from articula.solver.track.visibility import vertex_normals
+from articula.solver.geometry.normals import vertex_normals
 
 
 def _one(poses, n=0):
@@ -72,10 +72,6 @@ def test_data_normal_equations_match_central_differences(tube, plane):
     assert np.isclose(E, np.einsum("c,ci,ci->", scale, r, r), rtol=1e-12)
     assert np.abs(H - H_ref).max() < 1e-6 * np.abs(H_ref).max()
     assert np.abs(g - g_ref).max() < 1e-6 * np.abs(g_ref).max()
-
-
-def test_bone_depths_count_ancestors():
-    assert ff.bone_depths([-1, 0, 1, 0, 3, -1]).tolist() == [0, 1, 2, 1, 2, 0]
 
 
 def test_model_pairs_point_to_plane_distances(tube):

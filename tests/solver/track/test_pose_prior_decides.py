@@ -12,7 +12,7 @@ from articula.solver.rig.model import Poses
 from articula.solver.rig.skinning import hybrid_skin
 from articula.solver.track import frame_fit as ff
 from articula.solver.tracking.pose_prior import PosePrior
-from articula.solver.track.visibility import vertex_normals
+from articula.solver.geometry.normals import vertex_normals
 
 TWIST = 0.5        # radians about the hand's own axis (bone-local +Y)
 

@@ -13,7 +13,7 @@ from articula.solver.rig.skinning import AnchorGroups, hybrid_skin
 from articula.solver.track import frame_fit as ff
 from articula.solver.track import temporal, windows
 from articula.solver.tracking.pose_prior import PosePrior
-from articula.solver.track.visibility import vertex_normals
+from articula.solver.geometry.normals import vertex_normals
 
 
 def test_schedule_of_the_dissertation():

@@ -10,7 +10,7 @@ from articula.solver.depth.camera import look_at, preset
 from articula.solver.geometry.rotations import quat_conj, quat_mul, quat_to_rotvec, rotvec_to_quat
 from articula.solver.geometry.surface_distance import distance_to_surface
 from articula.solver.rig.model import Poses
-from articula.solver.track.visibility import vertex_normals
+from articula.solver.geometry.normals import vertex_normals
 from articula.solver.track_depth import gmm
 from articula.solver.track_depth.body import TrackingBody
 from articula.solver.track_depth.limits import JointLimits

@@ -4,7 +4,7 @@ import numpy as np
 
 from articula.solver.geometry.rotations import quat_to_rotvec
 from articula.solver.rig.model import Model
-from articula.solver.track.visibility import vertex_normals
+from articula.solver.geometry.normals import vertex_normals
 from articula.solver.track_depth.body import TrackingBody
 from articula.solver.track_depth.limits import JointLimits
 from articula.solver.track_depth.normal_equations import System
