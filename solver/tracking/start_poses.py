@@ -13,8 +13,10 @@ MPFB/CMU/Unreal/Rigify namings and Articula's role names, which learned rigs get
 the bone that aims it are retargeting's (:func:`solver.retarget.directions.plan_segments`, reversed
 chains of chest-rooted learned rigs included).  Top-down, every bone is carried by its parent at its rest
 relation, then the aiming bone turns by the smallest rotation that points its segment along the pose's
-direction (an end role: the bone's own head-to-tail axis, towards the end point); the hips and the chest
-then twist about their segment so the thigh joints (shoulder joints) lie as the pose's do.  The pose's
+direction (an end role: the bone's own head-to-tail axis, towards the end point); the hips aim at the
+chest joint rather than the spine's (a CMU clip's spine joint is its hips joint, and a rig's short
+lumbar segment would tilt the pelvis), and the hips and the chest then twist about their segment so
+the thigh joints (shoulder joints) lie as the pose's do.  The pose's
 body frame is put on the rig's rest body frame (:func:`solver.retarget.directions.body_frame`).
 """
 from __future__ import annotations
@@ -110,8 +112,8 @@ class RigPoser:
         names = skeleton.names
         segs = plan_segments(arm, arm, {r: (names[b], names[b]) for r, b in self.roles.items()})
         self.frame = body_frame(skeleton.heads, segs, "target")
-        self.aims = self._aims(segs)
         self.below = _subtree_masks(skeleton.parents)
+        self.aims = self._aims(segs)
 
     def _aims(self, segs) -> dict:
         """``{bone: _Aim}``: a segment's aim where retargeting aims it, else the role's own bone by its
@@ -130,6 +132,9 @@ class RigPoser:
                 end = next((r for r in [seg.role + ".end"] + NEXT.get(seg.role, []) if r in POSE_ROLES), None)
                 if end is not None:
                     out[seg.target] = _Aim(seg.target, (seg.target, 0), (seg.target, 1), (seg.role, end))
+        hips = out.get(by["hips"])
+        if hips is not None and hips.want[0] == "hips" and "chest" in by and self.below[by["hips"]][by["chest"]]:
+            hips.b, hips.want = (by["chest"], 0), ("hips", "chest")   # the pelvis by the whole lower trunk
         for role, pair in (("hips", ("thigh.L", "thigh.R")), ("chest", ("shoulder.L", "shoulder.R")),
                            ("chest", ("upper_arm.L", "upper_arm.R"))):
             aim = next((a for a in out.values() if a.want[0] == role), None)
@@ -140,21 +145,33 @@ class RigPoser:
     def poses(self, pose_set: PoseSet) -> Poses:
         """``Poses (P, B)`` of the rig in each pose of ``pose_set``: root rotation in model coordinates
         (the pose's up along the rig's rest up), translation 0, scale 1."""
+        W, _ = self.world(pose_set)
+        F, parents = self.sk.frames, self.sk.parents
+        local = np.empty_like(W)
+        local[:, 0] = F[0].T @ W[:, 0]
+        carried = W[:, parents[1:]] @ (np.swapaxes(F[parents[1:]], -1, -2) @ F[1:])
+        local[:, 1:] = np.swapaxes(carried, -1, -2) @ W[:, 1:]
+        return Poses(matrix_to_quat(local), np.zeros((len(W), 3)), np.ones(len(W)))
+
+    def world(self, pose_set: PoseSet, base=None, only=None):
+        """World bone rotations ``W (P, B, 3, 3)`` (columns: the bone's axes; ``W_b = Rm_b F_b``) and joint
+        positions ``H (P, B, 3)`` of the posed rig, model coordinates.  ``base (W, H)`` of one pose and
+        ``only (B,)`` bool: bones outside ``only`` keep ``base`` (faster when a limb alone changes)."""
         sk = self.sk
         J = pose_set.joints @ self.frame.T                     # (P, R, 3) model coordinates
         P, B = len(J), sk.num_bones
         F, h = sk.frames, sk.heads
         W, H = np.empty((P, B, 3, 3)), np.empty((P, B, 3))
-        local = np.empty((P, B, 3, 3))
-        for b in range(B):
+        bones = range(B) if only is None else np.flatnonzero(only)
+        if only is not None:
+            W[:], H[:] = base[0], base[1]
+        for b in bones:
             p = sk.parents[b]
-            carried = np.broadcast_to(F[b], (P, 3, 3)) if p < 0 else W[:, p] @ (F[p].T @ F[b])
+            W[:, b] = np.broadcast_to(F[b], (P, 3, 3)) if p < 0 else W[:, p] @ (F[p].T @ F[b])
             H[:, b] = h[b] if p < 0 else H[:, p] + (W[:, p] @ (F[p].T @ (h[b] - h[p])))
-            W[:, b] = carried
             if b in self.aims:
                 W[:, b] = self._aimed(self.aims[b], W, H, J, b)
-            local[:, b] = np.swapaxes(carried, -1, -2) @ W[:, b] if p >= 0 else F[0].T @ W[:, b]
-        return Poses(matrix_to_quat(local), np.zeros((P, 3)), np.ones(P))
+        return W, H
 
     def _point(self, W, H, b, point):
         """Posed ``point`` (bone, head|tail) ``(P, 3)``: carried by its nearest ancestor already posed (bones

@@ -41,12 +41,16 @@ TRUNK_SAMPLES = 48       # trunk vertices scoring an orientation
 MINOR_UP = 0.7           # the least principal axis is tried as up when its spread is this near the middle's
 SHIFTS = 2               # median shifts placing an orientation
 TRUNCATE_M = 0.10        # a distance counts at most this much (metres)
+LIMB_TRUNCATE_M = 0.30   # the same in the limb searches: a limb far from its capture still pulls
 COARSE_TRUNCATE_M = 0.25 # capture points farther than this do not move an orientation's placement
 REFINE = 24              # orientations refined by a rigid ICP of the trunk
 ICP_ROUNDS = 6
 DISTINCT_DEG = 20.0      # recombined orientations differ by more than this
 RECOMBINE = 3            # refined hypotheses whose limbs are recombined
 LIMB_CANDIDATES = 48     # start poses whose limbs are tried (the set is in farthest-point order)
+DIRECTIONS = 48          # directions tried per segment in the segment search (about 30 deg apart)
+SEGMENT_SEARCH = tuple((f"{a}.{s}", f"{b}.{s}") for s in "LR" for a, b in (
+    ("thigh", "shin"), ("shin", "foot"), ("upper_arm", "forearm"), ("forearm", "hand")))
 TRUNK_SEGMENTS = (("hips", "chest"), ("chest", "neck"), ("neck", "head.end"), ("upper_arm.R", "upper_arm.L"),
                   ("thigh.R", "thigh.L"))
 LIMBS = (("thigh.L", ("thigh.L", "shin.L", "foot.L", "toe.L", "toe.L.end")),
@@ -149,6 +153,15 @@ class _Sampled:
         self.sub = Model(model.rest_vertices[index], np.zeros((0, 3), np.int32), model.skeleton,
                          model.anchor[index], model.twist_weights[index], model.swing_weights[index])
 
+    def rigid(self, world, mask) -> np.ndarray:
+        """``(P, M, 3)`` the samples where ``mask (S,)``, each carried rigidly by its anchor part in the
+        posed rig ``world = (W (P, B, 3, 3), H (P, B, 3))`` (:meth:`.RigPoser.world`): the hybrid skin's
+        blending near the joints left out, which the limb searches' scores do not need."""
+        W, H = world
+        a, sk = self.anchor[mask], self.sub.skeleton
+        y = np.einsum("sji,sj->si", sk.frames[a], self.sub.rest_vertices[mask] - sk.heads[a])
+        return np.einsum("psij,sj->psi", W[:, a], y) + H[:, a]
+
     def posed(self, poses: Poses, mask=None) -> np.ndarray:
         """``(N, S, 3)`` the samples (those where ``mask (S,)``, if given) in each of ``poses``."""
         if mask is None:
@@ -237,36 +250,86 @@ def _recombined(poser, sample, pose_set, joints, R, t, cap, tree):
     tried = pose_set.take(slice(0, LIMB_CANDIDATES))
     joints = joints.copy()
     Y = sample.posed(_one(poser, joints))[0] @ R.T + t
+    base = [x[0] for x in poser.world(_as_set(joints[None]))]
     for root, roles in LIMBS:
         cols, r = [POSE_ROLES.index(x) for x in roles], POSE_ROLES.index(root)
         cand = np.repeat(joints[None], len(tried) + 1, axis=0)
         cand[1:, cols] = tried.joints[:, cols] - tried.joints[:, r:r + 1] + joints[r]
-        limb = poser.below[poser.roles[root]][sample.anchor]
-        if not limb.any():
-            continue
-        Yl = sample.posed(poser.poses(PoseSet(cand, np.zeros(len(cand)), np.zeros(len(cand)))), limb) @ R.T + t
-        k = int(np.argmin(_limb_scores(Y[~limb], Yl, cap, tree)))
-        joints, Y[limb] = cand[k], Yl[k]
+        joints, base = _best_limb(poser, sample, root, cand, base, Y, R, t, cap, tree)
+    joints = _aim_segments(poser, sample, joints, base, Y, R, t, cap, tree)
     body = _one(poser, joints)
     X = sample.posed(body)[0]
     R, t = _icp(X, cap, tree, R, t)
     return _score(X @ R.T + t, cap, tree), body, R, t
 
 
+def _best_limb(poser, sample, root, cand, base, Y, R, t, cap, tree):
+    """``(joints, base)`` of the candidate poses ``cand (H, R, 3)`` (differing in the limb below role
+    ``root``) whose samples score best, ``Y (S, 3)`` (the placed samples) updated in place; ``base``:
+    the rig's world pose ``[W (B, 3, 3), H (B, 3)]`` of the current joints, also kept for the others."""
+    below = poser.below[poser.roles[root]]
+    limb = below[sample.anchor]
+    if not limb.any():
+        return cand[0], base
+    W, H = poser.world(_as_set(cand), base, below)
+    Yl = sample.rigid((W, H), limb) @ R.T + t
+    k = int(np.argmin(_limb_scores(Y[~limb], Yl, cap, tree)))
+    Y[limb] = Yl[k]
+    return cand[k], [W[k], H[k]]
+
+
+def _as_set(joints) -> PoseSet:
+    return PoseSet(joints, np.zeros(len(joints)), np.zeros(len(joints)))
+
+
+def _aim_segments(poser, sample, joints, base, Y, R, t, cap, tree):
+    """``joints`` with each segment of :data:`SEGMENT_SEARCH` in turn pointed along the best of
+    ``DIRECTIONS`` directions spread over the sphere (or kept), the joints below it turning with it about
+    its joint; each choice by the symmetric score (``Y (S, 3)``, the samples as placed, is updated)."""
+    for a, b in SEGMENT_SEARCH:
+        if a not in poser.roles:
+            continue
+        moved = [POSE_ROLES.index(r) for r in _below_role(b)]
+        ia = POSE_ROLES.index(a)
+        now = joints[POSE_ROLES.index(b)] - joints[ia]
+        G = rotation_between(now / np.linalg.norm(now), _fibonacci(DIRECTIONS))   # (D, 3, 3)
+        cand = np.repeat(joints[None], len(G) + 1, axis=0)
+        cand[1:, moved] = np.einsum("dij,mj->dmi", G, joints[moved] - joints[ia]) + joints[ia]
+        joints, base = _best_limb(poser, sample, a, cand, base, Y, R, t, cap, tree)
+    return joints
+
+
+def _below_role(role: str) -> list:
+    """Pose roles of ``role``'s chain from it to the end (``shin.L`` → shin, foot, toe, toe end)."""
+    for _, roles in LIMBS:
+        if role in roles:
+            return list(roles[roles.index(role):])
+    return [role]
+
+
+def _fibonacci(n: int) -> np.ndarray:
+    """``(n, 3)`` unit vectors spread evenly over the sphere."""
+    k = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * k / n
+    phi = np.pi * (1.0 + np.sqrt(5.0)) * k
+    r = np.sqrt(1.0 - z * z)
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
 def _one(poser, joints) -> Poses:
-    return poser.poses(PoseSet(joints[None], np.zeros(1), np.zeros(1)))
+    return poser.poses(_as_set(joints[None]))
 
 
-def _limb_scores(fixed, Yl, cap, tree) -> np.ndarray:
-    """``(H,)`` the symmetric score (:func:`_scores`) of the samples ``fixed (F, 3)`` with each of the
-    limb's sample sets ``Yl (H, L, 3)``, computed from the limb's distances only."""
+def _limb_scores(fixed, Yl, cap, tree, truncate: float = LIMB_TRUNCATE_M) -> np.ndarray:
+    """``(H,)`` the symmetric score (:func:`_scores`, truncated at ``truncate``) of the samples ``fixed
+    (F, 3)`` with each of the limb's sample sets ``Yl (H, L, 3)``, from the limb's distances only."""
     S = len(fixed) + Yl.shape[1]
-    d_fixed = np.minimum(tree.query(fixed, distance_upper_bound=TRUNCATE_M)[0], TRUNCATE_M).sum()
-    d_limb = np.minimum(tree.query(Yl.reshape(-1, 3), distance_upper_bound=TRUNCATE_M)[0], TRUNCATE_M)
+    d_fixed = np.minimum(tree.query(fixed, distance_upper_bound=truncate)[0], truncate).sum()
+    d_limb = np.minimum(tree.query(Yl.reshape(-1, 3), distance_upper_bound=truncate)[0], truncate)
     out = (d_fixed + d_limb.reshape(Yl.shape[:2]).sum(axis=1)) / S
     to_fixed = _nearest_sq(cap, fixed[None])[0] if len(fixed) else np.full(len(cap), np.inf)
     to_limb = _nearest_sq(cap, Yl)
-    return out + np.minimum(np.sqrt(np.minimum(to_limb, to_fixed[None])), TRUNCATE_M).mean(axis=1)
+    return out + np.minimum(np.sqrt(np.minimum(to_limb, to_fixed[None])), truncate).mean(axis=1)
 
 
 def _nearest_sq(cap, Y) -> np.ndarray:

@@ -2,10 +2,12 @@
 ground truth: MakeHuman subjects posed in motions the start-pose set does not hold, the capture points
 sampled on the true posed surface and turned into a Z-up, a Y-up and a 30-degree tilted world.
 
-Thresholds: the best hypothesis's root (bone 0) within 30 degrees of the truth's world rotation, and its
-mean vertex error under 100 mm on walk frames (measured 29-80 mm; the per-frame fit is meant to take it
-from there); for random range-of-motion frames the root only (the search does not find their limbs
-reliably yet).  The root's world rotation is the truth's bone matrix turned by the world rotation."""
+Thresholds: the best hypothesis's hips (the body's root; bone 0 on cmu_mb, a child of a ground "root"
+bone on game_engine and default) within 30 degrees of the truth's world rotation, and one of the best
+four with a mean vertex error under 100 mm: the core's search fit (solver.tracking.frame, SEARCH stages) brought starts of
+77-105 mm (the truth with every bone turned 10 deg) to the level it reaches from the truth's
+neighbourhood, and did not from 240 mm (20 deg per bone).  The truth's world rotation is its bone
+matrix turned by the world rotation."""
 import numpy as np
 import pytest
 
@@ -39,25 +41,27 @@ def _surface_points(V, F, n, rng):
 
 def _subject(rig, motion, frame, **options):
     verts, faces, gt = posed_sequence(rig=rig, shape="female", n_poses=frame + 1, motion=motion, skin="hybrid",
-                                      seed=5, **options)
+                                      seed=11, **options)
     sk = Skeleton(gt["bone_names"], gt["parents"], gt["heads"], gt["tails"], gt["frames"])
     model = Model(gt["rest_vertices"], faces, sk, gt["anchor"], gt["twist_weights"], gt["swing_weights"])
-    return model, verts[frame], gt["bone_matrices"][frame, 0, :3, :3]
+    hips = role_bones(sk.names)["hips"]
+    return model, verts[frame], gt["bone_matrices"][frame, hips, :3, :3]
 
 
 def _best(model, truth_vertices, truth_root, world, seed=0):
-    """(root angle deg, mean vertex error mm) of the best hypothesis on the capture turned by ``world``."""
+    """(hips angle of the best hypothesis, deg; mean vertex error of the closest of the best 4, mm) on the
+    capture turned by ``world``."""
     rng = np.random.default_rng(seed)
     points = _surface_points(truth_vertices, model.faces, 20000, rng) @ world.T + SHIFT
     hyps = start_hypotheses(model, points, None, count=4)
     assert 1 <= len(hyps) <= 4 and all(np.isfinite(s) for _, s in hyps)
     assert [s for _, s in hyps] == sorted(s for _, s in hyps)
-    pose = hyps[0][0]
-    assert len(pose) == 1
-    Rm, _ = forward_kinematics(model.skeleton, pose)
-    R = Rm[0, 0].T @ (world @ truth_root)
+    assert all(len(pose) == 1 for pose, _ in hyps)
+    Rm, _ = forward_kinematics(model.skeleton, hyps[0][0])
+    R = Rm[0, role_bones(model.skeleton.names)["hips"]].T @ (world @ truth_root)
     angle = np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1)))
-    error = np.linalg.norm(hybrid_skin(model, pose)[0] - (truth_vertices @ world.T + SHIFT), axis=1).mean()
+    truth = truth_vertices @ world.T + SHIFT
+    error = min(np.linalg.norm(hybrid_skin(model, pose)[0] - truth, axis=1).mean() for pose, _ in hyps)
     return angle, 1000 * error
 
 
@@ -68,10 +72,13 @@ def test_walk_frame_found_in_any_world(world):
     assert angle < 30.0 and error < 100.0, (angle, error)
 
 
-def test_range_of_motion_frame_on_another_rig_finds_the_root():
-    model, V, root = _subject("game_engine", "rom", 1, amplitude=0.3)
-    angle, _ = _best(model, V, root, WORLDS["tilted_30"])
-    assert angle < 30.0
+@pytest.mark.parametrize("rig, frame, world", [("game_engine", 3, "y_up"), ("default", 6, "tilted_30")])
+def test_random_motion_frame_found_on_other_rigs(rig, frame, world):
+    """Random range-of-motion frames at half the joint limits (arms up or out, trunk bent and turned, a leg
+    raised): none is in the start-pose set."""
+    model, V, root = _subject(rig, "rom", frame, amplitude=0.5)
+    angle, error = _best(model, V, root, WORLDS[world])
+    assert angle < 30.0 and error < 100.0, (angle, error)
 
 
 def test_role_named_skeleton_as_learn_rig_names_it():
