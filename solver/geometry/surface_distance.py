@@ -342,3 +342,49 @@ def error_statistics(values) -> dict:
     q1, q3 = _median(x[:half]) if half else med, _median(x[n - half:]) if half else med
     return {"mean": float(x.mean()), "std": float(x.std()), "median": med,
             "mad": _median(np.abs(x - med)), "iqr": q3 - q1, "max": float(x[-1]), "count": n}
+
+
+FOOT_CANDIDATES = 4     # nearest centroids tried first for a foot point; the rest by an exact ball query
+FOOT_TOL = 1e-12        # a candidate within FOOT_TOL x (coordinate scale of the point) of the distance is the foot
+
+
+def closest_on_surface(points, vertices, faces):
+    """``(distances (N,), feet (N, 3), triangles (N,))``: each point's exact distance to the mesh
+    (:func:`distance_to_surface`), a closest point and a triangle holding it (ties: any); inputs
+    ``(N, 3)``, ``(V, 3)``, ``(F, 3)`` int64, unchecked.  The triangles of the ``FOOT_CANDIDATES``
+    nearest centroids are tried first; a point none of them reaches within rounding of its exact
+    distance d gets every triangle whose centroid lies within d + (largest centroid-to-corner radius)."""
+    d = distance_to_surface(points, vertices, faces)
+    d = distance_to_surface(points, vertices, faces)
+    N = len(points)
+    feet, which = np.zeros((N, 3)), np.zeros(N, dtype=np.int64)
+    if N == 0:
+        return d, feet, which
+    tri = vertices[faces]                                                  # (F, 3, 3)
+    centre = tri.mean(axis=1)
+    rmax = float(np.sqrt(((tri - centre[:, None]) ** 2).sum(axis=2).max()))
+    tol = FOOT_TOL * (np.abs(tri).max() + np.abs(points).max(axis=1) + rmax)           # (N,): rounding
+    tree = cKDTree(centre)
+    k = min(FOOT_CANDIDATES, len(faces))
+    cand = tree.query(points, k)[1].reshape(N, k)
+    best = np.full(N, np.inf)
+    rows = np.arange(N)
+    for j in range(k):                                  # only the points not yet resolved
+        t = cand[rows, j]
+        q = closest_points_on_triangles(points[rows], tri[t, 0], tri[t, 1], tri[t, 2])
+        dist = np.linalg.norm(q - points[rows], axis=1)
+        better = dist < best[rows]
+        r = rows[better]
+        best[r], feet[r], which[r] = dist[better], q[better], t[better]
+        rows = rows[best[rows] > d[rows] + tol[rows]]
+    if len(rows):                                       # exact fallback: every triangle that can hold the foot
+        lists = tree.query_ball_point(points[rows], d[rows] + rmax + tol[rows] + 1e-9 * rmax)
+        counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(rows))
+        t = np.fromiter((x for ids in lists for x in ids), dtype=np.int64, count=int(counts.sum()))
+        p = np.repeat(rows, counts)
+        q = closest_points_on_triangles(points[p], tri[t, 0], tri[t, 1], tri[t, 2])
+        dist = np.linalg.norm(q - points[p], axis=1)
+        order = np.lexsort((dist, p))                   # per point, its nearest candidate first
+        first = order[np.r_[0, np.cumsum(counts)[:-1]]]
+        feet[rows], which[rows] = q[first], t[first]
+    return d, feet, which

@@ -1,7 +1,8 @@
 """The pose of a frame with nothing to start from: the first frame, or a frame whose fit was lost.
 
 Start hypotheses from the broad pose set in any world orientation (:func:`solver.tracking.start_search.
-start_hypotheses`), plus the caller's own (the user's start pose, the last good pose), each fitted
+start_hypotheses`; a rig that is not a human body starts from its rest pose at the capture), plus the
+caller's own (the user's start pose, the last good pose), each fitted
 with the coarse-to-fine search stages of the core (:data:`solver.tracking.frame.SEARCH`), the pose
 prior guiding the limbs; the fit that leaves the least of the capture and of the model unexplained
 (:func:`coverage_score`) wins.
@@ -12,7 +13,9 @@ import numpy as np
 
 from ..errors import ArticulaInputError
 from ..rig.model import Poses
-from ..tracking.frame import SEARCH, FrameSettings, fit_frame
+from ..tracking.frame import SEARCH, SEARCH_HOLD, FrameSettings, fit_frame
+from ..roles import role_bones
+from ..tracking.start_poses import REQUIRED
 from ..tracking.start_search import start_hypotheses
 from ..tracking.terms import ModelToScan, ScanToModel, sample
 
@@ -42,16 +45,35 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
               cancel=None):
     """``(pose, score, candidates tried)``: the best fitted start on ``capture`` (module docstring);
     ``extra``: more one-frame Poses to try; ``count``: hypotheses from the pose set."""
-    starts = [pose for pose, _ in start_hypotheses(body.model, capture.points, capture.normals, count=count)]
-    starts += list(extra)
+    starts = list(extra)
+    if humanoid(body.model.skeleton):
+        starts = [pose for pose, _ in start_hypotheses(body.model, capture.points, capture.normals,
+                                                       count=count)] + starts
+    elif not starts:
+        starts = [centred_rest(body.model, capture.points)]
     best = None
     for start in starts:
         fit = fit_frame(body, capture.points, capture.normals, start, priors=priors, stages=SEARCH,
-                        settings=settings, cancel=cancel)
+                        settings=settings, cancel=cancel, weak_ratio=SEARCH_HOLD)
         score = coverage_score(body, capture, fit.state)
         if best is None or score < best[1]:
             best = (fit.pose, score)
     return best[0], best[1], len(starts)
+
+
+def humanoid(skeleton) -> bool:
+    """True when the rig has the roles the start poses need (a human body, named any known way)."""
+    roles = role_bones(skeleton.names)
+    return all(r in roles for r in REQUIRED)
+
+
+def centred_rest(model, points) -> Poses:
+    """The rest pose moved so that the model's box centre is the capture's: the start of a rig that is
+    not a human body (no start poses fit it)."""
+    pose = Poses.identity(1, model.skeleton.num_bones)
+    centre = lambda x: 0.5 * (np.percentile(x, 2, axis=0) + np.percentile(x, 98, axis=0))
+    pose.translations[0] = centre(points) - centre(model.rest_vertices)
+    return pose
 
 
 def coverage_score(body, capture, state) -> float:

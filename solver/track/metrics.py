@@ -12,13 +12,10 @@ nearest-centroid triangle and evaluates every triangle whose bounding sphere and
 bound (cKDTree searches).  This module adds the input checks and the foot points.  Units: metres.
 """
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..errors import ArticulaInputError
-from ..geometry.surface_distance import closest_points_on_triangles, distance_to_surface, error_statistics
+from ..geometry.surface_distance import closest_on_surface, distance_to_surface, error_statistics
 
-FOOT_CANDIDATES = 4     # nearest centroids tried first for a foot point; the rest by an exact ball query
-FOOT_TOL = 1e-12        # a candidate within FOOT_TOL x (coordinate scale of the point) of the distance is the foot
 
 
 def _array(name, x, dtype=np.float64):
@@ -60,39 +57,7 @@ def closest_points(points, vertices, faces):
     of its exact distance d gets every triangle whose centroid lies within d + (largest centroid-to-corner
     radius): a triangle at distance d has its centroid within d + its radius, so one is among them."""
     points, vertices, faces = _mesh(points, vertices, faces)
-    d = distance_to_surface(points, vertices, faces)
-    N = len(points)
-    feet, which = np.zeros((N, 3)), np.zeros(N, dtype=np.int64)
-    if N == 0:
-        return d, feet, which
-    tri = vertices[faces]                                                  # (F, 3, 3)
-    centre = tri.mean(axis=1)
-    rmax = float(np.sqrt(((tri - centre[:, None]) ** 2).sum(axis=2).max()))
-    tol = FOOT_TOL * (np.abs(tri).max() + np.abs(points).max(axis=1) + rmax)           # (N,): rounding
-    tree = cKDTree(centre)
-    k = min(FOOT_CANDIDATES, len(faces))
-    cand = tree.query(points, k)[1].reshape(N, k)
-    best = np.full(N, np.inf)
-    rows = np.arange(N)
-    for j in range(k):                                  # only the points not yet resolved
-        t = cand[rows, j]
-        q = closest_points_on_triangles(points[rows], tri[t, 0], tri[t, 1], tri[t, 2])
-        dist = np.linalg.norm(q - points[rows], axis=1)
-        better = dist < best[rows]
-        r = rows[better]
-        best[r], feet[r], which[r] = dist[better], q[better], t[better]
-        rows = rows[best[rows] > d[rows] + tol[rows]]
-    if len(rows):                                       # exact fallback: every triangle that can hold the foot
-        lists = tree.query_ball_point(points[rows], d[rows] + rmax + tol[rows] + 1e-9 * rmax)
-        counts = np.fromiter(map(len, lists), dtype=np.int64, count=len(rows))
-        t = np.fromiter((x for ids in lists for x in ids), dtype=np.int64, count=int(counts.sum()))
-        p = np.repeat(rows, counts)
-        q = closest_points_on_triangles(points[p], tri[t, 0], tri[t, 1], tri[t, 2])
-        dist = np.linalg.norm(q - points[p], axis=1)
-        order = np.lexsort((dist, p))                   # per point, its nearest candidate first
-        first = order[np.r_[0, np.cumsum(counts)[:-1]]]
-        feet[rows], which[rows] = q[first], t[first]
-    return d, feet, which
+    return closest_on_surface(points, vertices, faces)
 
 
 def robust_stats(d) -> dict:

@@ -30,7 +30,7 @@ from ..errors import ArticulaInputError
 from ..parallel import single_blas_thread
 from ..rig.model import Model, Poses
 from ..tracking.body import Body
-from ..tracking.frame import FrameSettings, SEARCH, fit_frame
+from ..tracking.frame import SEARCH, SEARCH_HOLD, FrameSettings, fit_frame
 from ..tracking.pose_prior import PosePrior, generic_prior, widened
 from ..tracking.priors import PairPrior
 from ..tracking.window import fit_windows
@@ -133,7 +133,7 @@ def first_frame(body, rec, start_pose, priors, options, settings):
         check_units(body.model, capture.points)
         if start_pose is not None:
             fit = fit_frame(body, capture.points, capture.normals, as_start(body.model, start_pose),
-                            priors=priors, stages=SEARCH, settings=settings)
+                            priors=priors, stages=SEARCH, settings=settings, weak_ratio=SEARCH_HOLD)
             pose = fit.pose
         else:
             pose, _, _ = find_pose(body, capture, priors, count=options.hypotheses, settings=settings)

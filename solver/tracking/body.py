@@ -13,10 +13,13 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import ArticulaInputError
+from ..geometry.surface_distance import closest_on_surface
 from ..rig.jacobians import apply_pose_increment, pose_jacobian
 from ..rig.model import Model, Poses
 from ..rig.skinning import AnchorGroups, hybrid_skin
 
+NEAREST = 2                  # vertices whose triangles are searched for a closest point
+EXACT_BEYOND = 0.003         # a query farther than this (m) from those triangles gets the exact closest point
 JACOBIAN_REUSE_RAD = 0.08    # a vertex Jacobian serves poses this close (per bone, radians)
 
 
@@ -92,17 +95,34 @@ class Surface:
 
     def closest(self, queries):
         """``(face (Q,), barycentric (Q, 3), foot (Q, 3), vertex (Q,))`` of each query ``(Q, 3)``: the
-        closest point on the one-ring of its nearest vertex."""
-        _, vertex = self.tree.query(queries)
-        tris = self.ring[vertex]                                         # (Q, R), -1 padding
+        closest point on the triangles around its ``NEAREST`` nearest vertices (the nearest vertex
+        alone misses the closest triangle where a long triangle's corners are all far)."""
+        if len(queries) == 0:
+            return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64)
+        _, near = self.tree.query(queries, k=NEAREST)
+        near = near.reshape(len(queries), -1)
+        tris = self.ring[near].reshape(len(queries), -1)                 # (Q, k R), -1 padding
         valid = tris >= 0
-        tri = self.faces[np.maximum(tris, 0)]                            # (Q, R, 3)
+        tri = self.faces[np.maximum(tris, 0)]                            # (Q, kR, 3)
         bary = closest_barycentric(queries[:, None, :], *(self.vertices[tri[..., k]] for k in range(3)))
         foot = np.einsum("qrk,qrkj->qrj", bary, self.vertices[tri])
         d2 = np.where(valid, np.sum((foot - queries[:, None, :]) ** 2, axis=2), np.inf)
         best = np.argmin(d2, axis=1)
         rows = np.arange(len(queries))
-        return tris[rows, best], bary[rows, best], foot[rows, best], vertex
+        face, bary, foot = tris[rows, best], bary[rows, best], foot[rows, best]
+        self._exact_where_far(queries, np.sqrt(d2[rows, best]), face, bary, foot)
+        return face, bary, foot, near[:, 0]
+
+    def _exact_where_far(self, queries, dist, face, bary, foot):
+        """Queries farther than ``EXACT_BEYOND`` from their ring get the mesh's exact closest point, in
+        place (on a coarse mesh a point's own triangle may lie on no nearby vertex's ring)."""
+        far = np.flatnonzero(dist > EXACT_BEYOND)
+        if not len(far):
+            return
+        _, feet, tri = closest_on_surface(queries[far], self.vertices, self.faces)
+        corners = self.vertices[self.faces[tri]]
+        face[far], foot[far] = tri, feet
+        bary[far] = closest_barycentric(queries[far], corners[:, 0], corners[:, 1], corners[:, 2])
 
 
 def one_ring(faces, num_vertices: int) -> np.ndarray:

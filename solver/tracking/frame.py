@@ -29,6 +29,7 @@ class Stage:
 
 
 TRACKING = (Stage(0.002, 0.05, 0.0, 12),)
+SEARCH_HOLD = 1e-7      # weak-direction ratio of a searched frame: only what the data cannot see is held
 SEARCH = (Stage(0.02, 0.25, 1.0, 12), Stage(0.006, 0.08, 1.0, 10), Stage(0.002, 0.04, 0.0, 12))
 
 
@@ -40,7 +41,7 @@ class FrameSettings:
     pull towards the target on every parameter, relative to the largest eigenvalue (0: none)."""
     samples: int = 4000
     coverage_vertices: int = 1500
-    weak_ratio: float = 1e-3
+    weak_ratio: float = 1e-4
     hold: float = 0.0
     step_rad: float = 2e-4
     step_m: float = 5e-5
@@ -56,9 +57,11 @@ class FrameFit:
 
 
 def fit_frame(body, points, normals, start, target=None, priors=(), stages=TRACKING,
-              settings: FrameSettings = FrameSettings(), cancel=None, seed: int = 0) -> FrameFit:
+              settings: FrameSettings = FrameSettings(), cancel=None, seed: int = 0, weak_ratio=None) -> FrameFit:
     """Fit one frame of capture ``points``/``normals`` ``(N, 3)`` from ``start`` (Poses, one frame);
-    ``target``: the pose the weak directions are held to (default ``start``); ``priors``: extra terms."""
+    ``target``: the pose the weak directions are held to (default ``start``); ``priors``: extra terms;
+    ``weak_ratio``: of the hold (default ``settings.weak_ratio``; a start that is only a guess, as a
+    searched frame's, should hold little: :data:`SEARCH_HOLD`)."""
     target = start if target is None else target
     spread = sample(body.model.num_vertices, settings.coverage_vertices, seed + 1)
     pose, used, hold = start, 0, None
@@ -67,7 +70,7 @@ def fit_frame(body, points, normals, start, target=None, priors=(), stages=TRACK
         if stage.coverage:
             data.append(ModelToScan(points, normals, spread, stage.eps, stage.reach, weight=stage.coverage))
         if hold is None:
-            hold = _hold(body, pose, data, target, settings)
+            hold = _hold(body, pose, data, target, settings, weak_ratio)
         fit = minimise(body, pose, data + [hold] + list(priors),
                        Stopping(stage.iterations, settings.step_rad, settings.step_m), cancel)
         pose, used = fit.pose, used + fit.iterations
@@ -75,10 +78,10 @@ def fit_frame(body, points, normals, start, target=None, priors=(), stages=TRACK
     return FrameFit(pose, final, used, fit.data)
 
 
-def _hold(body, pose, data, target, settings):
+def _hold(body, pose, data, target, settings, weak_ratio=None):
     """The pull towards ``target`` along the data's weak directions at ``pose`` (fixed for the frame)."""
     lin = State(body, pose).linearise(body, data)
-    W = weak_directions(lin.H, settings.weak_ratio)
+    W = weak_directions(lin.H, settings.weak_ratio if weak_ratio is None else weak_ratio)
     if settings.hold:
         W = W + settings.hold * float(np.linalg.eigvalsh(lin.H)[-1]) * np.eye(len(W))
     return TowardPose(target, W)

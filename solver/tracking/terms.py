@@ -38,7 +38,7 @@ class ScanToModel:
     A fixed sample of ``count`` capture points (seeded; the same every update, so energies compare),
     each matched to the closest point on the one-ring of its nearest posed vertex
     (:meth:`Body.surface`); the residual is the distance along that triangle's normal, its derivative
-    that of the nearest vertex along the normal (:func:`normal_jacobian`).  Pairs whose capture normal points
+    the barycentric combination of the triangle's vertex Jacobians (:func:`normal_jacobian`).  Pairs whose capture normal points
     against the face normal (below ``min_cos``) or farther than ``reach`` metres are left out; the rest
     weigh by Charbonnier with ``eps`` (about the capture noise, metres).  ``weight`` scales the energy
     per point (energy = weight * mean penalty * 1, so terms with other point counts compare)."""
@@ -50,28 +50,28 @@ class ScanToModel:
         self.eps, self.reach, self.min_cos, self.weight = eps, reach, min_cos, weight
 
     def pairs(self, state):
-        """``(vertex, face, residual, kept)`` of the sample against the state's surface (cached)."""
+        """``(barycentric, face, residual, kept)`` of the sample against the state's surface (cached)."""
         key = ("scan", id(self))
         if key not in state.cache:
             state.cache[key] = self._pairs(state.surface)
         return state.cache[key]
 
     def _pairs(self, surface):
-        face, _, foot, vertex = surface.closest(self.points)
+        face, bary, foot, _ = surface.closest(self.points)
         n = surface.face_normals[face]
         r = np.sum((self.points - foot) * n, axis=1)
         dist = np.linalg.norm(self.points - foot, axis=1)
         kept = (np.sum(n * self.normals, axis=1) >= self.min_cos) & (dist <= self.reach)
-        return vertex, face, r, kept
+        return bary, face, r, kept
 
     def energy(self, body, state) -> float:
         _, _, r, kept = self.pairs(state)
         return self._scale() * float(charbonnier(r[kept], self.eps)[0].sum())
 
     def linearise(self, body, state) -> Linear:
-        vertex, face, r, kept = self.pairs(state)
-        vertex, face, r = vertex[kept], face[kept], r[kept]
-        nJ = normal_jacobian(body, state, vertex, state.surface.face_normals[face])
+        bary, face, r, kept = self.pairs(state)
+        bary, face, r = bary[kept], face[kept], r[kept]
+        nJ = normal_jacobian(body, state, body.faces[face], state.surface.face_normals[face], bary)
         # residual = n . (point - foot): its derivative is minus n . d(foot)
         pen, w = charbonnier(r, self.eps)
         s = self._scale()
@@ -87,13 +87,21 @@ class ScanToModel:
         return r, kept
 
 
-def normal_jacobian(body, state, vertex, normals):
-    """``(K, P)`` derivative of ``normals[k] . x(vertex[k])`` with the unit ``normals (K, 3)`` held
-    fixed (Jacobians from :meth:`.body.Body.jacobian_near`).  The foot point of a pair moves with its
-    nearest vertex in this Gauss–Newton model (the residual itself is exact, so a pose that explains
-    the capture is still a fixed point)."""
-    J = body.jacobian_near(state.pose, vertex, state.slot)               # (K, 3, P)
-    return np.einsum("kj,kjp->kp", normals, J)
+def normal_jacobian(body, state, vertices, normals, weights=None):
+    """``(K, P)`` derivative of ``normals[k] . sum_c weights[k, c] x(vertices[k, c])`` with the unit
+    ``normals (K, 3)`` held fixed: points on the posed surface given by ``vertices (K, C)`` and their
+    barycentric ``weights (K, C)`` (C = 1 and weight 1 for vertices themselves).  Vertex Jacobians come
+    from :meth:`.body.Body.jacobian_near`."""
+    if len(normals) == 0:
+        return np.zeros((0, body.size))
+    vertices = np.asarray(vertices).reshape(len(normals), -1)
+    weights = np.ones(vertices.shape) if weights is None else weights
+    J = body.jacobian_near(state.pose, vertices.ravel(), state.slot).reshape(vertices.shape + _tail(body))
+    return np.einsum("kj,kc,kcjp->kp", normals, weights, J, optimize=True)
+
+
+def _tail(body):
+    return (3, body.size)
 
 
 class ModelToScan:
