@@ -39,6 +39,7 @@ SPINS = 12               # turns about the capture's major axis (30 deg apart)
 TRUNK_POSES = 12         # trunk shapes tried in the orientation stage
 TRUNK_SAMPLES = 48       # trunk vertices scoring an orientation
 MINOR_UP = 0.7           # the least principal axis is tried as up when its spread is this near the middle's
+COARSE_POINTS = 8000     # capture points of the tree the orientation and limb stages query
 SHIFTS = 2               # median shifts placing an orientation
 TRUNCATE_M = 0.10        # a distance counts at most this much (metres)
 LIMB_TRUNCATE_M = 0.30   # the same in the limb searches: a limb far from its capture still pulls
@@ -72,18 +73,19 @@ def start_hypotheses(model: Model, points, normals=None, count: int = 8, pose_se
     sample = _Sampled(model, _area_sample(model, MODEL_SAMPLES, rng))
     trunk = _Sampled(model, _area_sample(model, TRUNK_SAMPLES, rng, _trunk_vertices(model, poser)))
     tree = cKDTree(points)
+    coarse = cKDTree(points[rng.choice(len(points), min(COARSE_POINTS, len(points)), replace=False)])
     cap = points[rng.choice(len(points), min(CAPTURE_SAMPLES, len(points)), replace=False)]
     shapes = pose_set.take(_trunk_poses(pose_set, TRUNK_POSES))
     bodies = poser.poses(shapes)
     Xt = trunk.posed(bodies)                                   # (T, St, 3) model coordinates
-    found = _orientations(Xt, sample.posed(bodies).mean(axis=1), points, tree, poser.frame[:, 2])
+    found = _orientations(Xt, sample.posed(bodies).mean(axis=1), points, coarse, poser.frame[:, 2])
     refined = []
     for _, k, R, t in found[:REFINE]:
         R, t = _icp(Xt[k], None, tree, R, t)
         d = np.minimum(tree.query(Xt[k] @ R.T + t, distance_upper_bound=TRUNCATE_M)[0], TRUNCATE_M)
         refined.append((float(d.mean()), k, R, t))
     refined.sort(key=lambda item: item[0])
-    out = [_recombined(poser, sample, pose_set, shapes.joints[k], R, t, cap, tree)
+    out = [_recombined(poser, sample, pose_set, shapes.joints[k], R, t, cap, (tree, coarse))
            for _, k, R, t in _distinct(refined, RECOMBINE)]
     out.sort(key=lambda item: item[0])
     return [(_placed(model.skeleton, body, R, t), float(s)) for s, body, R, t in out[:count]]
@@ -243,10 +245,12 @@ def _icp(X, cap, tree, R, t, rounds: int = ICP_ROUNDS):
     return R, t
 
 
-def _recombined(poser, sample, pose_set, joints, R, t, cap, tree):
+def _recombined(poser, sample, pose_set, joints, R, t, cap, trees):
     """``(score, Poses, R, t)``: pose ``joints (R, 3)`` placed by ``(R, t)`` with each limb (:data:`LIMBS`)
     in turn given the direction set, relative to its root joint, of the first ``LIMB_CANDIDATES`` start
-    poses (or kept), each choice by the symmetric score; then a rigid ICP of the whole body."""
+    poses (or kept), each choice by the symmetric score (on the ``coarse`` tree of ``trees = (tree,
+    coarse)``); then the segment search and a rigid ICP of the whole body."""
+    tree, coarse = trees
     tried = pose_set.take(slice(0, LIMB_CANDIDATES))
     joints = joints.copy()
     Y = sample.posed(_one(poser, joints))[0] @ R.T + t
@@ -255,8 +259,8 @@ def _recombined(poser, sample, pose_set, joints, R, t, cap, tree):
         cols, r = [POSE_ROLES.index(x) for x in roles], POSE_ROLES.index(root)
         cand = np.repeat(joints[None], len(tried) + 1, axis=0)
         cand[1:, cols] = tried.joints[:, cols] - tried.joints[:, r:r + 1] + joints[r]
-        joints, base = _best_limb(poser, sample, root, cand, base, Y, R, t, cap, tree)
-    joints = _aim_segments(poser, sample, joints, base, Y, R, t, cap, tree)
+        joints, base = _best_limb(poser, sample, root, cand, base, Y, R, t, cap, coarse)
+    joints = _aim_segments(poser, sample, joints, base, Y, R, t, cap, coarse)
     body = _one(poser, joints)
     X = sample.posed(body)[0]
     R, t = _icp(X, cap, tree, R, t)
