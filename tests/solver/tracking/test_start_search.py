@@ -40,12 +40,17 @@ def _surface_points(V, F, n, rng):
 
 
 def _subject(rig, motion, frame, **options):
-    verts, faces, gt = posed_sequence(rig=rig, shape="female", n_poses=frame + 1, motion=motion, skin="hybrid",
-                                      seed=11, **options)
-    sk = Skeleton(gt["bone_names"], gt["parents"], gt["heads"], gt["tails"], gt["frames"])
-    model = Model(gt["rest_vertices"], faces, sk, gt["anchor"], gt["twist_weights"], gt["swing_weights"])
-    hips = role_bones(sk.names)["hips"]
+    verts, _, gt = posed_sequence(rig=rig, shape="female", n_poses=frame + 1, motion=motion, skin="hybrid",
+                                  seed=11, **options)
+    model, hips = _model(gt)
     return model, verts[frame], gt["bone_matrices"][frame, hips, :3, :3]
+
+
+def _model(gt):
+    """The subject's exact model from a ground truth, and its hips bone."""
+    sk = Skeleton(gt["bone_names"], gt["parents"], gt["heads"], gt["tails"], gt["frames"])
+    model = Model(gt["rest_vertices"], gt["faces"], sk, gt["anchor"], gt["twist_weights"], gt["swing_weights"])
+    return model, role_bones(sk.names)["hips"]
 
 
 def _best(model, truth_vertices, truth_root, world, seed=0):
@@ -72,13 +77,19 @@ def test_walk_frame_found_in_any_world(world):
     assert angle < 30.0 and error < 100.0, (angle, error)
 
 
-@pytest.mark.parametrize("rig, frame, world", [("game_engine", 3, "y_up"), ("default", 6, "tilted_30")])
-def test_random_motion_frame_found_on_other_rigs(rig, frame, world):
+@pytest.mark.parametrize("rig, world", [("game_engine", "y_up"), ("default", "tilted_30")])
+def test_random_motion_frames_found_on_other_rigs(rig, world):
     """Random range-of-motion frames at half the joint limits (arms up or out, trunk bent and turned, a leg
-    raised): none is in the start-pose set."""
-    model, V, root = _subject(rig, "rom", frame, amplitude=0.5)
-    angle, error = _best(model, V, root, WORLDS[world])
-    assert angle < 30.0 and error < 100.0, (angle, error)
+    raised), none of them in the start-pose set: at least 3 of 4 found (measured over 27 such cases:
+    85-96 % of hips within 30 deg, 93-100 % with one of the best 4 under 100 mm)."""
+    verts, _, gt = posed_sequence(rig=rig, shape="female", n_poses=7, motion="rom", skin="hybrid", seed=11,
+                                  amplitude=0.5)
+    model, hips = _model(gt)
+    found = []
+    for frame in (0, 2, 4, 6):
+        angle, error = _best(model, verts[frame], gt["bone_matrices"][frame, hips, :3, :3], WORLDS[world], frame)
+        found.append(angle < 30.0 and error < 100.0)
+    assert sum(found) >= 3, found
 
 
 def test_role_named_skeleton_as_learn_rig_names_it():
