@@ -13,10 +13,9 @@ MPFB/CMU/Unreal/Rigify namings and Articula's role names, which learned rigs get
 the bone that aims it are retargeting's (:func:`solver.retarget.directions.plan_segments`, reversed
 chains of chest-rooted learned rigs included).  Top-down, every bone is carried by its parent at its rest
 relation, then the aiming bone turns by the smallest rotation that points its segment along the pose's
-direction (an end role: the bone's own head-to-tail axis, towards the end point); the hips aim at the
-chest joint rather than the spine's (a CMU clip's spine joint is its hips joint, and a rig's short
-lumbar segment would tilt the pelvis), and the hips and the chest then twist about their segment so
-the thigh joints (shoulder joints) lie as the pose's do.  The pose's
+direction (an end role: the bone's own head-to-tail axis, towards the end point); the hips and the chest
+then twist about their segment so the thigh joints (shoulder joints) lie as the pose's do (the pelvis of
+a chest-rooted rig: :meth:`RigPoser._pelvis`).  The pose's
 body frame is put on the rig's rest body frame (:func:`solver.retarget.directions.body_frame`).
 """
 from __future__ import annotations
@@ -89,7 +88,9 @@ def load_pose_set(path: str = START_POSES_PATH) -> PoseSet:
 @dataclass
 class _Aim:
     """Bone ``bone`` turns so that point ``b`` minus point ``a`` points along the pose's ``a`` → ``b``
-    (roles ``want``); a point is ``(bone, 0 = head | 1 = tail)``.  ``lateral``: the twist pair, or None."""
+    (roles ``want``); a point is ``(bone, 0 = head | 1 = tail)``.  ``lateral`` (roles A, B), or None: then
+    it twists about that direction towards the pose's A → B (from the bone's joint when A does not turn
+    with it)."""
     bone: int
     a: tuple
     b: tuple
@@ -127,20 +128,35 @@ class RigPoser:
             elif seg.child is not None and seg.aim == seg.target and seg.role + ".end" in POSE_ROLES:
                 out.setdefault(seg.aim, _Aim(seg.aim, (seg.target, 0), (seg.target_child, 0),
                                              (seg.role, seg.role + ".end")))       # a hand aimed at its fingers
+        aimed = {a.want for a in out.values()}
         for seg in segs:
-            if seg.target not in out and seg.role in POSE_ROLES:
+            if seg.target not in out and seg.role in POSE_ROLES and (seg.role, seg.child) not in aimed:
                 end = next((r for r in [seg.role + ".end"] + NEXT.get(seg.role, []) if r in POSE_ROLES), None)
                 if end is not None:
                     out[seg.target] = _Aim(seg.target, (seg.target, 0), (seg.target, 1), (seg.role, end))
-        hips = out.get(by["hips"])
-        if hips is not None and hips.want[0] == "hips" and "chest" in by and self.below[by["hips"]][by["chest"]]:
-            hips.b, hips.want = (by["chest"], 0), ("hips", "chest")   # the pelvis by the whole lower trunk
-        for role, pair in (("hips", ("thigh.L", "thigh.R")), ("chest", ("shoulder.L", "shoulder.R")),
-                           ("chest", ("upper_arm.L", "upper_arm.R"))):
-            aim = next((a for a in out.values() if a.want[0] == role), None)
+        self._pelvis(out)
+        for role, pair in (("hips", ("thigh.R", "thigh.L")), ("chest", ("shoulder.R", "shoulder.L")),
+                           ("chest", ("upper_arm.R", "upper_arm.L"))):
+            aim = out.get(by[role]) if role in by else None
+            aim = aim if aim is not None else next((a for a in out.values() if a.want[0] == role), None)
             if aim is not None and aim.lateral is None and all(r in by for r in pair):
                 aim.lateral = pair
         return out
+
+    def _pelvis(self, out) -> None:
+        """The hips bone's aim: at the chest joint when it carries the chest (a CMU clip's spine joint is its
+        hips joint, and a rig's short lumbar segment would tilt the pelvis); when it hangs from the spine
+        (a learned rig rooted at the chest), along the thigh line, turned about it by the thigh seen from
+        the bone's joint (as from the spine's, or the chest's, joint in the pose)."""
+        by, hips = self.roles, self.roles["hips"]
+        aim = out.get(hips)
+        if aim is not None and aim.want[0] == "hips" and "chest" in by and self.below[hips][by["chest"]]:
+            aim.b, aim.want = (by["chest"], 0), ("hips", "chest")
+        elif aim is None or aim.want[0] != "hips":
+            above = next((r for r in ("spine", "chest") if r in by and not self.below[hips][by[r]]), None)
+            if above is not None:
+                out[hips] = _Aim(hips, (by["thigh.R"], 0), (by["thigh.L"], 0), ("thigh.R", "thigh.L"),
+                                 (above, "thigh.L"))
 
     def poses(self, pose_set: PoseSet) -> Poses:
         """``Poses (P, B)`` of the rig in each pose of ``pose_set``: root rotation in model coordinates
@@ -200,11 +216,12 @@ class RigPoser:
             return R
         Wb = W.copy()
         Wb[:, b] = R
-        l, r = (self.roles[s] for s in aim.lateral)
-        if not (self.below[b][l] and self.below[b][r]):
+        first, second = (self.roles[s] for s in aim.lateral)
+        if not self.below[b][second]:
             return R
-        u = self._point(Wb, H, b, (l, 0)) - self._point(Wb, H, b, (r, 0))
-        return _twist_towards(want, u, role_direction(J, aim.lateral[1], aim.lateral[0])) @ R
+        start = self._point(Wb, H, b, (first, 0)) if self.below[b][first] else H[:, b]
+        u = self._point(Wb, H, b, (second, 0)) - start
+        return _twist_towards(want, u, role_direction(J, *aim.lateral)) @ R
 
 
 def role_direction(J, a: str, b: str) -> np.ndarray:

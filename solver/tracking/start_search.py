@@ -271,6 +271,8 @@ def _best_limb(poser, sample, root, cand, base, Y, R, t, cap, tree):
     """``(joints, base)`` of the candidate poses ``cand (H, R, 3)`` (differing in the limb below role
     ``root``) whose samples score best, ``Y (S, 3)`` (the placed samples) updated in place; ``base``:
     the rig's world pose ``[W (B, 3, 3), H (B, 3)]`` of the current joints, also kept for the others."""
+    if root not in poser.roles:
+        return cand[0], base
     below = poser.below[poser.roles[root]]
     limb = below[sample.anchor]
     if not limb.any():
