@@ -13,7 +13,7 @@ from articula.sample_scenes.subjects import make_subject
 from articula.solver.errors import ArticulaInputError
 from articula.solver.learn.role_names import names_for
 from articula.solver.rig.kinematics import forward_kinematics
-from articula.solver.rig.model import Model, Skeleton
+from articula.solver.rig.model import Model, Skeleton, frames_from_bones
 from articula.solver.rig.skinning import hybrid_skin
 from articula.solver.roles import PARENT, role_bones
 from articula.solver.tracking.start_poses import (POSE_ROLES, START_POSES_PATH, PoseSet, RigPoser,
@@ -40,13 +40,13 @@ def test_shipped_set_is_small_and_broad():
     assert np.allclose(J[:, ix("hips")], 0.0)
 
 
-def _segment_errors(sk, poser, ps):
+def _segment_errors(sk, poser, ps, segments=SEGMENTS):
     poses = poser.poses(ps)
     Rm, tm = forward_kinematics(sk, poses)
     H = np.einsum("nbij,bj->nbi", Rm, sk.heads) + tm
     J = ps.joints @ poser.frame.T
     out = {}
-    for a, b in SEGMENTS:
+    for a, b in segments:
         if a in poser.roles and b in poser.roles:
             d = H[:, poser.roles[b]] - H[:, poser.roles[a]]
             d /= np.linalg.norm(d, axis=1, keepdims=True)
@@ -69,6 +69,44 @@ def test_role_named_skeleton_as_learn_rig_names_it():
     assert "thigh.L" in named.names and "upper_arm.R" in named.names
     errors = _segment_errors(named, RigPoser(named), load_pose_set().take(slice(0, 40)))
     assert len(errors) == len(SEGMENTS) and max(errors.values()) < 0.5, errors
+
+
+def test_chest_rooted_skeleton_as_learned_rigs_are():
+    """A rig rooted at its chest (as learn_rig's often are: the spine and hips hang from it, reversed), its
+    parts' axes its own and no hip or shoulder girdle bones: the limbs and the thigh and shoulder lines
+    still point as the pose's."""
+    sk = make_subject("cmu_mb").skeleton
+    roles = {b: r for r, b in role_bones(sk.names).items() if not r.startswith(("hip.", "shoulder."))}
+    names = [roles.get(b, f"part_{b:02d}") for b in range(sk.num_bones)]      # learn_rig's naming
+    chest = _rerooted(Skeleton(names, sk.parents, sk.heads, sk.tails, sk.frames), names.index("chest"))
+    poser = RigPoser(chest)
+    assert chest.parents[poser.roles["hips"]] == poser.roles["spine"]
+    ps = load_pose_set().take(slice(0, 60))
+    errors = _segment_errors(chest, poser, ps)
+    assert len(errors) == len(SEGMENTS) and max(errors.values()) < 0.5, errors
+    lines = _segment_errors(chest, poser, ps, (("thigh.R", "thigh.L"), ("upper_arm.R", "upper_arm.L")))
+    assert max(lines.values()) < 10.0, lines
+
+
+def _rerooted(sk, root):
+    """``sk`` with part ``root`` as its root: every edge on the way reversed (a part's joint is the one
+    it shares with its new parent), bones in breadth-first order, each with an axis of its own (random)."""
+    nbrs = {b: set() for b in range(sk.num_bones)}
+    for b in range(1, sk.num_bones):
+        nbrs[b].add(int(sk.parents[b]))
+        nbrs[int(sk.parents[b])].add(b)
+    order, parent, head = [root], {root: -1}, {root: sk.heads[root]}
+    for x in order:
+        for y in sorted(nbrs[x] - set(parent)):
+            parent[y] = x
+            head[y] = sk.heads[y] if sk.parents[y] == x else sk.heads[x]
+            order.append(y)
+    index = {b: i for i, b in enumerate(order)}
+    heads = np.array([head[b] for b in order])
+    axes = np.random.default_rng(0).normal(size=heads.shape)        # a learned part's axis is its own
+    tails = heads + 0.1 * axes / np.linalg.norm(axes, axis=1, keepdims=True)
+    return Skeleton([sk.names[b] for b in order], [index[parent[b]] if parent[b] >= 0 else -1 for b in order],
+                    heads, tails, frames_from_bones(heads, tails))
 
 
 @pytest.mark.parametrize("rig", ["cmu_mb", "game_engine"])
