@@ -76,10 +76,12 @@ def recognise(names, minimum: float = MINIMUM) -> Recognition:
         rank = (coverage(preset, found), preset.priority if found else 0, len(found))
         if rank > best_rank:
             best, best_found, best_rank = preset, found, rank
-    if best is None:
-        for key, b in index.items():
-            if key in unambiguous:
-                best_found.setdefault(unambiguous[key], b)
+    taken = set(best_found.values())
+    for key, b in index.items():           # roles the naming leaves out, by names only one role has anywhere
+        role = unambiguous.get(key)        # (a role-named rig whose root is Unreal's "pelvis")
+        if role is not None and role not in best_found and b not in taken:
+            best_found[role] = b
+            taken.add(b)
     return Recognition({r: best_found[r] for r in ROLES if r in best_found}, best)
 
 

@@ -1,8 +1,7 @@
 """The pose of a frame with nothing to start from: the first frame, or a frame whose fit was lost.
 
 Start hypotheses from the broad pose set in any world orientation (:func:`solver.tracking.start_search.
-start_hypotheses`; a rig that is not a human body starts from its rest pose at the capture), plus the
-caller's own (the user's start pose, the last good pose), each fitted
+start_hypotheses`; only for a human body), the rest pose at the capture, plus the caller's own (the user's start pose, the last good pose), each fitted
 with the coarse-to-fine search stages of the core (:data:`solver.tracking.frame.SEARCH`), the pose
 prior guiding the limbs; the fit that leaves the least of the capture and of the model unexplained
 (:func:`coverage_score`) wins.
@@ -19,38 +18,37 @@ from ..tracking.start_poses import REQUIRED
 from ..tracking.start_search import start_hypotheses
 from ..tracking.terms import ModelToScan, ScanToModel, sample
 
+SIZE_RATIO = (0.4, 2.5)  # a capture's extent (1st-99th percentile) over the model's height outside this is refused
 SCORE_EPS = 0.01        # Charbonnier scale of the score (m): a limb in the wrong place counts fully
 SCORE_REACH = 0.2       # pairs farther than this count as this far (m)
 
 
 def check_units(model, points) -> None:
-    """Refuse a capture whose size is not a body's size (likely a unit mistake), naming the unit."""
-    if len(points) < 10:
+    """Refuse captures whose extent is not that of the model's body (``SIZE_RATIO``), naming both sizes:
+    a capture in millimetres or centimetres against a model in metres is the usual cause."""
+    if len(points) < 3:
         return
     lo, hi = np.percentile(points, [1, 99], axis=0)
-    ext = float(np.linalg.norm(hi - lo))
-    rest = model.rest_vertices
-    height = float(np.linalg.norm(rest.max(axis=0) - rest.min(axis=0)))
-    ratio = ext / max(height, 1e-9)
-    if 0.4 <= ratio <= 2.5:
-        return
-    guess = min((("millimetres", 1000.0), ("centimetres", 100.0), ("inches", 39.37), ("metres", 1.0)),
-                key=lambda u: abs(np.log(ratio / u[1])))
-    raise ArticulaInputError(
-        f"capture: it spans {ext:.3g} units but the model's body {height:.3g} m ({ratio:.3g} x); "
-        f"are the captures in {guess[0]}? Convert them to metres (Import > Scale) or pick the right model")
+    capture = float(np.max(hi - lo))
+    body = float(np.ptp(model.rest_vertices, axis=0).max())
+    ratio = capture / max(body, 1e-12)
+    if not SIZE_RATIO[0] <= ratio <= SIZE_RATIO[1]:
+        hint = ""
+        for factor, unit in ((1000.0, "millimetres"), (100.0, "centimetres"), (1 / 0.0254, "inches")):
+            if abs(np.log(ratio / factor)) < 0.7:
+                hint = f" (about {factor:.4g}x: are the captures in {unit} and the model in metres?)"
+        raise ArticulaInputError(f"captures and model differ in size: the capture spans {capture:.4g} units, "
+                                 f"the model is {body:.4g} m tall{hint}; bring both to metres before tracking")
 
 
 def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: FrameSettings = FrameSettings(),
               cancel=None):
     """``(pose, score, candidates tried)``: the best fitted start on ``capture`` (module docstring);
     ``extra``: more one-frame Poses to try; ``count``: hypotheses from the pose set."""
-    starts = list(extra)
+    starts = list(extra) + [centred_rest(body.model, capture.points)]
     if humanoid(body.model.skeleton):
         starts = [pose for pose, _ in start_hypotheses(body.model, capture.points, capture.normals,
                                                        count=count)] + starts
-    elif not starts:
-        starts = [centred_rest(body.model, capture.points)]
     best = None
     for start in starts:
         fit = fit_frame(body, capture.points, capture.normals, start, priors=priors, stages=SEARCH,

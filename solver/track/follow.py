@@ -39,7 +39,7 @@ def median_mm(state, points) -> float:
 def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings, priors=(), say=None,
            cancel=None) -> dict:
     """``{tracked frame: pose}`` of pass 1 from tracked frame ``first`` at ``pose``; fills the report
-    entries (median, lost, re-initialised, reason, seconds).  ``say(i)`` reports progress."""
+    entries (median, lost, re-initialised, reason, seconds).  ``say(i, median mm)`` reports progress."""
     history, medians, out = [pose], [], {first: pose}
     for i in range(first + 1, len(rec)):
         t0 = time.perf_counter()
@@ -68,7 +68,7 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
         history = (history + [fit_pose])[-2:]
         out[i] = fit_pose
         if say is not None:
-            say(i)
+            say(i, med)
     return out
 
 

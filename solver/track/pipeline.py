@@ -31,12 +31,13 @@ from ..parallel import single_blas_thread
 from ..rig.model import Model, Poses
 from ..tracking.body import Body
 from ..tracking.frame import SEARCH, SEARCH_HOLD, FrameSettings, fit_frame
+from ..tracking.lm import State
 from ..tracking.pose_prior import PosePrior, generic_prior, widened
 from ..tracking.priors import PairPrior
 from ..tracking.window import fit_windows
 from .adaptation import adapt_on_keys
 from .first_frame import as_start, check_units, find_pose
-from .follow import follow
+from .follow import follow, median_mm
 from .gaps import interpolate_gaps, stacked
 from .options import ADAPT_MIN_FRAMES, MODEL_PRIOR_MIN_POSES, TrackOptions
 from .recording import Recording
@@ -90,8 +91,10 @@ def track_sequence(model, source, options: TrackOptions = TrackOptions(), traini
         settings = FrameSettings(samples=options.samples, weak_ratio=options.weak_ratio)
         priors = [PairPrior(prior, PRIOR_WEIGHT)] if prior is not None else []
         first, pose = clock.run("initialisation", first_frame, body, rec, start_pose, priors, options, settings)
-        poses = clock.run("pass 1", follow, body, rec, first, pose, options, settings, priors,
-                          lambda i: say(0.6 * (i + 1) / len(rec), f"tracking: frame {i + 1} of {len(rec)}"))
+        tracked = lambda i, med: say(0.6 * (i + 1) / len(rec), f"tracking: frame {i + 1} of {len(rec)}, median "
+                                                               f"{med:.1f} mm")
+        tracked(first, rec.entries[first]["median_mm"])
+        poses = clock.run("pass 1", follow, body, rec, first, pose, options, settings, priors, tracked)
         adapted = adapting(options, rec)
         if adapted:
             body, poses = clock.run("adaptation", adapt_on_keys, body, rec, poses, prior, training_poses, options,
@@ -137,7 +140,8 @@ def first_frame(body, rec, start_pose, priors, options, settings):
             pose = fit.pose
         else:
             pose, _, _ = find_pose(body, capture, priors, count=options.hypotheses, settings=settings)
-        rec.entries[i]["seconds"] = round(time.perf_counter() - t0, 3)
+        rec.entries[i].update(seconds=round(time.perf_counter() - t0, 3),
+                              median_mm=median_mm(State(body, pose), capture.points))
         return i, pose
     raise ArticulaInputError(f"captures: no frame of the {len(rec)} tracked has at least 100 points "
                              f"(all empty or all NaN)")
