@@ -17,8 +17,11 @@ start-pose set (:mod:`.start_poses`) is put on the rig and searched against one 
    the direction set, relative to its root joint, of each of the first ``LIMB_CANDIDATES`` start poses
    (or stays), chosen by a robust symmetric score: the mean of ``min(d, TRUNCATE_M)`` from the model
    samples to the capture (the KD-tree) plus from the capture samples to the model samples, so a limb
-   where the capture has none costs as much as capture left unexplained.  A rigid ICP of the whole body
-   on the pairs of both directions ends it.
+   where the capture has none costs as much as capture left unexplained (truncated at ``LIMB_TRUNCATE_M``
+   there, so a limb far from its capture is still pulled towards it rather than onto the trunk); then
+   each thigh, shin, upper arm and forearm in turn is pointed along the best of ``DIRECTIONS`` directions.
+   A rigid ICP of the whole body on the pairs of both directions ends it, and the hypotheses are ranked
+   by the same score on ``FINAL_SAMPLES`` vertices and points.
 
 :func:`start_hypotheses` returns them best first as one-frame :class:`Poses` in the capture's world.
 """
@@ -35,6 +38,7 @@ from .start_poses import POSE_ROLES, PoseSet, RigPoser, role_direction, load_pos
 
 MODEL_SAMPLES = 200      # model vertices scoring a hypothesis
 CAPTURE_SAMPLES = 200    # capture points scoring a hypothesis
+FINAL_SAMPLES = 800      # model vertices and capture points of the final ranking
 SPINS = 12               # turns about the capture's major axis (30 deg apart)
 TRUNK_POSES = 12         # trunk shapes tried in the orientation stage
 TRUNK_SAMPLES = 48       # trunk vertices scoring an orientation
@@ -87,6 +91,9 @@ def start_hypotheses(model: Model, points, normals=None, count: int = 8, pose_se
     refined.sort(key=lambda item: item[0])
     out = [_recombined(poser, sample, pose_set, shapes.joints[k], R, t, cap, (tree, coarse))
            for _, k, R, t in _distinct(refined, RECOMBINE)]
+    final = _Sampled(model, _area_sample(model, FINAL_SAMPLES, rng))
+    cap = points[rng.choice(len(points), min(FINAL_SAMPLES, len(points)), replace=False)]
+    out = [(_score(final.posed(body)[0] @ R.T + t, cap, tree), body, R, t) for _, body, R, t in out]
     out.sort(key=lambda item: item[0])
     return [(_placed(model.skeleton, body, R, t), float(s)) for s, body, R, t in out[:count]]
 
