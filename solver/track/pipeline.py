@@ -44,7 +44,7 @@ from .recording import Recording
 from .report import assess, notes
 
 BOX_PAD = 0.1           # rad added to each side of the prior's box limits
-PRIOR_WEIGHT = 1e-6     # weight of the pairwise pose prior in searched frames (m^2 per unit of Eq. 4.8)
+PRIOR_WEIGHT = 1e-5     # weight of the pairwise pose prior in searched frames (m^2 per unit of Eq. 4.8)
 
 
 @dataclasses.dataclass
