@@ -29,7 +29,7 @@ class Stage:
 
 
 TRACKING = (Stage(0.002, 0.05, 0.0, 12),)
-SEARCH_HOLD = 1e-7      # weak-direction ratio of a searched frame: only what the data cannot see is held
+SEARCH_HOLD = 1e-6      # weak-direction ratio of a searched frame: only what the data cannot see is held
 SEARCH = (Stage(0.02, 0.25, 1.0, 12), Stage(0.006, 0.08, 1.0, 10), Stage(0.002, 0.04, 0.0, 12))
 
 
