@@ -2,9 +2,9 @@
 
 Start hypotheses from the broad pose set in any world orientation (:func:`solver.tracking.start_search.
 start_hypotheses`; only for a human body), the rest pose at the capture, plus the caller's own (the user's start pose, the last good pose), each fitted
-with the coarse-to-fine search stages of the core (:data:`solver.tracking.frame.SEARCH`), the pose
-prior guiding the limbs; the fit that leaves the least of the capture and of the model unexplained
-(:func:`coverage_score`) wins.
+with the coarse stage of the core's search (:data:`solver.tracking.frame.SEARCH`), the best ``KEEP`` by
+:func:`coverage_score` through the finer stages, the pose prior guiding the limbs; the fit that leaves
+the least of the capture and of the model unexplained wins.
 """
 from __future__ import annotations
 
@@ -19,6 +19,7 @@ from ..tracking.start_search import start_hypotheses
 from ..tracking.terms import ModelToScan, ScanToModel, sample
 
 SIZE_RATIO = (0.4, 2.5)  # a capture's extent (1st-99th percentile) over the model's height outside this is refused
+KEEP = 2                # starts fitted to the end after the coarse stage
 SCORE_EPS = 0.01        # Charbonnier scale of the score (m): a limb in the wrong place counts fully
 SCORE_REACH = 0.2       # pairs farther than this count as this far (m)
 
@@ -49,14 +50,23 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
     if humanoid(body.model.skeleton):
         starts = [pose for pose, _ in start_hypotheses(body.model, capture.points, capture.normals,
                                                        count=count)] + starts
-    best = None
+    coarse = []
     for start in starts:
-        fit = fit_frame(body, capture.points, capture.normals, start, priors=priors, stages=SEARCH,
-                        settings=settings, cancel=cancel, weak_ratio=SEARCH_HOLD)
+        fit = _fit(body, capture, start, priors, SEARCH[:1], settings, cancel)
+        coarse.append((coverage_score(body, capture, fit.state), fit.pose))
+    coarse.sort(key=lambda item: item[0])
+    best = None
+    for _, pose in coarse[:KEEP]:
+        fit = _fit(body, capture, pose, priors, SEARCH[1:], settings, cancel)
         score = coverage_score(body, capture, fit.state)
         if best is None or score < best[1]:
             best = (fit.pose, score)
     return best[0], best[1], len(starts)
+
+
+def _fit(body, capture, start, priors, stages, settings, cancel):
+    return fit_frame(body, capture.points, capture.normals, start, priors=priors, stages=stages,
+                     settings=settings, cancel=cancel, weak_ratio=SEARCH_HOLD)
 
 
 def humanoid(skeleton) -> bool:

@@ -19,7 +19,9 @@ from ..rig.model import Model, Poses
 from ..rig.skinning import AnchorGroups, hybrid_skin
 
 NEAREST = 2                  # vertices whose triangles are searched for a closest point
-EXACT_BEYOND = 0.003         # a query farther than this (m) from those triangles gets the exact closest point
+EXACT_BEYOND = 0.003         # a query farther than this (m) from those triangles gets the exact closest point,
+EXACT_WITHIN = 0.1           # ... when nearer than this,
+EXACT_SHARE = 0.1            # ... and no more than this share of the queries are
 JACOBIAN_REUSE_RAD = 0.08    # a vertex Jacobian serves poses this close (per bone, radians)
 
 
@@ -114,10 +116,12 @@ class Surface:
         return face, bary, foot, near[:, 0]
 
     def _exact_where_far(self, queries, dist, face, bary, foot):
-        """Queries farther than ``EXACT_BEYOND`` from their ring get the mesh's exact closest point, in
-        place (on a coarse mesh a point's own triangle may lie on no nearby vertex's ring)."""
-        far = np.flatnonzero(dist > EXACT_BEYOND)
-        if not len(far):
+        """Queries between ``EXACT_BEYOND`` and ``EXACT_WITHIN`` from their ring get the mesh's exact
+        closest point, in place (on a coarse mesh a point's own triangle may lie on no nearby vertex's
+        ring); skipped while more than ``EXACT_SHARE`` of the queries are that far (a fit far from its
+        minimum, whose pairs change anyway)."""
+        far = np.flatnonzero((dist > EXACT_BEYOND) & (dist < EXACT_WITHIN))
+        if not len(far) or len(far) > EXACT_SHARE * len(dist):
             return
         _, feet, tri = closest_on_surface(queries[far], self.vertices, self.faces)
         corners = self.vertices[self.faces[tri]]

@@ -19,11 +19,12 @@ import numpy as np
 
 from ..geometry.rotations import quat_conj, quat_mul, quat_to_rotvec
 from ..rig.model import Poses
-from .lm import State, damped_step
+from .lm import State, Stopping, damped_step, small_step
 from .terms import ScanToModel
 
 FINAL_EPS = 0.002       # Charbonnier scale of the windows' data term (m), as the frame fit's last stage
 FINAL_REACH = 0.04
+WINDOW_STOP = Stopping(step_rad=5e-4, step_m=1e-4)   # every frame's step below these ends a window's fit
 
 
 def schedule(frames, numbers, size: int, step: int) -> list:
@@ -94,7 +95,7 @@ def fit_window(body, captures, starts, w_temp: float, settings, iterations: int 
         trial = [State(body, body.moved(s.pose, d), s.slot) for s, d in zip(states, step)]
         e_trial = sum(t.energy(body, s) for t, s in zip(terms, trial)) + temporal_energy(trial, weight)
         if e_trial < energy:
-            done = energy - e_trial <= 1e-4 * energy
+            done = all(small_step(d, WINDOW_STOP) for d in step)
             states, energy, mu = trial, e_trial, mu / 3.0
             if done:
                 break
