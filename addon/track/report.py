@@ -41,8 +41,9 @@ def report_document(outcome) -> dict:
 
 
 def summary_text(outcome) -> str:
-    """One line: frames tracked (input frame indices), their median residual, lost/skipped frames (input
-    frame indices), the prior and adaptation; the solver's notes are reported separately."""
+    """One line: frames tracked (input frame indices), their median residual, lost/skipped frames and the
+    frames failing the truth-free fit checks (input frame indices), the prior and adaptation; the solver's
+    notes are reported separately."""
     result = outcome.result
     n = len(result.poses)
     med = residuals_mm(result)
@@ -55,6 +56,11 @@ def summary_text(outcome) -> str:
                      f"{_frames(result.lost)}")
     if result.skipped:
         parts.append(f"{len(result.skipped)} skipped (poses interpolated): {_frames(result.skipped)}")
+    flagged = list(getattr(result, "doubtful", ()))
+    if flagged:
+        parts.append(f"{len(flagged)} failing the fit checks (likely wrong, see the report): {_frames(flagged)}")
+    elif getattr(result, "frames", None) and any(f.get("verdict") for f in result.frames):
+        parts.append("every frame passes the fit checks")
     parts.append(f"pose prior: {result.prior}")
     parts.append("model adapted" if result.adapted else "model not adapted")
     return "; ".join(parts)

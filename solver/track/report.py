@@ -16,7 +16,8 @@ from . import metrics
 
 def assess(body, rec, poses, options) -> list:
     """Fill every usable frame's entry with its distances and, when ``options.checks``, its verdict and
-    reasons; frames the checks call lost are marked lost.  Returns the input frames called doubtful."""
+    reasons.  Returns the input frames the checks flag (doubtful or lost): their poses are kept (a check
+    can be wrong where the subject really touches itself) and the report says so."""
     checked = prepare(body.model) if options.checks else None
     doubtful = []
     for i in rec.usable():
@@ -31,9 +32,7 @@ def assess(body, rec, poses, options) -> list:
             continue
         verdict = check_frame(body.model, pose, posed, capture, checked)
         entry.update(verdict=verdict.verdict, checks=list(verdict.reasons))
-        if verdict.verdict == "lost":
-            entry.update(lost=True, reason="; ".join(verdict.reasons[:2]))
-        elif verdict.verdict == "doubtful":
+        if verdict.verdict != "good":
             doubtful.append(rec.range[i])
     return doubtful
 
@@ -56,6 +55,7 @@ def notes(rec, prior_name, options, doubtful) -> list:
                    f"are interpolated")
     if doubtful:
         first = next(e for e in entries if e["frame"] == doubtful[0])
-        out.append(f"doubtful: {len(doubtful)} frame(s) fail a check (first: frame {doubtful[0]}: "
-                   f"{first['checks'][0] if first['checks'] else ''})")
+        called = sum(e["verdict"] == "lost" for e in entries)
+        out.append(f"checks: {len(doubtful)} frame(s) fail a check, {called} of them badly (the fit is likely "
+                   f"wrong there; first: frame {doubtful[0]}: {first['checks'][0] if first['checks'] else ''})")
     return out

@@ -50,9 +50,10 @@ class Body:
             held = self._jacobians[slot] = (pose, J.astype(np.float32))
         return held[1][np.asarray(vertices, dtype=np.int64)].astype(np.float64)
 
-    def forget(self) -> None:
-        """Drop the held Jacobians (memory: V x 3 x P float32 each)."""
-        self._jacobians.clear()
+    def forget(self, keep=()) -> None:
+        """Drop the held Jacobians (memory: V x 3 x P float32 each) but those of the slots ``keep``."""
+        for slot in [s for s in self._jacobians if s not in keep]:
+            del self._jacobians[slot]
 
     def pose(self, pose: Poses) -> np.ndarray:
         """Posed vertices ``(V, 3)`` of one frame."""

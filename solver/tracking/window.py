@@ -69,21 +69,24 @@ def fit_windows(body, rec, poses: dict, frames, options, settings, say=None) -> 
         if not mine:
             continue
         idx = [frames[k] for k in win]
+        body.forget(keep={("frame", i) for i in idx})
         fitted = fit_window(body, [rec.capture(i) for i in idx], [poses[i] for i in idx], options.w_temp,
-                            settings)
+                            settings, slots=[("frame", i) for i in idx])
         for k in mine:
             out[frames[k]] = fitted[win.index(k)]
-        body.forget()
         if say is not None:
             say((w + 1) / len(windows))
+    body.forget()
     return out
 
 
-def fit_window(body, captures, starts, w_temp: float, settings, iterations: int = 5) -> list:
-    """One window: the frames' poses (list of one-frame Poses) fitted together from ``starts``."""
+def fit_window(body, captures, starts, w_temp: float, settings, iterations: int = 4, slots=None) -> list:
+    """One window: the frames' poses (list of one-frame Poses) fitted together from ``starts``;
+    ``slots``: the frames' keys for held Jacobians (:meth:`.body.Body.jacobian_near`)."""
     terms = [ScanToModel(c.points, c.normals, settings.samples, FINAL_EPS, FINAL_REACH, seed=k)
              for k, c in enumerate(captures)]
-    states = [State(body, p, slot=('window', k)) for k, p in enumerate(starts)]
+    slots = slots or [("window", k) for k in range(len(starts))]
+    states = [State(body, p, slot) for p, slot in zip(starts, slots)]
     P, n = body.size, len(starts)
     lins = [t.linearise(body, s) for t, s in zip(terms, states)]
     weight = w_temp * float(np.mean([np.linalg.eigvalsh(l.H)[-1] for l in lins]))
