@@ -12,6 +12,7 @@ import numpy as np
 
 from ..errors import ArticulaInputError
 from ..rig.model import Poses
+from ..tracking.checks import check_frame
 from ..tracking.frame import SEARCH, SEARCH_HOLD, FrameSettings, fit_frame
 from ..roles import role_bones
 from ..tracking.start_poses import REQUIRED
@@ -43,9 +44,11 @@ def check_units(model, points) -> None:
 
 
 def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: FrameSettings = FrameSettings(),
-              cancel=None):
+              cancel=None, checked=None):
     """``(pose, score, candidates tried)``: the best fitted start on ``capture`` (module docstring);
-    ``extra``: more one-frame Poses to try; ``count``: hypotheses from the pose set."""
+    ``extra``: more one-frame Poses to try; ``count``: hypotheses from the pose set; ``checked``: the
+    model prepared for :func:`solver.tracking.checks.check_frame`: fits that fail the checks rank after
+    those that pass, and while the best fails them the next coarse candidates are fitted too."""
     starts = list(extra) + [centred_rest(body.model, capture.points)]
     if humanoid(body.model.skeleton):
         starts = [pose for pose, _ in start_hypotheses(body.model, capture.points, capture.normals,
@@ -56,12 +59,22 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
         coarse.append((coverage_score(body, capture, fit.state), fit.pose))
     coarse.sort(key=lambda item: item[0])
     best = None
-    for _, pose in coarse[:KEEP]:
+    for k, (_, pose) in enumerate(coarse):
+        if k >= KEEP and (best is None or best[2] == 0):
+            break
         fit = _fit(body, capture, pose, priors, SEARCH[1:], settings, cancel)
-        score = coverage_score(body, capture, fit.state)
-        if best is None or score < best[1]:
-            best = (fit.pose, score)
+        rank = (_verdict(body, capture, fit, checked), coverage_score(body, capture, fit.state))
+        if best is None or (rank[0], rank[1]) < (best[2], best[1]):
+            best = (fit.pose, rank[1], rank[0])
     return best[0], best[1], len(starts)
+
+
+def _verdict(body, capture, fit, checked) -> int:
+    """0 good, 1 doubtful, 2 lost by the truth-free checks (0 without them)."""
+    if checked is None:
+        return 0
+    found = check_frame(body.model, fit.pose, fit.state.posed, capture, checked)
+    return ("good", "doubtful", "lost").index(found.verdict)
 
 
 def _fit(body, capture, start, priors, stages, settings, cancel):

@@ -16,6 +16,7 @@ import numpy as np
 from ..geometry.rotations import quat_conj, quat_mul, quat_normalize
 from ..rig.model import Poses
 from ..tracking.frame import TRACKING, FrameSettings, fit_frame
+from ..tracking.checks import check_frame
 from .first_frame import find_pose
 
 RUNNING = 10            # frames in the running median that lost-frame detection compares with
@@ -37,10 +38,14 @@ def median_mm(state, points) -> float:
 
 
 def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings, priors=(), say=None,
-           cancel=None) -> dict:
+           cancel=None, checked=None) -> dict:
     """``{tracked frame: pose}`` of pass 1 from tracked frame ``first`` at ``pose``; fills the report
-    entries (median, lost, re-initialised, reason, seconds).  ``say(i, median mm)`` reports progress."""
+    entries (median, lost, re-initialised, reason, seconds).  ``say(i, median mm)`` reports progress;
+    ``checked``: the model prepared for the truth-free checks: a frame they call lost is searched again
+    as a jump is, and keeps its fit when the search fails them too (then the frames after it that fail
+    them are not searched until one passes: a subject that really touches itself fails them throughout)."""
     history, medians, out = [pose], [], {first: pose}
+    searched_in_vain = False          # the last frame the checks failed was searched again without a better fit
     for i in range(first + 1, len(rec)):
         t0 = time.perf_counter()
         capture = rec.capture(i)
@@ -52,17 +57,24 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
         med = median_mm(fit.state, _sample(capture.points))
         limit = max(options.lost_factor * float(np.median(medians[-RUNNING:])) if medians else 0.0,
                     options.lost_mm)
-        if med > limit:
-            fit_pose, med = _again(body, capture, history[-1], options, settings, priors, cancel)
+        fit_pose = fit.pose
+        jump = med > limit
+        flagged = not jump and _lost(body, capture, fit.pose, fit.state.posed, checked)
+        if not flagged:
+            searched_in_vain = False
+        if jump or (flagged and not searched_in_vain):
+            again, again_med = _again(body, capture, history[-1], options, settings, priors, cancel, checked)
             rec.entries[i]["reinitialised"] = True
-            if med > limit:
-                rec.entries[i].update(lost=True, median_mm=med, reason=f"median {med:.1f} mm after "
-                                      f"re-initialisation (limit {limit:.1f} mm)")
+            if jump and again_med > limit:
+                rec.entries[i].update(lost=True, median_mm=again_med, reason=f"median {again_med:.1f} mm "
+                                      f"after re-initialisation (limit {limit:.1f} mm)")
                 rec.entries[i]["seconds"] = round(time.perf_counter() - t0, 3)
                 history = history[-1:]
                 continue
-        else:
-            fit_pose = fit.pose
+            if jump or not _lost(body, capture, again, body.pose(again), checked):
+                fit_pose, med = again, again_med
+            else:                                     # the search fails the checks too: keep the fit, and do
+                searched_in_vain = True               # not search the next frames while they fail alike
         rec.entries[i].update(median_mm=med, seconds=round(time.perf_counter() - t0, 3))
         medians.append(med)
         history = (history + [fit_pose])[-2:]
@@ -72,10 +84,14 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
     return out
 
 
-def _again(body, capture, last, options, settings, priors, cancel):
+def _lost(body, capture, pose, posed, checked) -> bool:
+    return checked is not None and check_frame(body.model, pose, posed, capture, checked).verdict == "lost"
+
+
+def _again(body, capture, last, options, settings, priors, cancel, checked=None):
     """A lost frame searched again: ``(pose, median mm)``."""
     pose, _, _ = find_pose(body, capture, priors, extra=[last], count=options.hypotheses, settings=settings,
-                           cancel=cancel)
+                           cancel=cancel, checked=checked)
     from ..tracking.lm import State
     return pose, median_mm(State(body, pose), _sample(capture.points))
 

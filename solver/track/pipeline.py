@@ -30,6 +30,7 @@ from ..errors import ArticulaInputError
 from ..parallel import single_blas_thread
 from ..rig.model import Model, Poses
 from ..tracking.body import Body
+from ..tracking.checks import prepare
 from ..tracking.frame import SEARCH, SEARCH_HOLD, FrameSettings, fit_frame
 from ..tracking.lm import State
 from ..tracking.pose_prior import PosePrior, generic_prior, widened
@@ -90,11 +91,14 @@ def track_sequence(model, source, options: TrackOptions = TrackOptions(), traini
         body = Body(model)
         settings = FrameSettings(samples=options.samples, weak_ratio=options.weak_ratio)
         priors = [PairPrior(prior, PRIOR_WEIGHT)] if prior is not None else []
-        first, pose = clock.run("initialisation", first_frame, body, rec, start_pose, priors, options, settings)
+        checked = prepare(model) if options.checks else None
+        first, pose = clock.run("initialisation", first_frame, body, rec, start_pose, priors, options, settings,
+                                checked)
         tracked = lambda i, med: say(0.6 * (i + 1) / len(rec), f"tracking: frame {i + 1} of {len(rec)}, median "
                                                                f"{med:.1f} mm")
         tracked(first, rec.entries[first]["median_mm"])
-        poses = clock.run("pass 1", follow, body, rec, first, pose, options, settings, priors, tracked)
+        poses = clock.run("pass 1", follow, body, rec, first, pose, options, settings, priors, tracked,
+                          None, checked)
         adapted = adapting(options, rec)
         if adapted:
             body, poses = clock.run("adaptation", adapt_on_keys, body, rec, poses, prior, training_poses, options,
@@ -102,7 +106,7 @@ def track_sequence(model, source, options: TrackOptions = TrackOptions(), traini
         if options.temporal and len(poses) >= 3:
             poses = clock.run("windows", smooth, body, rec, poses, options, settings, say)
         full = interpolate_gaps(stacked(poses, len(rec)), rec.usable())
-        doubtful = clock.run("report", assess, body, rec, full, options)
+        doubtful = clock.run("report", assess, body, rec, full, checked)
     lost = [rec.range[i] for i in range(len(rec)) if rec.entries[i]["lost"]]
     skipped = [rec.range[i] for i in range(len(rec)) if rec.entries[i]["skipped"]]
     return TrackResult(full, body.model, adapted, rec.entries, lost, skipped, clock.rounded(), prior_name,
@@ -125,7 +129,7 @@ def choose_prior(model, training_poses, which: str):
     return widened(generic_prior(model.skeleton), None, BOX_PAD), "generic"
 
 
-def first_frame(body, rec, start_pose, priors, options, settings):
+def first_frame(body, rec, start_pose, priors, options, settings, checked=None):
     """``(tracked frame, pose)`` of the first frame with enough points: fitted from ``start_pose`` or
     found by the search."""
     for i in range(len(rec)):
@@ -139,7 +143,8 @@ def first_frame(body, rec, start_pose, priors, options, settings):
                             priors=priors, stages=SEARCH, settings=settings, weak_ratio=SEARCH_HOLD)
             pose = fit.pose
         else:
-            pose, _, _ = find_pose(body, capture, priors, count=options.hypotheses, settings=settings)
+            pose, _, _ = find_pose(body, capture, priors, count=options.hypotheses, settings=settings,
+                                   checked=checked)
         rec.entries[i].update(seconds=round(time.perf_counter() - t0, 3),
                               median_mm=median_mm(State(body, pose), capture.points))
         return i, pose

@@ -10,15 +10,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..tracking.checks import check_frame, prepare
+from ..tracking.checks import check_frame
 from . import metrics
 
 
-def assess(body, rec, poses, options) -> list:
+def assess(body, rec, poses, checked=None) -> list:
     """Fill every usable frame's entry with its distances and, when ``options.checks``, its verdict and
-    reasons.  Returns the input frames the checks flag (doubtful or lost): their poses are kept (a check
+    reasons (``checked``: the model prepared by :func:`solver.tracking.checks.prepare`, None: no checks).
+    Returns the input frames the checks flag (doubtful or lost): their poses are kept (a check
     can be wrong where the subject really touches itself) and the report says so."""
-    checked = prepare(body.model) if options.checks else None
     doubtful = []
     for i in rec.usable():
         pose = poses.take(i)
