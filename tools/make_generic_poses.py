@@ -1,4 +1,4 @@
-"""Build the generic body poses shipped as ``solver/track/data/generic_body_poses.npz``: starting hypotheses
+"""Build the generic body poses shipped as ``solver/tracking/data/generic_body_poses.npz``: starting hypotheses
 for the first frame of a tracked recording when the model has few poses of its own (docs/track.md
 "Pipeline").
 
@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / ".pkgroot"))
 from articula.sample_scenes.subjects import make_subject  # noqa: E402
 from articula.sample_scenes.walk import CYCLE_FRAMES, walk_poses  # noqa: E402
-from articula.solver.track.initialise import GENERIC_POSES_PATH  # noqa: E402
+from articula.solver.tracking.body_poses import GENERIC_POSES_PATH  # noqa: E402
 
 
 def main(argv=None) -> int:

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..geometry.rotations import matrix_to_quat, quat_mul, rotation_between
 from ..rig.model import Poses
-from ..track.initialise import body_poses
+from ..tracking.body_poses import body_poses
 from .limb_search import place_limbs
 from . import icp
 
