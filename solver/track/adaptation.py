@@ -35,6 +35,6 @@ def adapt_on_keys(body, rec, poses: dict, prior, training_poses, options, settin
     refit = {}
     for i in sorted(poses):
         c = rec.capture(i)
-        refit[i] = fit_frame(adapted, c.points, c.normals, poses[i], settings=settings, stages=TRACKING[1:],
+        refit[i] = fit_frame(adapted, c.points, c.normals, poses[i], settings=settings, stages=TRACKING,
                              seed=i).pose
     return adapted, refit

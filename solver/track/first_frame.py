@@ -60,7 +60,7 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
     coarse.sort(key=lambda item: item[0])
     best = None
     for k, (_, pose) in enumerate(coarse):
-        if k >= KEEP and (best is None or best[2] == 0):
+        if k >= KEEP and best[2] == 0:
             break
         fit = _fit(body, capture, pose, priors, SEARCH[1:], settings, cancel)
         rank = (_verdict(body, capture, fit, checked), coverage_score(body, capture, fit.state))
@@ -70,11 +70,11 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
 
 
 def _verdict(body, capture, fit, checked) -> int:
-    """0 good, 1 doubtful, 2 lost by the truth-free checks (0 without them)."""
+    """1 when the truth-free checks call the fit lost, else 0 (a doubtful fit ranks with the good: a body
+    whose parts touch at rest is doubtful in its true pose)."""
     if checked is None:
         return 0
-    found = check_frame(body.model, fit.pose, fit.state.posed, capture, checked)
-    return ("good", "doubtful", "lost").index(found.verdict)
+    return int(check_frame(body.model, fit.pose, fit.state.posed, capture, checked).verdict == "lost")
 
 
 def _fit(body, capture, start, priors, stages, settings, cancel):

@@ -44,7 +44,8 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
     ``checked``: the model prepared for the truth-free checks: a frame they call lost is searched again
     as a jump is, and keeps its fit when the search fails them too (then the frames after it that fail
     them are not searched until one passes: a subject that really touches itself fails them throughout)."""
-    history, medians, out = [pose], [], {first: pose}
+    history, out = [pose], {first: pose}
+    medians = [rec.entries[first]["median_mm"]] if rec.entries[first].get("median_mm") is not None else []
     searched_in_vain = False          # the last frame the checks failed was searched again without a better fit
     for i in range(first + 1, len(rec)):
         t0 = time.perf_counter()
