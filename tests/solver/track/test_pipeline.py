@@ -236,3 +236,14 @@ def test_the_options_decide_how_far_captures_are_thinned(body):
     thin = pipeline.track_sequence(body, src, _options(max_points=500), start_pose=start)
     assert [f["points"] for f in full.frames] == [len(p) for p in pts]
     assert all(f["points"] <= 500 < len(p) for f, p in zip(thin.frames, pts))
+
+
+def test_adaptation_runs_inside_the_tracker_and_keeps_the_fit(body):
+    """adapt="on": the model is adapted on the key frames and every frame refitted with it; on captures of
+    the model itself the adapted, posed model still lies on the captures (median within 3 mm)."""
+    poses = _motion(body, 3)
+    posed, pts = _source(body, poses)
+    src = cp.CaptureSource.from_arrays(pts, [body.faces] * 3)
+    res = pipeline.track_sequence(body, src, dataclasses.replace(_options(), adapt="on"), start_pose=poses.take([0]))
+    assert res.adapted and res.model is not body and res.model.num_vertices == body.num_vertices
+    assert max(f["median_mm"] for f in res.frames) < 3.0, [f["median_mm"] for f in res.frames]
