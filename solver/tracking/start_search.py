@@ -34,6 +34,7 @@ from ..errors import ArticulaInputError
 from ..geometry.rotations import matrix_to_quat, quat_mul, rotation_between
 from ..rig.model import Model, Poses
 from ..rig.skinning import hybrid_skin
+from .limbs import sphere_directions
 from .start_poses import POSE_ROLES, PoseSet, RigPoser, role_direction, load_pose_set
 
 MODEL_SAMPLES = 200      # model vertices scoring a hypothesis
@@ -305,7 +306,7 @@ def _aim_segments(poser, sample, joints, base, Y, R, t, cap, tree):
         moved = [POSE_ROLES.index(r) for r in _below_role(b)]
         ia = POSE_ROLES.index(a)
         now = joints[POSE_ROLES.index(b)] - joints[ia]
-        G = rotation_between(now / np.linalg.norm(now), _fibonacci(DIRECTIONS))   # (D, 3, 3)
+        G = rotation_between(now / np.linalg.norm(now), sphere_directions(DIRECTIONS))   # (D, 3, 3)
         cand = np.repeat(joints[None], len(G) + 1, axis=0)
         cand[1:, moved] = np.einsum("dij,mj->dmi", G, joints[moved] - joints[ia]) + joints[ia]
         joints, base = _best_limb(poser, sample, a, cand, base, Y, R, t, cap, tree)
@@ -318,15 +319,6 @@ def _below_role(role: str) -> list:
         if role in roles:
             return list(roles[roles.index(role):])
     return [role]
-
-
-def _fibonacci(n: int) -> np.ndarray:
-    """``(n, 3)`` unit vectors spread evenly over the sphere."""
-    k = np.arange(n) + 0.5
-    z = 1.0 - 2.0 * k / n
-    phi = np.pi * (1.0 + np.sqrt(5.0)) * k
-    r = np.sqrt(1.0 - z * z)
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 
 def _one(poser, joints) -> Poses:
