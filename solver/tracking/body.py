@@ -13,15 +13,14 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import ArticulaInputError
-from ..geometry.surface_distance import closest_on_surface
 from ..rig.jacobians import apply_pose_increment, pose_jacobian
 from ..rig.model import Model, Poses
 from ..rig.skinning import AnchorGroups, hybrid_skin
 
 NEAREST = 2                  # vertices whose triangles are searched for a closest point
-EXACT_BEYOND = 0.003         # a query farther than this (m) from those triangles gets the exact closest point,
-EXACT_WITHIN = 0.1           # ... when nearer than this,
-EXACT_SHARE = 0.1            # ... and no more than this share of the queries are
+WIDE = 16                    # ... for a query EXACT_BEYOND..EXACT_WITHIN (m) from those triangles
+EXACT_BEYOND = 0.003
+EXACT_WITHIN = 0.1
 JACOBIAN_REUSE_RAD = 0.08    # a vertex Jacobian serves poses this close (per bone, radians)
 
 
@@ -44,11 +43,21 @@ class Body:
         ``slot`` keeps one such evaluation per frame of a window.  Why: a fit moves the pose by little
         between its later iterations, and a Jacobian a few hundredths of a radian old changes only the
         Gauss–Newton steps, not the residuals, so not the pose the fit converges to."""
+        return self._held(pose, slot, tolerance)[np.asarray(vertices, dtype=np.int64)].astype(np.float64)
+
+    def combined_jacobian(self, pose: Poses, vertices, coefficients, slot=0) -> np.ndarray:
+        """``(K, P)`` = ``sum_c coefficients[k, c] . J(vertices[k, c])``: rows of held vertex Jacobians
+        (:meth:`jacobian_near`) combined by ``coefficients (K, C, 3)`` in single precision (what a
+        Gauss–Newton step needs), returned in double."""
+        J = self._held(pose, slot, JACOBIAN_REUSE_RAD)[np.asarray(vertices, dtype=np.int64)]   # (K, C, 3, P)
+        return np.einsum("kcj,kcjp->kp", coefficients.astype(np.float32), J, optimize=True).astype(np.float64)
+
+    def _held(self, pose, slot, tolerance):
         held = self._jacobians.get(slot)
         if held is None or _turned(held[0], pose) > tolerance:
             J = pose_jacobian(self.model, pose, self.groups)[1][0][..., self.columns]
             held = self._jacobians[slot] = (pose, J.astype(np.float32))
-        return held[1][np.asarray(vertices, dtype=np.int64)].astype(np.float64)
+        return held[1]
 
     def forget(self, keep=()) -> None:
         """Drop the held Jacobians (memory: V x 3 x P float32 each) but those of the slots ``keep``."""
@@ -99,35 +108,33 @@ class Surface:
     def closest(self, queries):
         """``(face (Q,), barycentric (Q, 3), foot (Q, 3), vertex (Q,))`` of each query ``(Q, 3)``: the
         closest point on the triangles around its ``NEAREST`` nearest vertices (the nearest vertex
-        alone misses the closest triangle where a long triangle's corners are all far)."""
+        alone misses the closest triangle where a long triangle's corners are all far), and for queries
+        ``EXACT_BEYOND``..``EXACT_WITHIN`` off those, around its ``WIDE`` nearest."""
         if len(queries) == 0:
             return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64)
-        _, near = self.tree.query(queries, k=NEAREST)
+        face, bary, foot, dist, near = self._on_rings(queries, NEAREST)
+        far = np.flatnonzero((dist > EXACT_BEYOND) & (dist < EXACT_WITHIN))
+        if len(far):
+            f2, b2, p2, d2, _ = self._on_rings(queries[far], WIDE)
+            better = d2 < dist[far]
+            rows = far[better]
+            face[rows], bary[rows], foot[rows] = f2[better], b2[better], p2[better]
+        return face, bary, foot, near
+
+    def _on_rings(self, queries, k: int):
+        """Closest points on the triangles around each query's ``k`` nearest vertices: ``(face, bary,
+        foot, distance, nearest vertex)``."""
+        _, near = self.tree.query(queries, k=k)
         near = near.reshape(len(queries), -1)
         tris = self.ring[near].reshape(len(queries), -1)                 # (Q, k R), -1 padding
         valid = tris >= 0
         tri = self.faces[np.maximum(tris, 0)]                            # (Q, kR, 3)
-        bary = closest_barycentric(queries[:, None, :], *(self.vertices[tri[..., k]] for k in range(3)))
+        bary = closest_barycentric(queries[:, None, :], *(self.vertices[tri[..., c]] for c in range(3)))
         foot = np.einsum("qrk,qrkj->qrj", bary, self.vertices[tri])
         d2 = np.where(valid, np.sum((foot - queries[:, None, :]) ** 2, axis=2), np.inf)
         best = np.argmin(d2, axis=1)
         rows = np.arange(len(queries))
-        face, bary, foot = tris[rows, best], bary[rows, best], foot[rows, best]
-        self._exact_where_far(queries, np.sqrt(d2[rows, best]), face, bary, foot)
-        return face, bary, foot, near[:, 0]
-
-    def _exact_where_far(self, queries, dist, face, bary, foot):
-        """Queries between ``EXACT_BEYOND`` and ``EXACT_WITHIN`` from their ring get the mesh's exact
-        closest point, in place (on a coarse mesh a point's own triangle may lie on no nearby vertex's
-        ring); skipped while more than ``EXACT_SHARE`` of the queries are that far (a fit far from its
-        minimum, whose pairs change anyway)."""
-        far = np.flatnonzero((dist > EXACT_BEYOND) & (dist < EXACT_WITHIN))
-        if not len(far) or len(far) > EXACT_SHARE * len(dist):
-            return
-        _, feet, tri = closest_on_surface(queries[far], self.vertices, self.faces)
-        corners = self.vertices[self.faces[tri]]
-        face[far], foot[far] = tri, feet
-        bary[far] = closest_barycentric(queries[far], corners[:, 0], corners[:, 1], corners[:, 2])
+        return tris[rows, best], bary[rows, best], foot[rows, best], np.sqrt(d2[rows, best]), near[:, 0]
 
 
 def one_ring(faces, num_vertices: int) -> np.ndarray:

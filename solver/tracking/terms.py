@@ -90,18 +90,13 @@ class ScanToModel:
 def normal_jacobian(body, state, vertices, normals, weights=None):
     """``(K, P)`` derivative of ``normals[k] . sum_c weights[k, c] x(vertices[k, c])`` with the unit
     ``normals (K, 3)`` held fixed: points on the posed surface given by ``vertices (K, C)`` and their
-    barycentric ``weights (K, C)`` (C = 1 and weight 1 for vertices themselves).  Vertex Jacobians come
-    from :meth:`.body.Body.jacobian_near`."""
+    barycentric ``weights (K, C)`` (C = 1 and weight 1 for vertices themselves), by
+    :meth:`.body.Body.combined_jacobian`."""
     if len(normals) == 0:
         return np.zeros((0, body.size))
     vertices = np.asarray(vertices).reshape(len(normals), -1)
     weights = np.ones(vertices.shape) if weights is None else weights
-    J = body.jacobian_near(state.pose, vertices.ravel(), state.slot).reshape(vertices.shape + _tail(body))
-    return np.einsum("kj,kc,kcjp->kp", normals, weights, J, optimize=True)
-
-
-def _tail(body):
-    return (3, body.size)
+    return body.combined_jacobian(state.pose, vertices, weights[:, :, None] * normals[:, None, :], state.slot)
 
 
 class ModelToScan:
