@@ -64,6 +64,9 @@ def _namings():
     return out, {key: roles.pop() for key, roles in seen.items() if len(roles) == 1}
 
 
+ROLE_NAMING = "articula"    # the preset whose names are the roles themselves (learned and Articula rigs)
+
+
 def recognise(names, minimum: float = MINIMUM) -> Recognition:
     """The roles of the bones called ``names`` (see the module docstring)."""
     index = {}
@@ -77,8 +80,9 @@ def recognise(names, minimum: float = MINIMUM) -> Recognition:
         if rank > best_rank:
             best, best_found, best_rank = preset, found, rank
     taken = set(best_found.values())
-    for key, b in index.items():           # roles the naming leaves out, by names only one role has anywhere
-        role = unambiguous.get(key)        # (a role-named rig whose root is Unreal's "pelvis")
+    fill = best is None or best.name == ROLE_NAMING
+    for key, b in index.items():           # roles a role-named rig leaves out, by names only one role has
+        role = unambiguous.get(key) if fill else None     # anywhere (its root called Unreal's "pelvis")
         if role is not None and role not in best_found and b not in taken:
             best_found[role] = b
             taken.add(b)

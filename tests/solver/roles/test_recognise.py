@@ -172,3 +172,12 @@ def test_builtin_presets_are_valid():
             "mpfb_default", "unreal"} <= set(names)
     with pytest.raises(ArticulaInputError, match="unknown roles"):
         presets.parse_preset({"format": presets.FORMAT, "roles": {"wing.L": "w"}}, "x.json")
+
+
+def test_a_role_named_rig_rooted_at_a_pelvis_gets_its_hips():
+    """Role names with Unreal's "pelvis" for the root (the tube test body): the root is the hips (a rig read
+    by another naming gets no such fill: tests/blender/retarget's Rigify rig keeps its DEF- spine free)."""
+    names = ["pelvis", "spine", "chest", "neck", "head", "upper_arm.L", "forearm.L", "hand.L", "upper_arm.R",
+             "forearm.R", "hand.R", "thigh.L", "shin.L", "foot.L", "thigh.R", "shin.R", "foot.R"]
+    roles = role_bones(names)
+    assert roles["hips"] == 0 and roles["thigh.L"] == names.index("thigh.L")
