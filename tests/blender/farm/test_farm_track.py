@@ -308,19 +308,24 @@ def captures(tmp_path_factory):
 
 
 def _track_from_a_wrong_start(captures, job, k, axis):
-    """Track chunk ``k`` of ``job`` here, started from its first frame's true pose with the root turned
-    half a turn about ``axis``: the chunk settles on another solution (metres from the truth)."""
-    from articula.solver.formats.bundle import save_bundle
+    """Chunk ``k`` of ``job`` on another solution, metres from the truth: tracked here from its first
+    frame's true pose with the root turned half a turn about ``axis``, and, since the tracker may find its
+    way back from there, every pose of the written chunk turned so about its root as well."""
+    from articula.solver.formats.bundle import load_bundle, save_bundle
     from articula.solver.geometry.rotations import quat_mul, rotvec_to_quat
     from articula.solver.rig.model import Poses
     a, b = job.ranges[k]
+    turn = rotvec_to_quat(np.pi * np.asarray(axis, float))
     rot = captures["poses"].rotations[a:a + 1].copy()
-    rot[0, 0] = quat_mul(rotvec_to_quat(np.pi * np.asarray(axis, float)), rot[0, 0])
+    rot[0, 0] = quat_mul(turn, rot[0, 0])
     wrong = str(captures["root"] / f"wrong_start_{k}.npz")
     save_bundle(wrong, captures["model"], Poses(rot, captures["poses"].translations[a:a + 1], np.ones(1)))
     subprocess.run([RUN, "track", "--model", captures["person"], "--scans", captures["folder"], "--frames",
                     f"{a}:{b}", "--start-pose", wrong, "--out", job.chunk_path(k), *FAST], check=True,
                    timeout=JOB_SECONDS, capture_output=True)
+    chunk = load_bundle(job.chunk_path(k))
+    chunk.poses.rotations[:, 0] = quat_mul(turn, chunk.poses.rotations[:, 0])
+    save_bundle(job.chunk_path(k), chunk.model, chunk.poses, chunk.provenance)
 
 
 def test_chunks_on_other_solutions_are_tracked_again_and_the_merge_matches_one_process(farm, captures, tmp_path):
