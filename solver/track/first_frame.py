@@ -14,6 +14,7 @@ from ..errors import ArticulaInputError
 from ..rig.model import Poses
 from ..tracking.checks import check_frame
 from ..tracking.frame import SEARCH, SEARCH_HOLD, FrameSettings, fit_frame
+from ..geometry.rotations import matrix_to_quat, quat_to_matrix, rotvec_to_quat
 from ..roles import role_bones
 from ..tracking.start_poses import REQUIRED
 from ..tracking.start_search import start_hypotheses
@@ -49,10 +50,12 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
     ``extra``: more one-frame Poses to try; ``count``: hypotheses from the pose set; ``checked``: the
     model prepared for :func:`solver.tracking.checks.check_frame`: fits that fail the checks rank after
     those that pass, and while the best fails them the next coarse candidates are fitted too."""
-    starts = list(extra) + [centred_rest(body.model, capture.points)]
     if humanoid(body.model.skeleton):
         starts = [pose for pose, _ in start_hypotheses(body.model, capture.points, capture.normals,
-                                                       count=count)] + starts
+                                                       count=count)] + [centred_rest(body.model, capture.points)]
+    else:
+        starts = turned_rests(body.model, capture.points)
+    starts += list(extra)
     coarse = []
     for start in starts:
         fit = _fit(body, capture, start, priors, SEARCH[:1], settings, cancel)
@@ -86,6 +89,45 @@ def humanoid(skeleton) -> bool:
     """True when the rig has the roles the start poses need (a human body, named any known way)."""
     roles = role_bones(skeleton.names)
     return all(r in roles for r in REQUIRED)
+
+
+def turned_rests(model, points, turns: int = 4) -> list:
+    """Rest poses of a rig that is not a human body: its longest principal axis on the capture's (both
+    ways), ``turns`` turns about it, centred on the capture; the untouched rest pose first."""
+    out = [centred_rest(model, points)]
+    model_axes, capture_axes = _principal(model.rest_vertices), _principal(points)
+    for sign in (1.0, -1.0):
+        for k in range(turns):
+            spin = rotation_about(capture_axes[:, 0], 2.0 * np.pi * k / turns)
+            R = spin @ capture_axes @ np.diag([sign, sign, 1.0]) @ model_axes.T
+            out.append(rotated_rest(model, points, R))
+    return out
+
+
+def _principal(x):
+    """``(3, 3)`` principal axes of points as columns, longest first, right-handed."""
+    _, _, vt = np.linalg.svd(x - x.mean(axis=0), full_matrices=False)
+    axes = vt.T
+    if np.linalg.det(axes) < 0:
+        axes[:, 2] *= -1
+    return axes
+
+
+def rotated_rest(model, points, R) -> Poses:
+    """The rest pose turned by the world rotation ``R (3, 3)`` about the root's joint and centred on the
+    capture."""
+    pose = Poses.identity(1, model.skeleton.num_bones)
+    F = model.skeleton.frames[0]
+    pose.rotations[0, 0] = matrix_to_quat(F.T @ R @ F)
+    head = model.skeleton.heads[0]
+    turned = (model.rest_vertices - head) @ R.T + head
+    centre = lambda x: 0.5 * (np.percentile(x, 2, axis=0) + np.percentile(x, 98, axis=0))
+    pose.translations[0] = centre(points) - centre(turned)
+    return pose
+
+
+def rotation_about(axis, angle):
+    return quat_to_matrix(rotvec_to_quat(np.asarray(axis, float) * angle))
 
 
 def centred_rest(model, points) -> Poses:

@@ -247,3 +247,15 @@ def test_adaptation_runs_inside_the_tracker_and_keeps_the_fit(body):
     res = pipeline.track_sequence(body, src, dataclasses.replace(_options(), adapt="on"), start_pose=poses.take([0]))
     assert res.adapted and res.model is not body and res.model.num_vertices == body.num_vertices
     assert max(f["median_mm"] for f in res.frames) < 3.0, [f["median_mm"] for f in res.frames]
+
+
+def test_rest_starts_of_a_rig_that_is_not_a_body_cover_its_orientation(body):
+    """A rig without the start poses' roles starts from its rest pose turned onto the capture's principal
+    axes: a capture of the rest pose turned and moved (closed form) is matched exactly by one of them."""
+    from articula.solver.track.first_frame import rotated_rest, rotation_about, turned_rests
+    R = rotation_about(np.array([0.0, 0.0, 1.0]), np.pi / 2) @ rotation_about(np.array([1.0, 0.0, 0.0]), 0.4)
+    pts = body.rest_vertices @ R.T + [0.5, -1.0, 2.0]
+    assert np.abs(hybrid_skin(body, rotated_rest(body, pts, R))[0] - pts).max() < 1e-9
+    starts = turned_rests(body, pts)
+    gaps = [np.abs(hybrid_skin(body, s)[0] - pts).max() for s in starts]
+    assert len(starts) == 9 and min(gaps) < 1e-9, gaps
