@@ -13,6 +13,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import ArticulaInputError
+from ..geometry.surface_distance import closest_on_surface
 from ..rig.jacobians import apply_pose_increment, pose_jacobian
 from ..rig.model import Model, Poses
 from ..rig.skinning import AnchorGroups, hybrid_skin
@@ -21,6 +22,7 @@ NEAREST = 2                  # vertices whose triangles are searched for a close
 WIDE = 16                    # ... for a query EXACT_BEYOND..EXACT_WITHIN (m) from those triangles
 EXACT_BEYOND = 0.003
 EXACT_WITHIN = 0.1
+EXACT_SHARE = 0.1            # ... and then the mesh's exact closest point while at most this share is that far
 JACOBIAN_REUSE_RAD = 0.08    # a vertex Jacobian serves poses this close (per bone, radians)
 
 
@@ -118,8 +120,21 @@ class Surface:
             f2, b2, p2, d2, _ = self._on_rings(queries[far], WIDE)
             better = d2 < dist[far]
             rows = far[better]
-            face[rows], bary[rows], foot[rows] = f2[better], b2[better], p2[better]
+            face[rows], bary[rows], foot[rows], dist[rows] = f2[better], b2[better], p2[better], d2[better]
+        self._exact_where_far(queries, dist, face, bary, foot)
         return face, bary, foot, near
+
+    def _exact_where_far(self, queries, dist, face, bary, foot):
+        """Queries still ``EXACT_BEYOND``..``EXACT_WITHIN`` off get the mesh's exact closest point, in
+        place, while they are at most ``EXACT_SHARE`` of the queries (a converging fit on a coarse mesh,
+        whose long triangles' corners can all be far from a point on them)."""
+        far = np.flatnonzero((dist > EXACT_BEYOND) & (dist < EXACT_WITHIN))
+        if not len(far) or len(far) > EXACT_SHARE * len(dist):
+            return
+        _, feet, tri = closest_on_surface(queries[far], self.vertices, self.faces)
+        corners = self.vertices[self.faces[tri]]
+        face[far], foot[far] = tri, feet
+        bary[far] = closest_barycentric(queries[far], corners[:, 0], corners[:, 1], corners[:, 2])
 
     def _on_rings(self, queries, k: int):
         """Closest points on the triangles around each query's ``k`` nearest vertices: ``(face, bary,
