@@ -15,24 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.rotations import quat_conj, quat_mul, quat_to_rotvec
+from .pose_prior import rotvec_increment_jacobian
 from .terms import Linear
-
-
-def increment_jacobian(r) -> np.ndarray:
-    """``(..., 3, 3)`` d log(exp(r) exp(d)) / d d at d = 0 (the inverse right Jacobian of SO(3))."""
-    r = np.asarray(r, dtype=np.float64)
-    t = np.linalg.norm(r, axis=-1)
-    small = t < 1e-4
-    ts = np.where(small, 1.0, t)
-    c = np.where(small, 1.0 / 12.0 + t * t / 720.0, (1.0 - 0.5 * ts / np.tan(0.5 * ts)) / (ts * ts))
-    K = _skew(r)
-    return np.eye(3) + 0.5 * K + c[..., None, None] * (K @ K)
-
-
-def _skew(r):
-    z = np.zeros(r.shape[:-1])
-    return np.stack([z, -r[..., 2], r[..., 1], r[..., 2], z, -r[..., 0], -r[..., 1], r[..., 0], z],
-                    axis=-1).reshape(r.shape + (3,))
 
 
 def pose_difference(pose, target):
@@ -44,7 +28,7 @@ def pose_difference(pose, target):
     B = len(r)
     Je = np.zeros((3 + 3 * B, 3 + 3 * B))
     Je[:3, :3] = np.eye(3)
-    blocks = increment_jacobian(r)
+    blocks = rotvec_increment_jacobian(r)
     for b in range(B):
         Je[3 + 3 * b:6 + 3 * b, 3 + 3 * b:6 + 3 * b] = blocks[b]
     return np.concatenate([pose.translations[0] - target.translations[0], r.ravel()]), Je
@@ -120,7 +104,7 @@ class JointBox:
         r, x = self._excess(pose)
         P = body.size
         J = np.zeros((len(r), 3, P))
-        blocks = increment_jacobian(r)
+        blocks = rotvec_increment_jacobian(r)
         for b in range(len(r)):
             J[b, :, 3 + 3 * b:6 + 3 * b] = blocks[b]
         active = (x != 0).ravel()
