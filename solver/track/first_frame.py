@@ -24,6 +24,8 @@ SIZE_RATIO = (0.4, 2.5)  # a capture's extent (1st-99th percentile) over the mod
 KEEP = 2                # starts fitted to the end after the coarse stage
 SCORE_EPS = 0.01        # Charbonnier scale of the score (m): a limb in the wrong place counts fully
 SCORE_REACH = 0.2       # pairs farther than this count as this far (m)
+FINE_EPS = 0.002        # Charbonnier scale of the capture score (m): that of the tracking stage
+LOST_PENALTY = 2.0      # a fit the checks call lost ranks as if its score were this many times higher
 
 
 def check_units(model, points) -> None:
@@ -48,8 +50,10 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
               cancel=None, checked=None):
     """``(pose, score, candidates tried)``: the best fitted start on ``capture`` (module docstring);
     ``extra``: more one-frame Poses to try; ``count``: hypotheses from the pose set; ``checked``: the
-    model prepared for :func:`solver.tracking.checks.check_frame`: fits that fail the checks rank after
-    those that pass, and while the best fails them the next coarse candidates are fitted too."""
+    model prepared for :func:`solver.tracking.checks.check_frame`: a fit that fails the checks ranks after
+    those that pass unless they explain the capture clearly worse (``LOST_PENALTY``: a subject touching
+    itself fails the checks in its true pose), and while the best fails them the next coarse candidates
+    are fitted too."""
     if humanoid(body.model.skeleton):
         starts = [pose for pose, _ in start_hypotheses(body.model, capture.points, capture.normals,
                                                        count=count)] + [centred_rest(body.model, capture.points)]
@@ -66,9 +70,9 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
         if k >= KEEP and best[2] == 0:
             break
         fit = _fit(body, capture, pose, priors, SEARCH[1:], settings, cancel)
-        rank = (_verdict(body, capture, fit, checked), coverage_score(body, capture, fit.state))
-        if best is None or (rank[0], rank[1]) < (best[2], best[1]):
-            best = (fit.pose, rank[1], rank[0])
+        lost, score = _verdict(body, capture, fit, checked), coverage_score(body, capture, fit.state)
+        if best is None or score * LOST_PENALTY ** lost < best[1] * LOST_PENALTY ** best[2]:
+            best = (fit.pose, score, lost)
     return best[0], best[1], len(starts)
 
 
@@ -142,18 +146,24 @@ def centred_rest(model, points) -> Poses:
 def coverage_score(body, capture, state) -> float:
     """Robust two-way distance (m^2 units of the Charbonnier penalty) between the capture and the
     posed model: what a limb on the wrong surface leaves unexplained either way."""
-    scan = ScanToModel(capture.points, capture.normals, 2000, SCORE_EPS, SCORE_REACH, min_cos=-1.0, seed=7)
-    model = ModelToScan(capture.points, capture.normals, sample(body.model.num_vertices, 1500, 8), SCORE_EPS,
-                        SCORE_REACH, min_cos=-1.0)
-    return scan.energy(body, state) + model.energy(body, state) + _unreached(scan, model, state)
+    return _score(body, capture, state, SCORE_EPS, True)
 
 
-def _unreached(scan, model, state) -> float:
-    """Pairs beyond the reach are left out of the energies; count each as a pair at the reach."""
-    _, _, _, kept = scan.pairs(state)
-    _, _, kept_m = model.pairs(state)
-    far = SCORE_EPS * SCORE_EPS * (np.sqrt(1.0 + (SCORE_REACH / SCORE_EPS) ** 2) - 1.0)
-    return far * (float((~kept).mean()) + float((~kept_m).mean()))
+def capture_score(body, capture, state) -> float:
+    """The capture-to-model half of :func:`coverage_score` at the tracking scale (``FINE_EPS``): the
+    measure a tracked fit minimises, so a search that lowers it has found a better fit of the capture
+    (the model-to-capture half also counts model parts the cameras cannot see)."""
+    return _score(body, capture, state, FINE_EPS, False)
+
+
+def _score(body, capture, state, eps, both) -> float:
+    scan = ScanToModel(capture.points, capture.normals, 2000, eps, SCORE_REACH, min_cos=-1.0, seed=7)
+    terms = [scan]
+    if both:
+        terms.append(ModelToScan(capture.points, capture.normals, sample(body.model.num_vertices, 1500, 8), eps,
+                                 SCORE_REACH, min_cos=-1.0))
+    far = eps * eps * (np.sqrt(1.0 + (SCORE_REACH / eps) ** 2) - 1.0)       # a pair beyond the reach counts
+    return sum(t.energy(body, state) + far * float((~t.pairs(state)[-1]).mean()) for t in terms)  # as at it
 
 
 def as_start(model, pose: Poses) -> Poses:

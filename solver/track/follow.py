@@ -17,7 +17,8 @@ from ..geometry.rotations import quat_conj, quat_mul, quat_normalize
 from ..rig.model import Poses
 from ..tracking.frame import TRACKING, FrameSettings, fit_frame
 from ..tracking.checks import check_frame
-from .first_frame import find_pose
+from ..tracking.lm import State
+from .first_frame import capture_score, find_pose
 
 RUNNING = 10            # frames in the running median that lost-frame detection compares with
 
@@ -42,8 +43,9 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
     """``{tracked frame: pose}`` of pass 1 from tracked frame ``first`` at ``pose``; fills the report
     entries (median, lost, re-initialised, reason, seconds).  ``say(i, median mm)`` reports progress;
     ``checked``: the model prepared for the truth-free checks: a frame they call lost is searched again
-    as a jump is, and keeps its fit when the search fails them too (then the frames after it that fail
-    them are not searched until one passes: a subject that really touches itself fails them throughout)."""
+    as a jump is, and keeps its fit unless the search explains the capture better
+    (:func:`.first_frame.capture_score`) and passes them (when it does not, the frames after it that fail them are not searched until one passes:
+    a subject that really touches itself fails them throughout)."""
     history, out = [pose], {first: pose}
     medians = [rec.entries[first]["median_mm"]] if rec.entries[first].get("median_mm") is not None else []
     searched_in_vain = False          # the last frame the checks failed was searched again without a better fit
@@ -72,10 +74,12 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
                 rec.entries[i]["seconds"] = round(time.perf_counter() - t0, 3)
                 history = history[-1:]
                 continue
-            if jump or not _lost(body, capture, again, body.pose(again), checked):
+            better = capture_score(body, capture, State(body, again)) < capture_score(body, capture, fit.state)
+            if jump or (better and not _lost(body, capture, again, body.pose(again), checked)):
                 fit_pose, med = again, again_med
-            else:                                     # the search fails the checks too: keep the fit, and do
-                searched_in_vain = True               # not search the next frames while they fail alike
+            else:                                     # the search explains the capture no better or fails the
+                searched_in_vain = True               # checks too: keep the fit, and do not search the next
+                                                      # frames while they fail alike
         rec.entries[i].update(median_mm=med, seconds=round(time.perf_counter() - t0, 3))
         medians.append(med)
         history = (history + [fit_pose])[-2:]
@@ -93,7 +97,6 @@ def _again(body, capture, last, options, settings, priors, cancel, checked=None)
     """A lost frame searched again: ``(pose, median mm)``."""
     pose, _, _ = find_pose(body, capture, priors, extra=[last], count=options.hypotheses, settings=settings,
                            cancel=cancel, checked=checked)
-    from ..tracking.lm import State
     return pose, median_mm(State(body, pose), _sample(capture.points))
 
 

@@ -28,7 +28,7 @@ class Stage:
     iterations: int
 
 
-TRACKING = (Stage(0.002, 0.05, 0.0, 12),)
+TRACKING = (Stage(0.01, 0.1, 0.0, 8), Stage(0.002, 0.05, 0.0, 12))
 SEARCH_HOLD = 1e-6      # weak-direction ratio of a searched frame: only what the data cannot see is held
 SEARCH = (Stage(0.02, 0.25, 1.0, 12), Stage(0.006, 0.08, 1.0, 10), Stage(0.002, 0.04, 0.0, 12))
 
@@ -69,8 +69,10 @@ def fit_frame(body, points, normals, start, target=None, priors=(), stages=TRACK
         data = [ScanToModel(points, normals, settings.samples, stage.eps, stage.reach, seed=seed)]
         if stage.coverage:
             data.append(ModelToScan(points, normals, spread, stage.eps, stage.reach, weight=stage.coverage))
-        if hold is None:
-            hold = _hold(body, pose, data, target, settings, weak_ratio)
+        if hold is None:            # from the finest stage's pairs at the start (see docs/track.md "Design")
+            last = stages[-1]
+            hold = _hold(body, pose, [ScanToModel(points, normals, settings.samples, last.eps, last.reach, seed=seed)],
+                         target, settings, weak_ratio)
         fit = minimise(body, pose, data + [hold] + list(priors),
                        Stopping(stage.iterations, settings.step_rad, settings.step_m), cancel)
         pose, used = fit.pose, used + fit.iterations
