@@ -104,43 +104,54 @@ class Surface:
         self.vertices, self.faces, self.ring = vertices, faces, ring
         self.tree = cKDTree(vertices)
         a, b, c = (vertices[faces[:, k]] for k in range(3))
+        edge = np.max([np.linalg.norm(x - y, axis=1) for x, y in ((a, b), (b, c), (c, a))], axis=0)   # (F,)
+        self.by_edge = np.argsort(-edge, kind="stable")                  # triangles, longest edge first
+        self.edge = edge[self.by_edge]
         n = np.cross(b - a, c - a)
         self.face_normals = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
 
     def closest(self, queries):
         """``(face (Q,), barycentric (Q, 3), foot (Q, 3), vertex (Q,))`` of each query ``(Q, 3)``: the
         closest point on the triangles around its ``NEAREST`` nearest vertices (the nearest vertex
-        alone misses the closest triangle where a long triangle's corners are all far), and for queries
-        ``EXACT_BEYOND``..``EXACT_WITHIN`` off those, around its ``WIDE`` nearest."""
+        alone misses the closest triangle where a long triangle's corners are all far), for queries
+        ``EXACT_BEYOND``..``EXACT_WITHIN`` off those around its ``WIDE`` nearest, and then over the
+        triangles that search can have missed (:meth:`_missed`)."""
         if len(queries) == 0:
             return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64)
-        face, bary, foot, dist, near = self._on_rings(queries, NEAREST)
+        face, bary, foot, dist, near, _ = self._on_rings(queries, NEAREST)
         far = np.flatnonzero((dist > EXACT_BEYOND) & (dist < EXACT_WITHIN))
         if len(far):
-            f2, b2, p2, d2, _ = self._on_rings(queries[far], WIDE)
+            f2, b2, p2, d2, _, reach = self._on_rings(queries[far], WIDE)
             better = d2 < dist[far]
             rows = far[better]
             face[rows], bary[rows], foot[rows], dist[rows] = f2[better], b2[better], p2[better], d2[better]
-        self._exact_where_far(queries, dist, face, bary, foot)
+            self._missed(queries, far, dist, reach, face, bary, foot)
         return face, bary, foot, near
 
-    def _exact_where_far(self, queries, dist, face, bary, foot):
-        """Queries still ``EXACT_BEYOND``..``EXACT_WITHIN`` off get the mesh's exact closest point, in
-        place, while they are at most ``EXACT_SHARE`` of the queries (a converging fit on a coarse mesh,
-        whose long triangles' corners can all be far from a point on them)."""
-        far = np.flatnonzero((dist > EXACT_BEYOND) & (dist < EXACT_WITHIN))
-        if not len(far) or len(far) > EXACT_SHARE * len(dist):
+    def _missed(self, queries, rows, dist, reach, face, bary, foot):
+        """The ring search's answers for ``rows`` made exact, in place, while they are at most
+        ``EXACT_SHARE`` of the queries (a converging fit).  A closer triangle none of whose corners was
+        searched (all at least ``reach`` from the query) holds the closer foot p with its corners outside
+        the ball of radius ``reach``, so its longest edge is at least ``sqrt(3 (reach^2 - dist^2))`` (an
+        edge subtending 120 degrees or more at p): only triangles that long are searched exactly, a few
+        on a fine mesh, all of a coarse mesh's long ones."""
+        need = np.sqrt(3.0 * np.maximum(reach ** 2 - dist[rows] ** 2, 0.0))
+        rows = rows[need <= self.edge[0]]
+        if not len(rows) or len(rows) > EXACT_SHARE * len(queries):
             return
-        _, feet, tri = closest_on_surface(queries[far], self.vertices, self.faces)
+        subset = self.by_edge[:np.searchsorted(-self.edge, -need.min(), side="right")]
+        d, feet, tri = closest_on_surface(queries[rows], self.vertices, self.faces[subset])
+        better = d < dist[rows]
+        at, tri = rows[better], subset[tri[better]]
         corners = self.vertices[self.faces[tri]]
-        face[far], foot[far] = tri, feet
-        bary[far] = closest_barycentric(queries[far], corners[:, 0], corners[:, 1], corners[:, 2])
+        face[at], foot[at], dist[at] = tri, feet[better], d[better]
+        bary[at] = closest_barycentric(queries[at], corners[:, 0], corners[:, 1], corners[:, 2])
 
     def _on_rings(self, queries, k: int):
         """Closest points on the triangles around each query's ``k`` nearest vertices: ``(face, bary,
-        foot, distance, nearest vertex)``."""
-        _, near = self.tree.query(queries, k=k)
-        near = near.reshape(len(queries), -1)
+        foot, distance, nearest vertex, distance of the k-th nearest vertex)``."""
+        gap, near = self.tree.query(queries, k=k)
+        near, gap = near.reshape(len(queries), -1), gap.reshape(len(queries), -1)
         tris = self.ring[near].reshape(len(queries), -1)                 # (Q, k R), -1 padding
         valid = tris >= 0
         tri = self.faces[np.maximum(tris, 0)]                            # (Q, kR, 3)
@@ -149,7 +160,7 @@ class Surface:
         d2 = np.where(valid, np.sum((foot - queries[:, None, :]) ** 2, axis=2), np.inf)
         best = np.argmin(d2, axis=1)
         rows = np.arange(len(queries))
-        return tris[rows, best], bary[rows, best], foot[rows, best], np.sqrt(d2[rows, best]), near[:, 0]
+        return tris[rows, best], bary[rows, best], foot[rows, best], np.sqrt(d2[rows, best]), near[:, 0], gap[:, -1]
 
 
 def one_ring(faces, num_vertices: int) -> np.ndarray:

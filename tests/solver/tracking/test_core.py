@@ -89,6 +89,34 @@ def test_one_ring_closest_point_is_the_surface_closest_point_near_the_surface(tu
     assert np.mean(np.abs(d - exact) < 1e-9) > 0.97
 
 
+def test_closest_points_are_exact_on_a_fine_mesh_with_a_few_long_triangles():
+    """A flat grid (5 mm) with a strip of two long slivers (60 mm): queries 3-100 mm above the strip get
+    the mesh's exact closest point (brute force over every triangle), those near the slivers too,
+    although none of the slivers' corners is among their nearest vertices."""
+    from articula.solver.tracking.body import Surface, one_ring
+    n = 41
+    x, y = np.meshgrid(np.linspace(0, 0.2, n), np.linspace(0, 0.2, n))
+    verts = np.stack([x.ravel(), y.ravel(), np.zeros(n * n)], axis=1)
+    ids = np.arange(n * n).reshape(n, n)
+    quads = [(ids[i, j], ids[i, j + 1], ids[i + 1, j + 1], ids[i + 1, j]) for i in range(n - 1) for j in range(n - 1)
+             if not 18 <= j < 30 or i != 20]
+    faces = [(a, b, c) for a, b, c, _ in quads] + [(a, c, d) for a, _, c, d in quads]
+    faces += [(ids[20, 18], ids[20, 30], ids[21, 30]), (ids[20, 18], ids[21, 30], ids[21, 18])]
+    faces = np.array(faces)
+    surface = Surface(verts, faces, one_ring(faces, len(verts)))
+    rng = np.random.default_rng(3)
+    near = np.column_stack([rng.uniform(0, 0.2, (300, 2)), rng.uniform(0.0005, 0.0025, 300)])
+    off = np.column_stack([rng.uniform(0.1, 0.14, 25), rng.uniform(0.1, 0.105, 25), rng.uniform(0.004, 0.03, 25)])
+    q = np.concatenate([near, off])                       # a converging fit: a few queries far off
+    _, _, foot, _ = surface.closest(q)
+    exact, _, _ = closest_points(q, verts, faces)
+    d = np.linalg.norm(q - foot, axis=1)
+    assert np.all(d >= exact - 1e-12)
+    far = exact > 0.004
+    assert far.sum() >= 20
+    np.testing.assert_allclose(d[far], exact[far], atol=1e-12)
+
+
 def test_normal_jacobian_matches_finite_differences(tube):
     model, body = tube
     pose = _pose(model, 3)
