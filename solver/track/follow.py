@@ -6,6 +6,8 @@ directions its data barely constrain (:func:`solver.tracking.priors.weak_directi
 median capture-to-model distance jumps (above ``lost_factor`` x the running median and ``lost_mm``) is
 searched again from the start hypotheses and the last good pose (:func:`.first_frame.find_pose`) and
 listed as lost when that does not bring it back; the next frame then starts from the last good pose.
+A frame the truth-free checks call lost is fitted again from the last good pose with coverage and keeps
+whichever fit explains the capture better (docs/track.md "Design").
 """
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ import numpy as np
 
 from ..geometry.rotations import quat_conj, quat_mul, quat_normalize
 from ..rig.model import Poses
-from ..tracking.frame import TRACKING, FrameSettings, fit_frame
+from ..tracking.frame import SEARCH, SEARCH_HOLD, TRACKING, FrameSettings, fit_frame
 from ..tracking.checks import check_frame
 from ..tracking.lm import State
 from .first_frame import capture_score, find_pose
@@ -43,9 +45,11 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
     """``{tracked frame: pose}`` of pass 1 from tracked frame ``first`` at ``pose``; fills the report
     entries (median, lost, re-initialised, reason, seconds).  ``say(i, median mm)`` reports progress;
     ``checked``: the model prepared for the truth-free checks: a frame they call lost is searched again
-    as a jump is, and keeps its fit unless the search explains the capture better
-    (:func:`.first_frame.capture_score`) and passes them (when it does not, the frames after it that fail them are not searched until one passes:
-    a subject that really touches itself fails them throughout)."""
+    near where it is (from the last good pose through the searched frame's finer stages, with coverage;
+    a jump gets the full search of the first frame), and keeps its fit unless the search explains the
+    capture better (:func:`.first_frame.capture_score`) and passes them (when it does not, the frames
+    after it that fail them are not searched until one passes: a subject that really touches itself
+    fails them throughout)."""
     history, out = [pose], {first: pose}
     medians = [rec.entries[first]["median_mm"]] if rec.entries[first].get("median_mm") is not None else []
     searched_in_vain = False          # the last frame the checks failed was searched again without a better fit
@@ -66,7 +70,10 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
         if not flagged:
             searched_in_vain = False
         if jump or (flagged and not searched_in_vain):
-            again, again_med = _again(body, capture, history[-1], options, settings, priors, cancel, checked)
+            if jump:
+                again, again_med = _again(body, capture, history[-1], options, settings, priors, cancel, checked)
+            else:
+                again, again_med = _nearby(body, capture, history[-1], settings, priors, cancel)
             rec.entries[i]["reinitialised"] = True
             if jump and again_med > limit:
                 rec.entries[i].update(lost=True, median_mm=again_med, reason=f"median {again_med:.1f} mm "
@@ -91,6 +98,15 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
 
 def _lost(body, capture, pose, posed, checked) -> bool:
     return checked is not None and check_frame(body.model, pose, posed, capture, checked).verdict == "lost"
+
+
+def _nearby(body, capture, last, settings, priors, cancel):
+    """A frame the checks flag searched near where it is: ``(pose, median mm)`` of the fit from the last
+    good pose through the searched frame's finer stages (coverage at 8 cm reach pulls a limb off a
+    surface another part explains)."""
+    fit = fit_frame(body, capture.points, capture.normals, last, priors=priors, stages=SEARCH[1:], settings=settings,
+                    cancel=cancel, weak_ratio=SEARCH_HOLD)
+    return fit.pose, median_mm(fit.state, _sample(capture.points))
 
 
 def _again(body, capture, last, options, settings, priors, cancel, checked=None):
