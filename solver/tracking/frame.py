@@ -21,16 +21,18 @@ from .terms import ModelToScan, ScanToModel, sample
 @dataclasses.dataclass(frozen=True)
 class Stage:
     """eps: Charbonnier scale (m); reach: pairs farther than this are left out (m); coverage: weight of
-    the model-to-capture term (0: none); iterations: at most this many linearisations."""
+    the model-to-capture term (0: none); iterations: at most this many linearisations; guided: the
+    caller's priors take part (a pose prior guides a search, and biases the minimum it ends in)."""
     eps: float
     reach: float
     coverage: float
     iterations: int
+    guided: bool = True
 
 
 TRACKING = (Stage(0.01, 0.1, 0.0, 8), Stage(0.002, 0.05, 0.0, 12))
 SEARCH_HOLD = 1e-6      # weak-direction ratio of a searched frame: only what the data cannot see is held
-SEARCH = (Stage(0.02, 0.25, 1.0, 12), Stage(0.006, 0.08, 1.0, 10), Stage(0.002, 0.04, 0.0, 12))
+SEARCH = (Stage(0.02, 0.25, 1.0, 12), Stage(0.006, 0.08, 1.0, 10), Stage(0.002, 0.04, 0.0, 12, guided=False))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -73,7 +75,9 @@ def fit_frame(body, points, normals, start, target=None, priors=(), stages=TRACK
             last = stages[-1]
             hold = _hold(body, pose, [ScanToModel(points, normals, settings.samples, last.eps, last.reach, seed=seed)],
                          target, settings, weak_ratio)
-        fit = minimise(body, pose, data + [hold] + list(priors),
+        elif priors and not stage.guided:     # what the priors decided where the data are weak is kept
+            hold = TowardPose(pose, hold.W)
+        fit = minimise(body, pose, data + [hold] + (list(priors) if stage.guided else []),
                        Stopping(stage.iterations, settings.step_rad, settings.step_m), cancel)
         pose, used = fit.pose, used + fit.iterations
     final = data[0].energy(body, fit.data)
