@@ -1,6 +1,6 @@
 """Limbs placed by searching each bone's direction on the first frame (and after the person was lost),
-for arms and legs the start hypotheses hold elsewhere (ours; the scan tracker's limb search,
-:mod:`solver.track.limb_search`, adapted to one depth camera): bone by bone from the root outwards the
+for arms and legs the start hypotheses hold elsewhere (ours; the scan tracker's former limb search,
+adapted to one depth camera): bone by bone from the root outwards the
 bone's subtree turns rigidly about its posed joint to each of ``DIRECTIONS`` directions and, for limbs
 (subtrees of ``LIMB_POINTS`` points), the child's subtree too for each of the bone's ``PAIRED`` best
 directions (a bent elbow is found with the upper arm); the configuration with the lowest whole-body
