@@ -51,7 +51,7 @@ class ScanToModel:
 
     def pairs(self, state):
         """``(barycentric, face, residual, kept)`` of the sample against the state's surface (cached)."""
-        key = ("scan", id(self))
+        key = ("scan", self)           # the term itself: a freed term's id can come back
         if key not in state.cache:
             state.cache[key] = self._pairs(state.surface)
         return state.cache[key]
@@ -113,7 +113,7 @@ class ModelToScan:
         self.eps, self.reach, self.min_cos, self.weight = eps, reach, min_cos, weight
 
     def pairs(self, state):
-        key = ("model", id(self))
+        key = ("model", self)
         if key not in state.cache:
             state.cache[key] = self._pairs(state.posed, state.surface)
         return state.cache[key]

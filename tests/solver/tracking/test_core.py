@@ -117,6 +117,20 @@ def test_closest_points_are_exact_on_a_fine_mesh_with_a_few_long_triangles():
     np.testing.assert_allclose(d[far], exact[far], atol=1e-12)
 
 
+def test_a_states_cached_pairs_belong_to_their_term(tube):
+    """Terms made and dropped one after another on one state (as the scores of a search are) each get
+    their own pairs: a dropped term's cache entry never answers for a new term (CPython gives a new
+    object a freed one's id, so an id is not a key)."""
+    model, body = tube
+    state = State(body, _pose(model, 5))
+    pts, nrm = _surface_points(model, _pose(model, 6), 400)
+    for k in range(20):
+        term = ScanToModel(pts, nrm, 100, 0.002, 0.2, seed=k)
+        assert term.energy(body, state) == ScanToModel(pts, nrm, 100, 0.002, 0.2, seed=k).energy(
+            body, State(body, state.pose))
+        del term
+
+
 def test_normal_jacobian_matches_finite_differences(tube):
     model, body = tube
     pose = _pose(model, 3)
