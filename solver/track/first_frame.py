@@ -1,10 +1,12 @@
 """The pose of a frame with nothing to start from: the first frame, or a frame whose fit was lost.
 
 Start hypotheses from the broad pose set in any world orientation (:func:`solver.tracking.start_search.
-start_hypotheses`; only for a human body), the rest pose at the capture, plus the caller's own (the user's start pose, the last good pose), each fitted
-with the coarse stage of the core's search (:data:`solver.tracking.frame.SEARCH`), the best ``KEEP`` by
-:func:`coverage_score` through the finer stages, the pose prior guiding the limbs; the fit that leaves
-the least of the capture and of the model unexplained wins.
+start_hypotheses`) and the rest pose at the capture for a human body, rest poses turned onto the
+capture's principal axes for any other rig (:func:`turned_rests`), plus the caller's own (the user's
+start pose, the last good pose), each fitted with the coarse stage of the core's search
+(:data:`solver.tracking.frame.SEARCH`), the best ``KEEP`` by :func:`coverage_score` through the finer
+stages, the pose prior guiding the limbs; the fit that leaves the least of the capture and of the
+model unexplained wins.
 """
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ from ..errors import ArticulaInputError
 from ..rig.model import Poses
 from ..tracking.checks import check_frame
 from ..tracking.frame import SEARCH, SEARCH_HOLD, FrameSettings, fit_frame
-from ..geometry.rotations import matrix_to_quat, quat_to_matrix, rotvec_to_quat
+from ..geometry.rotations import matrix_to_quat, rotvec_to_matrix
 from ..roles import role_bones
 from ..tracking.start_poses import REQUIRED
 from ..tracking.start_search import start_hypotheses
@@ -102,7 +104,7 @@ def turned_rests(model, points, turns: int = 4) -> list:
     model_axes, capture_axes = _principal(model.rest_vertices), _principal(points)
     for sign in (1.0, -1.0):
         for k in range(turns):
-            spin = rotation_about(capture_axes[:, 0], 2.0 * np.pi * k / turns)
+            spin = rotvec_to_matrix(capture_axes[:, 0] * (2.0 * np.pi * k / turns))
             R = spin @ capture_axes @ np.diag([sign, sign, 1.0]) @ model_axes.T
             out.append(rotated_rest(model, points, R))
     return out
@@ -125,22 +127,21 @@ def rotated_rest(model, points, R) -> Poses:
     pose.rotations[0, 0] = matrix_to_quat(F.T @ R @ F)
     head = model.skeleton.heads[0]
     turned = (model.rest_vertices - head) @ R.T + head
-    centre = lambda x: 0.5 * (np.percentile(x, 2, axis=0) + np.percentile(x, 98, axis=0))
-    pose.translations[0] = centre(points) - centre(turned)
+    pose.translations[0] = _box_centre(points) - _box_centre(turned)
     return pose
-
-
-def rotation_about(axis, angle):
-    return quat_to_matrix(rotvec_to_quat(np.asarray(axis, float) * angle))
 
 
 def centred_rest(model, points) -> Poses:
     """The rest pose moved so that the model's box centre is the capture's: the start of a rig that is
     not a human body (no start poses fit it)."""
     pose = Poses.identity(1, model.skeleton.num_bones)
-    centre = lambda x: 0.5 * (np.percentile(x, 2, axis=0) + np.percentile(x, 98, axis=0))
-    pose.translations[0] = centre(points) - centre(model.rest_vertices)
+    pose.translations[0] = _box_centre(points) - _box_centre(model.rest_vertices)
     return pose
+
+
+def _box_centre(x):
+    """``(3,)`` centre of the box between the 2nd and 98th percentiles of points ``x (N, 3)``."""
+    return 0.5 * (np.percentile(x, 2, axis=0) + np.percentile(x, 98, axis=0))
 
 
 def coverage_score(body, capture, state) -> float:
@@ -162,8 +163,9 @@ def _score(body, capture, state, eps, both) -> float:
     if both:
         terms.append(ModelToScan(capture.points, capture.normals, sample(body.model.num_vertices, 1500, 8), eps,
                                  SCORE_REACH, min_cos=-1.0))
-    far = eps * eps * (np.sqrt(1.0 + (SCORE_REACH / eps) ** 2) - 1.0)       # a pair beyond the reach counts
-    return sum(t.energy(body, state) + far * float((~t.pairs(state)[-1]).mean()) for t in terms)  # as at it
+    # pairs beyond the reach are left out of the energies: each counts as a pair at the reach
+    far = eps * eps * (np.sqrt(1.0 + (SCORE_REACH / eps) ** 2) - 1.0)
+    return sum(t.energy(body, state) + far * float((~t.pairs(state)[-1]).mean()) for t in terms)
 
 
 def as_start(model, pose: Poses) -> Poses:

@@ -71,9 +71,10 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
             searched_in_vain = False
         if jump or (flagged and not searched_in_vain):
             if jump:
-                again, again_med = _again(body, capture, history[-1], options, settings, priors, cancel, checked)
+                searched = _again(body, capture, history[-1], options, settings, priors, cancel, checked)
             else:
-                again, again_med = _nearby(body, capture, history[-1], settings, priors, cancel)
+                searched = _nearby(body, capture, history[-1], settings, priors, cancel)
+            again, again_med = searched.pose, median_mm(searched, _sample(capture.points))
             rec.entries[i]["reinitialised"] = True
             if jump and again_med > limit:
                 rec.entries[i].update(lost=True, median_mm=again_med, reason=f"median {again_med:.1f} mm "
@@ -81,8 +82,8 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
                 rec.entries[i]["seconds"] = round(time.perf_counter() - t0, 3)
                 history = history[-1:]
                 continue
-            better = capture_score(body, capture, State(body, again)) < capture_score(body, capture, fit.state)
-            if jump or (better and not _lost(body, capture, again, body.pose(again), checked)):
+            better = capture_score(body, capture, searched) < capture_score(body, capture, fit.state)
+            if jump or (better and not _lost(body, capture, again, searched.posed, checked)):
                 fit_pose, med = again, again_med
             else:                                     # the search explains the capture no better or fails the
                 searched_in_vain = True               # checks too: keep the fit, and do not search the next
@@ -100,20 +101,19 @@ def _lost(body, capture, pose, posed, checked) -> bool:
     return checked is not None and check_frame(body.model, pose, posed, capture, checked).verdict == "lost"
 
 
-def _nearby(body, capture, last, settings, priors, cancel):
-    """A frame the checks flag searched near where it is: ``(pose, median mm)`` of the fit from the last
-    good pose through the searched frame's finer stages (coverage at 8 cm reach pulls a limb off a
-    surface another part explains)."""
-    fit = fit_frame(body, capture.points, capture.normals, last, priors=priors, stages=SEARCH[1:], settings=settings,
-                    cancel=cancel, weak_ratio=SEARCH_HOLD)
-    return fit.pose, median_mm(fit.state, _sample(capture.points))
+def _nearby(body, capture, last, settings, priors, cancel) -> State:
+    """A frame the checks flag searched near where it is: the state of the fit from the last good pose
+    through the searched frame's finer stages (coverage at 8 cm reach pulls a limb off a surface another
+    part explains)."""
+    return fit_frame(body, capture.points, capture.normals, last, priors=priors, stages=SEARCH[1:],
+                     settings=settings, cancel=cancel, weak_ratio=SEARCH_HOLD).state
 
 
-def _again(body, capture, last, options, settings, priors, cancel, checked=None):
-    """A lost frame searched again: ``(pose, median mm)``."""
+def _again(body, capture, last, options, settings, priors, cancel, checked=None) -> State:
+    """A lost frame searched again: the state of the best fit."""
     pose, _, _ = find_pose(body, capture, priors, extra=[last], count=options.hypotheses, settings=settings,
                            cancel=cancel, checked=checked)
-    return pose, median_mm(State(body, pose), _sample(capture.points))
+    return State(body, pose)
 
 
 def _sample(points, count: int = 4000):

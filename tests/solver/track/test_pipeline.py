@@ -252,8 +252,9 @@ def test_adaptation_runs_inside_the_tracker_and_keeps_the_fit(body):
 def test_rest_starts_of_a_rig_that_is_not_a_body_cover_its_orientation(body):
     """A rig without the start poses' roles starts from its rest pose turned onto the capture's principal
     axes: a capture of the rest pose turned and moved (closed form) is matched exactly by one of them."""
-    from articula.solver.track.first_frame import rotated_rest, rotation_about, turned_rests
-    R = rotation_about(np.array([0.0, 0.0, 1.0]), np.pi / 2) @ rotation_about(np.array([1.0, 0.0, 0.0]), 0.4)
+    from articula.solver.geometry.rotations import rotvec_to_matrix
+    from articula.solver.track.first_frame import rotated_rest, turned_rests
+    R = rotvec_to_matrix(np.array([0.0, 0.0, np.pi / 2])) @ rotvec_to_matrix(np.array([0.4, 0.0, 0.0]))
     pts = body.rest_vertices @ R.T + [0.5, -1.0, 2.0]
     assert np.abs(hybrid_skin(body, rotated_rest(body, pts, R))[0] - pts).max() < 1e-9
     starts = turned_rests(body, pts)
