@@ -7,7 +7,9 @@ median capture-to-model distance jumps (above ``lost_factor`` x the running medi
 searched again from the start hypotheses and the last good pose (:func:`.first_frame.find_pose`) and
 listed as lost when that does not bring it back; the next frame then starts from the last good pose.
 A frame the truth-free checks call lost is fitted again from the last good pose with coverage and keeps
-whichever fit explains the capture better (docs/track.md "Design").
+the new fit only when it explains the capture clearly better: a limb on a wrong surface leaves capture
+regions unexplained and scores many times worse, while a few per cent is the noise of fingers and folds
+(docs/track.md "Design").
 """
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ from ..tracking.lm import State
 from .first_frame import capture_score, find_pose
 
 RUNNING = 10            # frames in the running median that lost-frame detection compares with
+BETTER = 0.8            # a search replaces a flagged frame's fit when its capture score is below this share
 
 
 def predict(history) -> Poses:
@@ -47,7 +50,7 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
     ``checked``: the model prepared for the truth-free checks: a frame they call lost is searched again
     near where it is (from the last good pose through the searched frame's finer stages, with coverage;
     a jump gets the full search of the first frame), and keeps its fit unless the search explains the
-    capture better (:func:`.first_frame.capture_score`) and passes them (when it does not, the frames
+    capture clearly better (:func:`.first_frame.capture_score` below ``BETTER`` times the fit's) and passes them (when it does not, the frames
     after it that fail them are not searched until one passes: a subject that really touches itself
     fails them throughout)."""
     history, out = [pose], {first: pose}
@@ -82,8 +85,8 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
                 rec.entries[i]["seconds"] = round(time.perf_counter() - t0, 3)
                 history = history[-1:]
                 continue
-            better = capture_score(body, capture, searched) < capture_score(body, capture, fit.state)
-            if jump or (better and not _lost(body, capture, again, searched.posed, checked)):
+            if jump or (explains_better(body, capture, searched, fit.state)
+                        and not _lost(body, capture, again, searched.posed, checked)):
                 fit_pose, med = again, again_med
             else:                                     # the search explains the capture no better or fails the
                 searched_in_vain = True               # checks too: keep the fit, and do not search the next
@@ -95,6 +98,12 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
         if say is not None:
             say(i, med)
     return out
+
+
+def explains_better(body, capture, searched, fitted) -> bool:
+    """True when the ``searched`` state explains ``capture`` clearly better than the ``fitted`` one: its
+    capture score (:func:`.first_frame.capture_score`) is below ``BETTER`` times the fit's."""
+    return capture_score(body, capture, searched) < BETTER * capture_score(body, capture, fitted)
 
 
 def _lost(body, capture, pose, posed, checked) -> bool:
