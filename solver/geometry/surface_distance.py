@@ -355,7 +355,6 @@ def closest_on_surface(points, vertices, faces):
     nearest centroids are tried first; a point none of them reaches within rounding of its exact
     distance d gets every triangle whose centroid lies within d + (largest centroid-to-corner radius)."""
     d = distance_to_surface(points, vertices, faces)
-    d = distance_to_surface(points, vertices, faces)
     N = len(points)
     feet, which = np.zeros((N, 3)), np.zeros(N, dtype=np.int64)
     if N == 0:

@@ -13,7 +13,6 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import ArticulaInputError
-from ..geometry.surface_distance import closest_on_surface
 from ..rig.jacobians import apply_pose_increment, pose_jacobian
 from ..rig.model import Model, Poses
 from ..rig.skinning import AnchorGroups, hybrid_skin
@@ -133,19 +132,36 @@ class Surface:
         ``EXACT_SHARE`` of the queries (a converging fit).  A closer triangle none of whose corners was
         searched (all at least ``reach`` from the query) holds the closer foot p with its corners outside
         the ball of radius ``reach``, so its longest edge is at least ``sqrt(3 (reach^2 - dist^2))`` (an
-        edge subtending 120 degrees or more at p): only triangles that long are searched exactly, a few
-        on a fine mesh, all of a coarse mesh's long ones."""
+        edge subtending 120 degrees or more at p): only triangles that long are searched, and of those
+        only the ones whose bounding sphere (centroid, farthest corner) comes within ``dist``."""
         need = np.sqrt(3.0 * np.maximum(reach ** 2 - dist[rows] ** 2, 0.0))
-        rows = rows[need <= self.edge[0]]
+        keep = need <= self.edge[0]
+        rows, need = rows[keep], need[keep]
         if not len(rows) or len(rows) > EXACT_SHARE * len(queries):
             return
-        subset = self.by_edge[:np.searchsorted(-self.edge, -need.min(), side="right")]
-        d, feet, tri = closest_on_surface(queries[rows], self.vertices, self.faces[subset])
-        better = d < dist[rows]
-        at, tri = rows[better], subset[tri[better]]
-        corners = self.vertices[self.faces[tri]]
-        face[at], foot[at], dist[at] = tri, feet[better], d[better]
-        bary[at] = closest_barycentric(queries[at], corners[:, 0], corners[:, 1], corners[:, 2])
+        count = np.searchsorted(-self.edge, -need.min(), side="right")
+        subset, edge = self.by_edge[:count], self.edge[:count]
+        corners = self.vertices[self.faces[subset]]                                # (S, 3, 3)
+        centre = corners.mean(axis=1)
+        radius = np.sqrt(np.max(np.sum((corners - centre[:, None]) ** 2, axis=2), axis=1))
+        lists = cKDTree(centre).query_ball_point(queries[rows], dist[rows] + radius.max())
+        at = np.repeat(np.arange(len(rows)), [len(x) for x in lists])
+        tri = np.fromiter((t for x in lists for t in x), dtype=np.int64, count=len(at))
+        q = queries[rows[at]]
+        near = ((np.linalg.norm(q - centre[tri], axis=1) - radius[tri] <= dist[rows[at]])
+                & (edge[tri] >= need[at]))
+        at, tri, q = at[near], tri[near], q[near]
+        if not len(at):
+            return
+        b = closest_barycentric(q, corners[tri, 0], corners[tri, 1], corners[tri, 2])
+        d = np.linalg.norm(np.einsum("nk,nkj->nj", b, corners[tri]) - q, axis=1)
+        order = np.lexsort((d, at))                                  # per row, the closest first
+        first = order[np.r_[True, at[order][1:] != at[order][:-1]]]
+        better = d[first] < dist[rows[at[first]]]
+        first = first[better]
+        r = rows[at[first]]
+        face[r], bary[r], dist[r] = subset[tri[first]], b[first], d[first]
+        foot[r] = np.einsum("nk,nkj->nj", b[first], corners[tri[first]])
 
     def _on_rings(self, queries, k: int):
         """Closest points on the triangles around each query's ``k`` nearest vertices: ``(face, bary,

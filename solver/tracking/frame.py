@@ -22,15 +22,18 @@ from .terms import ModelToScan, ScanToModel, sample
 class Stage:
     """eps: Charbonnier scale (m); reach: pairs farther than this are left out (m); coverage: weight of
     the model-to-capture term (0: none); iterations: at most this many linearisations; guided: the
-    caller's priors take part (a pose prior guides a search, and biases the minimum it ends in)."""
+    caller's priors take part (a pose prior guides a search, and biases the minimum it ends in);
+    rel_energy: the stage ends when a step lowers the energy by less than this share (a coarse stage
+    only brings the pose near, the next one converges)."""
     eps: float
     reach: float
     coverage: float
     iterations: int
     guided: bool = True
+    rel_energy: float = 1e-4
 
 
-TRACKING = (Stage(0.01, 0.1, 0.0, 8), Stage(0.002, 0.05, 0.0, 12))
+TRACKING = (Stage(0.01, 0.1, 0.0, 8, rel_energy=1e-3), Stage(0.002, 0.05, 0.0, 12))
 SEARCH_HOLD = 1e-6      # weak-direction ratio of a searched frame: only what the data cannot see is held
 SEARCH = (Stage(0.02, 0.25, 1.0, 12), Stage(0.006, 0.08, 1.0, 10), Stage(0.002, 0.04, 0.0, 12, guided=False))
 
@@ -43,7 +46,7 @@ class FrameSettings:
     pull towards the target on every parameter, relative to the largest eigenvalue (0: none)."""
     samples: int = 4000
     coverage_vertices: int = 1500
-    weak_ratio: float = 1e-4
+    weak_ratio: float = 3e-5
     hold: float = 0.0
     step_rad: float = 2e-4
     step_m: float = 5e-5
@@ -78,7 +81,7 @@ def fit_frame(body, points, normals, start, target=None, priors=(), stages=TRACK
         elif priors and not stage.guided:     # what the priors decided where the data are weak is kept
             hold = TowardPose(pose, hold.W)
         fit = minimise(body, pose, data + [hold] + (list(priors) if stage.guided else []),
-                       Stopping(stage.iterations, settings.step_rad, settings.step_m), cancel)
+                       Stopping(stage.iterations, settings.step_rad, settings.step_m, stage.rel_energy), cancel)
         pose, used = fit.pose, used + fit.iterations
     final = data[0].energy(body, fit.data)
     return FrameFit(pose, final, used, fit.data)

@@ -5,7 +5,10 @@ Each iteration linearises every term at the current pose (IRLS weights, correspo
 pose), solves ``(H + mu diag(H)) step = -g``, and accepts the step when the energy re-evaluated at the
 trial pose (correspondences re-found there) is lower; mu falls on acceptance and rises on rejection
 (Nielsen's rule on the gain ratio).  It stops when an accepted step moves no bone by more than
-``step_rad`` and the root by no more than ``step_m``, or after ``max_iterations`` linearisations.
+``step_rad`` and the root by no more than ``step_m``, or after ``max_iterations`` linearisations; a
+rejected step ends it when it was nearly that small or when the linear model promised less than ``REJECTED_GAIN`` of
+the energy: what is left is below the energy's kinks (capture points switching between neighbouring
+fingers or triangles change it by more than that).
 """
 from __future__ import annotations
 
@@ -17,13 +20,15 @@ import numpy as np
 
 _TRACE = bool(os.environ.get('ARTICULA_LM_TRACE'))
 REJECTED_SLACK = 5.0     # a rejected step this close to the tolerance ends the fit
+REJECTED_GAIN = 1e-3     # ... as does one whose predicted decrease is below this share of the energy
 
 
 @dataclasses.dataclass(frozen=True)
 class Stopping:
     """When the fit stops: ``max_iterations`` linearisations; an accepted step below ``step_rad``
     (largest bone rotation, radians) and ``step_m`` (root translation, metres), or lowering the energy
-    by less than ``rel_energy`` of it; a rejected step within ``REJECTED_SLACK`` times those."""
+    by less than ``rel_energy`` of it; a rejected step within ``REJECTED_SLACK`` times those, or one whose
+    predicted decrease is below ``REJECTED_GAIN`` of the energy."""
     max_iterations: int = 15
     step_rad: float = 2e-4
     step_m: float = 5e-5
@@ -91,8 +96,8 @@ def minimise(body, pose, terms, stopping: Stopping = Stopping(), cancel=None) ->
         else:
             mu *= nu
             nu *= 2.0
-            if small_step(step, stopping, REJECTED_SLACK):
-                converged = True       # the energy's kinks (pairs switching) are below the step tolerance
+            if small_step(step, stopping, REJECTED_SLACK) or predicted <= REJECTED_GAIN * energy:
+                converged = True       # the energy's kinks (pairs switching) are below the tolerances
                 break
     return Fit(state.pose, energy, it, converged, state)
 
