@@ -6,7 +6,10 @@ each frame's capture-to-model term (:class:`.terms.ScanToModel`) gives a diagona
 temporal term ``w/2 sum_n |a_n|^2`` couples neighbours, with ``a_n`` the second difference of the
 frames' parameters (root translation; per bone ``log(q_{n}^-1 q_{n+1}) - log(q_{n-1}^-1 q_n)``, zero for
 constant velocity).  Its weight is ``w_temp`` times the frames' largest data curvature, so it decides
-only the directions the data leave free.
+only the directions the data leave free.  Each frame is also held to its start (pass 1's pose) along
+its data's weak directions at a tenth of the frame fit's ratio: the second differences leave an offset
+shared by all frames of a window free, and without the hold fingers and twists wandered 0.1-0.3 rad
+from where pass 1 left them (docs/track.md "Windows").
 
 Windows are anchored at input frame numbers (a window starts where the input frame number is a multiple
 of ``step``), and each frame keeps the pose of the window it is most central in: a frame's result
@@ -20,10 +23,12 @@ import numpy as np
 from ..geometry.rotations import quat_conj, quat_mul, quat_to_rotvec
 from ..rig.model import Poses
 from .lm import State, Stopping, damped_step, small_step
+from .priors import TowardPose, weak_directions
 from .terms import ScanToModel
 
 FINAL_EPS = 0.002       # Charbonnier scale of the windows' data term (m), as the frame fit's last stage
 FINAL_REACH = 0.04
+WINDOW_HOLD = 0.1       # the frames are held to their starts along weak directions at this share of the frame fit's ratio
 WINDOW_STOP = Stopping(step_rad=5e-4, step_m=1e-4)   # every frame's step below these ends a window's fit
 
 
@@ -82,27 +87,32 @@ def fit_windows(body, rec, poses: dict, frames, options, settings, say=None) -> 
 
 def fit_window(body, captures, starts, w_temp: float, settings, iterations: int = 4, slots=None) -> list:
     """One window: the frames' poses (list of one-frame Poses) fitted together from ``starts``;
-    ``slots``: the frames' keys for held Jacobians (:meth:`.body.Body.jacobian_near`)."""
-    terms = [ScanToModel(c.points, c.normals, settings.samples, FINAL_EPS, FINAL_REACH, seed=k)
-             for k, c in enumerate(captures)]
+    ``slots``: the frames' keys for held Jacobians (:meth:`.body.Body.jacobian_near`).  Each frame is
+    held to its start along its data's weak directions, as in the frame fit (the temporal term sees
+    second differences only: an offset shared by the window's frames is free without it)."""
+    data = [ScanToModel(c.points, c.normals, settings.samples, FINAL_EPS, FINAL_REACH, seed=k)
+            for k, c in enumerate(captures)]
     slots = slots or [("window", k) for k in range(len(starts))]
     states = [State(body, p, slot) for p, slot in zip(starts, slots)]
     P, n = body.size, len(starts)
-    lins = [t.linearise(body, s) for t, s in zip(terms, states)]
+    lins = [t.linearise(body, s) for t, s in zip(data, states)]
     weight = w_temp * float(np.mean([np.linalg.eigvalsh(l.H)[-1] for l in lins]))
+    terms = [[t, TowardPose(s.pose, weak_directions(l.H, WINDOW_HOLD * settings.weak_ratio))]
+             for t, s, l in zip(data, states, lins)]
+    lins = [l + hold.linearise(body, s) for l, (_, hold), s in zip(lins, terms, states)]
     energy = sum(l.energy for l in lins) + temporal_energy(states, weight)
     mu = 1e-4
     for _ in range(iterations):
         H, g = _system(lins, states, weight, P)
         step = damped_step(H, g, mu).reshape(n, P)
         trial = [State(body, body.moved(s.pose, d), s.slot) for s, d in zip(states, step)]
-        e_trial = sum(t.energy(body, s) for t, s in zip(terms, trial)) + temporal_energy(trial, weight)
+        e_trial = sum(s.energy(body, ts) for ts, s in zip(terms, trial)) + temporal_energy(trial, weight)
         if e_trial < energy:
             done = all(small_step(d, WINDOW_STOP) for d in step)
             states, energy, mu = trial, e_trial, mu / 3.0
             if done:
                 break
-            lins = [t.linearise(body, s) for t, s in zip(terms, states)]
+            lins = [s.linearise(body, ts) for s, ts in zip(states, terms)]
             energy = sum(l.energy for l in lins) + temporal_energy(states, weight)
         else:
             mu *= 4.0

@@ -12,7 +12,7 @@ from articula.solver.rig.skinning import hybrid_skin
 from articula.solver.track.metrics import closest_points
 from articula.solver.tracking import window
 from articula.solver.tracking.body import Body, closest_barycentric
-from articula.solver.tracking.frame import SEARCH, SEARCH_HOLD, TRACKING, fit_frame
+from articula.solver.tracking.frame import SEARCH, SEARCH_HOLD, TRACKING, FrameSettings, fit_frame
 from articula.solver.tracking.lm import State, minimise
 from articula.solver.tracking.priors import TowardPose, pose_difference, weak_directions
 from articula.solver.tracking.terms import ScanToModel, normal_jacobian
@@ -245,10 +245,8 @@ def test_window_fit_of_noise_free_frames_reaches_the_truth(tube):
 
     starts = [body.moved(t, np.random.default_rng(30 + k).normal(0, 0.01, body.size)) for k, t in enumerate(truths)]
 
-    class Settings:
-        samples = 3000
-
-    out = window.fit_window(body, [Cap(t, k) for k, t in enumerate(truths)], starts, 1e-6, Settings, iterations=20)
+    out = window.fit_window(body, [Cap(t, k) for k, t in enumerate(truths)], starts, 1e-6, FrameSettings(samples=3000),
+                            iterations=20)
     for fitted, t in zip(out, truths):
         assert _surface_gap(model, fitted, t) < 2e-4
 
