@@ -15,7 +15,7 @@ import numpy as np
 
 from .lm import State, Stopping, minimise
 from .priors import TowardPose, weak_directions
-from .terms import ModelToScan, ScanToModel, sample
+from .terms import ModelToScan, Sample, ScanToModel, sample
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,27 +69,28 @@ def fit_frame(body, points, normals, start, target=None, priors=(), stages=TRACK
     searched frame's, should hold little: :data:`SEARCH_HOLD`)."""
     target = start if target is None else target
     spread = sample(body.model.num_vertices, settings.coverage_vertices, seed + 1)
-    pose, used, hold = start, 0, None
+    shared = Sample(points, normals, settings.samples, seed)           # closest points found once per state
+    at, used, hold = State(body, start), 0, None
     for stage in stages:
-        data = [ScanToModel(points, normals, settings.samples, stage.eps, stage.reach, seed=seed)]
+        data = [ScanToModel(points, normals, eps=stage.eps, reach=stage.reach, shared=shared)]
         if stage.coverage:
             data.append(ModelToScan(points, normals, spread, stage.eps, stage.reach, weight=stage.coverage))
         if hold is None:            # from the finest stage's pairs at the start (see docs/track.md "Design")
             last = stages[-1]
-            hold = _hold(body, pose, [ScanToModel(points, normals, settings.samples, last.eps, last.reach, seed=seed)],
+            hold = _hold(body, at, [ScanToModel(points, normals, eps=last.eps, reach=last.reach, shared=shared)],
                          target, settings, weak_ratio)
         elif priors and not stage.guided:     # what the priors decided where the data are weak is kept
-            hold = TowardPose(pose, hold.W)
-        fit = minimise(body, pose, data + [hold] + (list(priors) if stage.guided else []),
+            hold = TowardPose(at.pose, hold.W)
+        fit = minimise(body, at, data + [hold] + (list(priors) if stage.guided else []),
                        Stopping(stage.iterations, settings.step_rad, settings.step_m, stage.rel_energy), cancel)
-        pose, used = fit.pose, used + fit.iterations
+        at, used = fit.data, used + fit.iterations
     final = data[0].energy(body, fit.data)
-    return FrameFit(pose, final, used, fit.data)
+    return FrameFit(fit.pose, final, used, fit.data)
 
 
-def _hold(body, pose, data, target, settings, weak_ratio=None):
-    """The pull towards ``target`` along the data's weak directions at ``pose`` (fixed for the frame)."""
-    lin = State(body, pose).linearise(body, data)
+def _hold(body, state, data, target, settings, weak_ratio=None):
+    """The pull towards ``target`` along the data's weak directions at ``state`` (fixed for the frame)."""
+    lin = state.linearise(body, data)
     W = weak_directions(lin.H, settings.weak_ratio if weak_ratio is None else weak_ratio)
     if settings.hold:
         W = W + settings.hold * float(np.linalg.eigvalsh(lin.H)[-1]) * np.eye(len(W))

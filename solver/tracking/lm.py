@@ -66,9 +66,10 @@ class State:
         return lin
 
 
-def minimise(body, pose, terms, stopping: Stopping = Stopping(), cancel=None) -> Fit:
-    """Minimise the sum of ``terms`` over one frame's parameters from ``pose`` (one frame)."""
-    state = State(body, pose)
+def minimise(body, start, terms, stopping: Stopping = Stopping(), cancel=None) -> Fit:
+    """Minimise the sum of ``terms`` over one frame's parameters from ``start`` (one frame's Poses, or a
+    :class:`State` whose cached pairs then serve the first linearisation)."""
+    state = start if isinstance(start, State) else State(body, start)
     mu, nu, it, converged = stopping.mu, 2.0, 0, False
     lin = state.linearise(body, terms)
     energy = lin.energy

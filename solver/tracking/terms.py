@@ -32,6 +32,22 @@ def charbonnier(r, eps):
     return eps * eps * (s - 1.0), 1.0 / s
 
 
+class Sample:
+    """A fixed seeded sample of ``count`` capture points ``(N, 3)`` and normals, with their closest points on
+    a state's surface found once (cached on the state): terms of several scales share one."""
+
+    def __init__(self, points, normals, count: int, seed: int = 0):
+        pick = sample(len(points), count, seed)
+        self.points, self.normals = points[pick], normals[pick]
+
+    def closest(self, state):
+        """``(face, barycentric, foot)`` of the sample on ``state.surface`` (:meth:`.body.Surface.closest`)."""
+        key = ("closest", self)        # the sample itself: a freed sample's id can come back
+        if key not in state.cache:
+            state.cache[key] = state.surface.closest(self.points)[:3]
+        return state.cache[key]
+
+
 class ScanToModel:
     """Capture points to the posed surface, point-to-plane along the model's face normal.
 
@@ -41,28 +57,26 @@ class ScanToModel:
     the barycentric combination of the triangle's vertex Jacobians (:func:`normal_jacobian`).  Pairs whose capture normal points
     against the face normal (below ``min_cos``) or farther than ``reach`` metres are left out; the rest
     weigh by Charbonnier with ``eps`` (about the capture noise, metres).  ``weight`` scales the energy
-    per point (energy = weight * mean penalty * 1, so terms with other point counts compare)."""
+    per point (energy = weight * mean penalty * 1, so terms with other point counts compare); ``shared``:
+    a :class:`Sample` to use instead of drawing one (its closest points serve every term on it)."""
 
     def __init__(self, points, normals, count: int = 5000, eps: float = 0.002, reach: float = 0.05,
-                 min_cos: float = 0.2, weight: float = 1.0, seed: int = 0):
-        pick = sample(len(points), count, seed)
-        self.points, self.normals = points[pick], normals[pick]
+                 min_cos: float = 0.2, weight: float = 1.0, seed: int = 0, shared: "Sample" = None):
+        self.sample = Sample(points, normals, count, seed) if shared is None else shared
+        self.points, self.normals = self.sample.points, self.sample.normals
         self.eps, self.reach, self.min_cos, self.weight = eps, reach, min_cos, weight
 
     def pairs(self, state):
         """``(barycentric, face, residual, kept)`` of the sample against the state's surface (cached)."""
         key = ("scan", self)           # the term itself: a freed term's id can come back
         if key not in state.cache:
-            state.cache[key] = self._pairs(state.surface)
+            face, bary, foot = self.sample.closest(state)
+            n = state.surface.face_normals[face]
+            r = np.sum((self.points - foot) * n, axis=1)
+            dist = np.linalg.norm(self.points - foot, axis=1)
+            kept = (np.sum(n * self.normals, axis=1) >= self.min_cos) & (dist <= self.reach)
+            state.cache[key] = bary, face, r, kept
         return state.cache[key]
-
-    def _pairs(self, surface):
-        face, bary, foot, _ = surface.closest(self.points)
-        n = surface.face_normals[face]
-        r = np.sum((self.points - foot) * n, axis=1)
-        dist = np.linalg.norm(self.points - foot, axis=1)
-        kept = (np.sum(n * self.normals, axis=1) >= self.min_cos) & (dist <= self.reach)
-        return bary, face, r, kept
 
     def energy(self, body, state) -> float:
         _, _, r, kept = self.pairs(state)
