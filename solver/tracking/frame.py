@@ -4,8 +4,12 @@ A stage is a Charbonnier scale, a reach and whether the coverage term (model to 
 A frame tracked from its predecessor's prediction fits capture-to-model pairs alone, whose minimum is
 unbiased (the coverage pairs' residual runs along the noisy capture's normal, docs/track.md "Design");
 a frame searched from a start hypothesis first fits coarse-to-fine with coverage (parts the capture
-does not yet explain are pulled towards it, so a limb leaves the wrong surface) and ends the same way.  Every stage also holds the pose near ``target`` along
-the directions the data barely constrain (:func:`.priors.weak_directions`) and adds the caller's priors.
+does not yet explain are pulled towards it, so a limb leaves the wrong surface) and ends the same way,
+its small parts (fingers, toes: :func:`small_bones`) kept where the start has them: the start poses
+describe the body's posture, and a finger's few points, matched while the body is centimetres off,
+pull it onto a surface it cannot leave (tracking fits them from there).  Every stage also holds the
+pose near ``target`` along the directions the data barely constrain (:func:`.priors.weak_directions`)
+and adds the caller's priors.
 """
 from __future__ import annotations
 
@@ -24,18 +28,23 @@ class Stage:
     the model-to-capture term (0: none); iterations: at most this many linearisations; guided: the
     caller's priors take part (a pose prior guides a search, and biases the minimum it ends in);
     rel_energy: the stage ends when a step lowers the energy by less than this share (a coarse stage
-    only brings the pose near, the next one converges)."""
+    only brings the pose near, the next one converges); small_held: the bones of small parts (fingers,
+    toes: :func:`small_bones`) stay at the start (while the body is centimetres off, their few points
+    pull them onto surfaces they cannot leave later)."""
     eps: float
     reach: float
     coverage: float
     iterations: int
     guided: bool = True
     rel_energy: float = 1e-4
+    small_held: bool = False
 
 
 TRACKING = (Stage(0.01, 0.1, 0.0, 8, rel_energy=1e-3), Stage(0.002, 0.05, 0.0, 12))
 SEARCH_HOLD = 1e-6      # weak-direction ratio of a searched frame: only what the data cannot see is held
-SEARCH = (Stage(0.02, 0.25, 1.0, 12), Stage(0.006, 0.08, 1.0, 10), Stage(0.002, 0.04, 0.0, 12, guided=False))
+SEARCH = (Stage(0.02, 0.25, 1.0, 12, small_held=True), Stage(0.006, 0.08, 1.0, 10, small_held=True),
+          Stage(0.002, 0.04, 0.0, 12, guided=False, small_held=True))
+SMALL_SHARE = 0.025     # a bone whose subtree holds less than this share of the vertices is a small part's
 
 
 @dataclasses.dataclass(frozen=True)
@@ -80,18 +89,49 @@ def fit_frame(body, points, normals, start, target=None, priors=(), stages=TRACK
             hold = _hold(body, at, [ScanToModel(points, normals, eps=last.eps, reach=last.reach, shared=shared)],
                          target, settings, weak_ratio)
         elif priors and not stage.guided:     # what the priors decided where the data are weak is kept
-            hold = TowardPose(at.pose, hold.W)
-        fit = minimise(body, at, data + [hold] + (list(priors) if stage.guided else []),
+            scale, hold = hold.scale, TowardPose(at.pose, hold.W)
+            hold.scale = scale
+        held = [_small_held(body, start, hold)] if stage.small_held else []
+        fit = minimise(body, at, data + [hold] + held + (list(priors) if stage.guided else []),
                        Stopping(stage.iterations, settings.step_rad, settings.step_m, stage.rel_energy), cancel)
         at, used = fit.data, used + fit.iterations
     final = data[0].energy(body, fit.data)
     return FrameFit(fit.pose, final, used, fit.data)
 
 
+def small_bones(model, share: float = SMALL_SHARE) -> np.ndarray:
+    """Bones (indices, sorted) of small parts branching off a larger one, and everything below them: a
+    bone whose subtree anchors fewer than ``share`` of the model's vertices and under a quarter of its
+    parent's subtree (fingers off a hand; a coarse learned rig's hand, a third of its forearm's subtree,
+    is no such part).  Any rig: by vertex counts, not names."""
+    parents = model.skeleton.parents
+    count = np.bincount(model.anchor, minlength=len(parents)).astype(float)
+    for b in range(len(parents) - 1, 0, -1):             # parents[b] < b: children before their parents
+        if parents[b] >= 0:
+            count[parents[b]] += count[b]
+    small = np.zeros(len(parents), bool)
+    for b in range(1, len(parents)):                     # parents first
+        p = parents[b]
+        small[b] = p >= 0 and (small[p] or (count[b] < share * model.num_vertices and count[b] < 0.25 * count[p]))
+    return np.flatnonzero(small)
+
+
+def _small_held(body, start, hold):
+    """A pull keeping the small parts' bones at ``start``, weighing 1 % of the data's largest curvature
+    (a finger's own is ~1e-5 of it: firm, and the system stays well conditioned)."""
+    W = np.zeros((body.size, body.size))
+    cols = (3 + 3 * small_bones(body.model)[:, None] + np.arange(3)).ravel()
+    W[cols, cols] = 1e-2 * hold.scale
+    return TowardPose(start, W)
+
+
 def _hold(body, state, data, target, settings, weak_ratio=None):
     """The pull towards ``target`` along the data's weak directions at ``state`` (fixed for the frame)."""
     lin = state.linearise(body, data)
     W = weak_directions(lin.H, settings.weak_ratio if weak_ratio is None else weak_ratio)
+    largest = float(np.linalg.eigvalsh(lin.H)[-1])
     if settings.hold:
-        W = W + settings.hold * float(np.linalg.eigvalsh(lin.H)[-1]) * np.eye(len(W))
-    return TowardPose(target, W)
+        W = W + settings.hold * largest * np.eye(len(W))
+    hold = TowardPose(target, W)
+    hold.scale = largest            # the data's largest curvature, the scale of other pulls
+    return hold

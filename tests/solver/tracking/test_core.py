@@ -1,6 +1,8 @@
 """The tracking core (solver.tracking body, terms, priors, lm, frame, window) against independent
 references: closest points by brute force, Jacobians by finite differences, eigen-lifting in closed form,
 and fits of the exact model on noise-free captures reaching the truth."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -12,7 +14,7 @@ from articula.solver.rig.skinning import hybrid_skin
 from articula.solver.track.metrics import closest_points
 from articula.solver.tracking import window
 from articula.solver.tracking.body import Body, closest_barycentric
-from articula.solver.tracking.frame import SEARCH, SEARCH_HOLD, TRACKING, FrameSettings, fit_frame
+from articula.solver.tracking.frame import SEARCH, SEARCH_HOLD, TRACKING, FrameSettings, Stage, fit_frame, small_bones
 from articula.solver.tracking.lm import State, minimise
 from articula.solver.tracking.priors import TowardPose, pose_difference, weak_directions
 from articula.solver.tracking.terms import ScanToModel, normal_jacobian
@@ -254,3 +256,40 @@ def test_window_fit_of_noise_free_frames_reaches_the_truth(tube):
 def test_tracking_stages_end_unbiased():
     """The last stage of every schedule fits capture-to-model pairs alone (no coverage)."""
     assert TRACKING[-1].coverage == 0 and SEARCH[-1].coverage == 0
+
+
+def _small_hand(model):
+    """The tube body with most of its right hand's vertices anchored on the forearm: the hand becomes a
+    small part branching off a larger one (as a finger off a hand)."""
+    names = model.skeleton.names
+    hand, forearm = names.index("hand.R"), names.index("forearm.R")
+    anchor = model.anchor.copy()
+    mine = np.flatnonzero(anchor == hand)
+    anchor[mine[: int(0.8 * len(mine))]] = forearm
+    return dataclasses.replace(model, anchor=anchor), hand
+
+
+def test_small_bones_are_small_parts_off_a_larger_one(tube):
+    """By vertex counts: none on the tube body as built (every part ~1/19 of the vertices); a hand left
+    with a fifth of its vertices is one (under 2.5 % and under a quarter of its forearm's subtree)."""
+    model, _ = tube
+    assert len(small_bones(model)) == 0
+    small, hand = _small_hand(model)
+    assert small_bones(small).tolist() == [hand]
+    assert small_bones(small, share=0.001).tolist() == []
+
+
+def test_a_stage_holding_small_parts_keeps_them_at_the_start(tube):
+    """A searched stage with ``small_held``: the small hand stays at its start pose while the body
+    converges to the capture; without it the hand moves too."""
+    model, _ = tube
+    small, hand = _small_hand(model)
+    body = Body(small)
+    truth = _pose(small, 7, scale=0.2)
+    pts, nrm = _surface_points(small, truth, 5000, 3)
+    start = body.moved(truth, np.random.default_rng(4).normal(0, 0.05, body.size))
+    angle = lambda pose: 2 * np.arccos(min(1.0, abs(float(np.sum(pose.rotations[0, hand] * start.rotations[0, hand])))))
+    fit = lambda stage: fit_frame(body, pts, nrm, start, stages=(stage,), weak_ratio=SEARCH_HOLD).pose
+    held, free = fit(Stage(0.006, 0.08, 1.0, 10, small_held=True)), fit(Stage(0.006, 0.08, 1.0, 10))
+    assert angle(held) < 2e-3 < 0.02 < angle(free)
+    assert _surface_gap(small, held, truth) < 0.02
