@@ -79,19 +79,18 @@ def fit_frame(body, points, normals, start, target=None, priors=(), stages=TRACK
     target = start if target is None else target
     spread = sample(body.model.num_vertices, settings.coverage_vertices, seed + 1)
     shared = Sample(points, normals, settings.samples, seed)           # closest points found once per state
-    at, used, hold = State(body, start), 0, None
+    at, used, hold, largest = State(body, start), 0, None, 0.0
     for stage in stages:
         data = [ScanToModel(points, normals, eps=stage.eps, reach=stage.reach, shared=shared)]
         if stage.coverage:
             data.append(ModelToScan(points, normals, spread, stage.eps, stage.reach, weight=stage.coverage))
         if hold is None:            # from the finest stage's pairs at the start (see docs/track.md "Design")
             last = stages[-1]
-            hold = _hold(body, at, [ScanToModel(points, normals, eps=last.eps, reach=last.reach, shared=shared)],
-                         target, settings, weak_ratio)
+            hold, largest = _hold(body, at, [ScanToModel(points, normals, eps=last.eps, reach=last.reach,
+                                                         shared=shared)], target, settings, weak_ratio)
         elif priors and not stage.guided:     # what the priors decided where the data are weak is kept
-            scale, hold = hold.scale, TowardPose(at.pose, hold.W)
-            hold.scale = scale
-        held = [_small_held(body, start, hold)] if stage.small_held else []
+            hold = TowardPose(at.pose, hold.W)
+        held = [_small_held(body, start, largest)] if stage.small_held else []
         fit = minimise(body, at, data + [hold] + held + (list(priors) if stage.guided else []),
                        Stopping(stage.iterations, settings.step_rad, settings.step_m, stage.rel_energy), cancel)
         at, used = fit.data, used + fit.iterations
@@ -116,22 +115,21 @@ def small_bones(model, share: float = SMALL_SHARE) -> np.ndarray:
     return np.flatnonzero(small)
 
 
-def _small_held(body, start, hold):
-    """A pull keeping the small parts' bones at ``start``, weighing 1 % of the data's largest curvature
-    (a finger's own is ~1e-5 of it: firm, and the system stays well conditioned)."""
+def _small_held(body, start, largest):
+    """A pull keeping the small parts' bones at ``start``, weighing 1 % of the data's ``largest``
+    curvature (a finger's own is ~1e-5 of it: firm, and the system stays well conditioned)."""
     W = np.zeros((body.size, body.size))
     cols = (3 + 3 * small_bones(body.model)[:, None] + np.arange(3)).ravel()
-    W[cols, cols] = 1e-2 * hold.scale
+    W[cols, cols] = 1e-2 * largest
     return TowardPose(start, W)
 
 
 def _hold(body, state, data, target, settings, weak_ratio=None):
-    """The pull towards ``target`` along the data's weak directions at ``state`` (fixed for the frame)."""
+    """``(pull, largest)``: the pull towards ``target`` along the data's weak directions at ``state`` (fixed
+    for the frame) and the data's largest curvature (the scale of other pulls)."""
     lin = state.linearise(body, data)
     W = weak_directions(lin.H, settings.weak_ratio if weak_ratio is None else weak_ratio)
     largest = float(np.linalg.eigvalsh(lin.H)[-1])
     if settings.hold:
         W = W + settings.hold * largest * np.eye(len(W))
-    hold = TowardPose(target, W)
-    hold.scale = largest            # the data's largest curvature, the scale of other pulls
-    return hold
+    return TowardPose(target, W), largest
