@@ -484,9 +484,9 @@ def _unexplained(body, joints, points, model_tree, capture_tree, spacing, point_
 def _region_part(body, joints, near, explained, neighbours, cluster_points, model_tree):
     """The region a cluster of unexplained capture belongs to: the region explaining most of the capture
     next to it (its k-NN neighbours that are explained; the one nearest the root of the region tree among
-    those with a quarter of the votes) or, when a child region's joint lies within :data:`JOINT_REACH` of that
-    capture, that child (a limb moved away leaves its capture hanging from its joint); without explained
-    neighbours the region nearest to the cluster."""
+    those with a quarter of the votes, or the most voted when none has) or, when a child region's joint
+    lies within :data:`JOINT_REACH` of that capture, that child (a limb moved away leaves its capture
+    hanging from its joint); without explained neighbours the region nearest to the cluster."""
     nb = neighbours.ravel()
     nb = nb[nb < len(explained)]
     nb = nb[explained[nb]]
@@ -494,7 +494,7 @@ def _region_part(body, joints, near, explained, neighbours, cluster_points, mode
         _, idx = model_tree.query(cluster_points[:: max(1, len(cluster_points) // 200)])
         return int(np.argmax(np.bincount(body.vertex_region[idx], minlength=len(body.regions))))
     votes = np.bincount(body.vertex_region[near[nb]], minlength=len(body.regions))
-    strong = np.flatnonzero(votes >= 0.25 * votes.sum())
+    strong = np.flatnonzero(votes >= min(0.25 * votes.sum(), votes.max()))     # votes spread: the most voted
     best = strong[np.lexsort((-votes[strong], body.depth[strong]))[0]]
     children = np.flatnonzero(body.parent_region == best)
     if len(children):
