@@ -50,9 +50,9 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
     ``checked``: the model prepared for the truth-free checks: a frame they call lost is searched again
     near where it is (from the last good pose through the searched frame's finer stages, with coverage;
     a jump gets the full search of the first frame), and keeps its fit unless the search explains the
-    capture clearly better (:func:`.first_frame.capture_score` below ``BETTER`` times the fit's) and passes them (when it does not, the frames
-    after it that fail them are not searched until one passes: a subject that really touches itself
-    fails them throughout)."""
+    capture clearly better (:func:`explains_better`) and passes them (when it does not, the frames after
+    it that fail them are not searched until one passes: a subject that really touches itself fails them
+    throughout)."""
     history, out = [pose], {first: pose}
     medians = [rec.entries[first]["median_mm"]] if rec.entries[first].get("median_mm") is not None else []
     searched_in_vain = False          # the last frame the checks failed was searched again without a better fit

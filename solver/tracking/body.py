@@ -146,7 +146,7 @@ class Surface:
         radius = np.sqrt(np.max(np.sum((corners - centre[:, None]) ** 2, axis=2), axis=1))
         lists = cKDTree(centre).query_ball_point(queries[rows], dist[rows] + radius.max())
         at = np.repeat(np.arange(len(rows)), [len(x) for x in lists])
-        tri = np.fromiter((t for x in lists for t in x), dtype=np.int64, count=len(at))
+        tri = np.concatenate([np.asarray(x, dtype=np.int64) for x in lists])       # rows is not empty
         q = queries[rows[at]]
         near = ((np.linalg.norm(q - centre[tri], axis=1) - radius[tri] <= dist[rows[at]])
                 & (edge[tri] >= need[at]))

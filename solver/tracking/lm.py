@@ -6,9 +6,9 @@ pose), solves ``(H + mu diag(H)) step = -g``, and accepts the step when the ener
 trial pose (correspondences re-found there) is lower; mu falls on acceptance and rises on rejection
 (Nielsen's rule on the gain ratio).  It stops when an accepted step moves no bone by more than
 ``step_rad`` and the root by no more than ``step_m``, or after ``max_iterations`` linearisations; a
-rejected step ends it when it was nearly that small or when the linear model promised less than ``REJECTED_GAIN`` of
-the energy: what is left is below the energy's kinks (capture points switching between neighbouring
-fingers or triangles change it by more than that).
+rejected step ends it when it was nearly that small or when the linear model promised less than
+``REJECTED_GAIN`` of the energy: what is left is below the energy's kinks (capture points switching
+between neighbouring fingers or triangles change it by more than that).
 """
 from __future__ import annotations
 

@@ -28,7 +28,7 @@ from .terms import ScanToModel
 
 FINAL_EPS = 0.002       # Charbonnier scale of the windows' data term (m), as the frame fit's last stage
 FINAL_REACH = 0.04
-WINDOW_HOLD = 0.1       # the frames are held to their starts along weak directions at this share of the frame fit's ratio
+WINDOW_HOLD = 0.1       # frames held to their starts along weak directions at this share of the frame ratio
 WINDOW_STOP = Stopping(step_rad=5e-4, step_m=1e-4)   # every frame's step below these ends a window's fit
 
 
