@@ -1,7 +1,8 @@
 """The pose of a frame with nothing to start from: the first frame, or a frame whose fit was lost.
 
 Start hypotheses from the broad pose set in any world orientation (:func:`solver.tracking.start_search.
-start_hypotheses`) and the rest pose at the capture for a human body, rest poses turned onto the
+start_hypotheses`), from the capture's geodesic extremities and rings (:func:`solver.tracking.
+geodesic_starts.geodesic_starts`) and the rest pose at the capture for a human body, rest poses turned onto the
 capture's principal axes for any other rig (:func:`turned_rests`), plus the caller's own (the user's
 start pose, the last good pose), each fitted with the coarse stage of the core's search
 (:data:`solver.tracking.frame.SEARCH`), the best ``KEEP`` by :func:`coverage_score` through the finer
@@ -15,6 +16,7 @@ import numpy as np
 from ..errors import ArticulaInputError
 from ..rig.model import Poses
 from ..tracking.checks import check_frame
+from ..tracking.geodesic_starts import geodesic_starts
 from ..tracking.frame import SEARCH, SEARCH_HOLD, FrameSettings, fit_frame
 from ..geometry.rotations import matrix_to_quat, rotvec_to_matrix
 from ..roles import role_bones
@@ -59,6 +61,7 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
     if humanoid(body.model.skeleton):
         starts = [pose for pose, _ in start_hypotheses(body.model, capture.points, capture.normals,
                                                        count=count)] + [centred_rest(body.model, capture.points)]
+        starts += geodesic_starts(body.model, capture.points, capture.normals)
     else:
         starts = turned_rests(body.model, capture.points)
     starts += list(extra)

@@ -35,7 +35,7 @@ from ..geometry.rotations import matrix_to_quat, quat_mul, rotation_between
 from ..rig.model import Model, Poses
 from ..rig.skinning import hybrid_skin
 from .limbs import sphere_directions
-from .start_poses import POSE_ROLES, PoseSet, RigPoser, role_direction, load_pose_set
+from .start_poses import POSE_ROLES, PoseSet, RigPoser, load_pose_set, role_direction
 
 MODEL_SAMPLES = 200      # model vertices scoring a hypothesis
 CAPTURE_SAMPLES = 200    # capture points scoring a hypothesis
@@ -97,6 +97,35 @@ def start_hypotheses(model: Model, points, normals=None, count: int = 8, pose_se
     out = [(_score(final.posed(body)[0] @ R.T + t, cap, tree), body, R, t) for _, body, R, t in out]
     out.sort(key=lambda item: item[0])
     return [(_placed(model.skeleton, body, R, t), float(s)) for s, body, R, t in out[:count]]
+
+
+def recombined_start(model: Model, poser: RigPoser, joints, points, pose_set: PoseSet = None,
+                     seed: int = 0) -> Poses:
+    """One-frame :class:`Poses` of ``model`` from ``joints (R, 3)``: the :data:`POSE_ROLES` joints
+    estimated on the capture ``points (N, 3)`` (its world, metres), put on the rig by ``poser`` and each
+    limb then searched as the start poses' are (:func:`_recombined`)."""
+    ix = POSE_ROLES.index
+    up = _unit_vector(joints[ix("neck")] - joints[ix("hips")])
+    left = joints[ix("thigh.L")] - joints[ix("thigh.R")]
+    left = _unit_vector(left - up * (left @ up))
+    frame = np.stack([left, np.cross(up, left), up], axis=1)           # columns left, back, up
+    height = float(np.ptp(model.rest_vertices @ poser.frame[:, 2]))
+    body = (joints - joints[ix("hips")]) @ frame / height
+    R = frame @ poser.frame.T
+    _, H = poser.world(_as_set(body[None]))
+    t = joints[ix("hips")] - R @ H[0, poser.roles["hips"]]
+    rng = np.random.default_rng(seed)
+    points = _check(points, 1)
+    sample = _Sampled(model, _area_sample(model, MODEL_SAMPLES, rng))
+    coarse = cKDTree(points[rng.choice(len(points), min(COARSE_POINTS, len(points)), replace=False)])
+    cap = points[rng.choice(len(points), min(CAPTURE_SAMPLES, len(points)), replace=False)]
+    pose_set = load_pose_set() if pose_set is None else pose_set
+    _, pose, R, t = _recombined(poser, sample, pose_set, body, R, t, cap, (cKDTree(points), coarse))
+    return _placed(model.skeleton, pose, R, t)
+
+
+def _unit_vector(v):
+    return v / max(float(np.linalg.norm(v)), 1e-12)
 
 
 def _distinct(found, count) -> list:
