@@ -215,6 +215,9 @@ class Landmarks:
         R, t = _kabsch(self.rest[[ix(r) for r, _ in ROOTS]], np.array([found[r] for r, _ in ROOTS]))
         for role in TRUNK:
             J[ix(role)] = R @ self.rest[ix(role)] + t
+        if not self.poser.below[self.poser.roles["hips"]][self.poser.roles.get("chest", 0)]:
+            # a rig rooted at the chest: its hips bone starts there; the start poses' hips joint is the pelvis
+            J[ix("hips")] = 0.5 * (J[ix("thigh.L")] + J[ix("thigh.R")])
         for role, c in found.items():
             J[ix(role)] = c
         missing = ~np.isfinite(J).all(axis=1)

@@ -150,9 +150,10 @@ class RigPoser:
         the bone's joint (as from the spine's, or the chest's, joint in the pose)."""
         by, hips = self.roles, self.roles["hips"]
         aim = out.get(hips)
-        if aim is not None and aim.want[0] == "hips" and "chest" in by and self.below[hips][by["chest"]]:
+        carries = "chest" in by and self.below[hips][by["chest"]]
+        if aim is not None and aim.want[0] == "hips" and carries:
             aim.b, aim.want = (by["chest"], 0), ("hips", "chest")
-        elif aim is None or aim.want[0] != "hips":
+        elif aim is None or aim.want[0] != "hips" or not carries:      # its own axis may point down
             above = next((r for r in ("spine", "chest") if r in by and not self.below[hips][by[r]]), None)
             if above is not None:
                 out[hips] = _Aim(hips, (by["thigh.R"], 0), (by["thigh.L"], 0), ("thigh.R", "thigh.L"),

@@ -55,6 +55,7 @@ DISTINCT_DEG = 20.0      # recombined orientations differ by more than this
 RECOMBINE = 3            # refined hypotheses whose limbs are recombined
 LIMB_CANDIDATES = 48     # start poses whose limbs are tried (the set is in farthest-point order)
 DIRECTIONS = 48          # directions tried per segment in the segment search (about 30 deg apart)
+PLACING = ("neck", "upper_arm.L", "upper_arm.R", "forearm.L", "forearm.R", "thigh.L", "thigh.R", "shin.L", "shin.R")
 SEGMENT_SEARCH = tuple((f"{a}.{s}", f"{b}.{s}") for s in "LR" for a, b in (
     ("thigh", "shin"), ("shin", "foot"), ("upper_arm", "forearm"), ("forearm", "hand")))
 TRUNK_SEGMENTS = (("hips", "chest"), ("chest", "neck"), ("neck", "head.end"), ("upper_arm.R", "upper_arm.L"),
@@ -103,17 +104,21 @@ def recombined_start(model: Model, poser: RigPoser, joints, points, pose_set: Po
                      seed: int = 0) -> Poses:
     """One-frame :class:`Poses` of ``model`` from ``joints (R, 3)``: the :data:`POSE_ROLES` joints
     estimated on the capture ``points (N, 3)`` (its world, metres), put on the rig by ``poser`` and each
-    limb then searched as the start poses' are (:func:`_recombined`)."""
+    limb then searched as the start poses' are (:func:`_recombined`); placed by the joints of
+    :data:`PLACING` (a learned rig's hips bone may start at its chest)."""
     ix = POSE_ROLES.index
-    up = _unit_vector(joints[ix("neck")] - joints[ix("hips")])
+    pelvis = 0.5 * (joints[ix("thigh.L")] + joints[ix("thigh.R")])
+    up = _unit_vector(joints[ix("neck")] - pelvis)
     left = joints[ix("thigh.L")] - joints[ix("thigh.R")]
     left = _unit_vector(left - up * (left @ up))
     frame = np.stack([left, np.cross(up, left), up], axis=1)           # columns left, back, up
     height = float(np.ptp(model.rest_vertices @ poser.frame[:, 2]))
-    body = (joints - joints[ix("hips")]) @ frame / height
+    body = (joints - pelvis) @ frame / height
     R = frame @ poser.frame.T
     _, H = poser.world(_as_set(body[None]))
-    t = joints[ix("hips")] - R @ H[0, poser.roles["hips"]]
+    placed = [(ix(r), poser.roles[r]) for r in PLACING if r in poser.roles and np.isfinite(joints[ix(r)]).all()]
+    rows, bones = (np.array(x) for x in zip(*placed))
+    t = (joints[rows] - H[0, bones] @ R.T).mean(axis=0)
     rng = np.random.default_rng(seed)
     points = _check(points, 1)
     sample = _Sampled(model, _area_sample(model, MODEL_SAMPLES, rng))

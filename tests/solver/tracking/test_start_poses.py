@@ -3,6 +3,7 @@
 References: the stored joint positions themselves (each aimed segment of the posed rig, by forward
 kinematics, must point along the stored direction), and the body measures of the set (independent of
 the aiming code)."""
+import json
 import os
 
 import numpy as np
@@ -86,6 +87,38 @@ def test_chest_rooted_skeleton_as_learned_rigs_are():
     assert len(errors) == len(SEGMENTS) and max(errors.values()) < 0.5, errors
     lines = _segment_errors(chest, poser, ps, (("thigh.R", "thigh.L"), ("upper_arm.R", "upper_arm.L")))
     assert max(lines.values()) < 10.0, lines
+
+
+def test_learned_rig_keeps_its_pelvis_below_its_chest():
+    """The skeleton learn_rig gave for a mixamo body (``data/learned_mixamo_skeleton.json``): rooted at the
+    chest, its hips part hanging from it and pointing down to the thigh joints, no spine part.  Posed by
+    its own rest joints, it stays at rest (its hips part, aimed by its own axis along the pose's hips-to-
+    spine direction, turned the thighs above the chest, 0.4-0.6 m off)."""
+    with open(os.path.join(os.path.dirname(__file__), "data", "learned_mixamo_skeleton.json")) as f:
+        data = json.load(f)
+    sk = Skeleton(data["names"], np.array(data["parents"]), np.array(data["heads"]), np.array(data["tails"]),
+                  np.array(data["frames"]))
+    poser = RigPoser(sk)
+    assert sk.parents[poser.roles["hips"]] == poser.roles["chest"] and "spine" not in poser.roles
+    J = np.stack([_rest_joint(sk, poser.roles, r) for r in POSE_ROLES])
+    body = (J - J[POSE_ROLES.index("hips")]) @ poser.frame
+    Rm, tm = forward_kinematics(sk, poser.poses(PoseSet(body[None], np.zeros(1), np.zeros(1))))
+    posed = np.einsum("bij,bj->bi", Rm[0], sk.heads) + tm[0]
+    error = np.linalg.norm(posed - sk.heads, axis=1)
+    assert error.max() < 0.05, dict(zip(sk.names, error.round(3)))
+
+
+def _rest_joint(sk, roles, role):
+    """The rest position of pose role ``role`` (ends: the bone's tail, or its chain's last bone's; a role
+    the rig lacks: its parent's joint)."""
+    if role.endswith(".end"):
+        base = role[:-4]
+        while base not in roles:
+            base = PARENT[base]
+        return sk.tails[roles[base]]
+    while role not in roles:
+        role = PARENT[role]
+    return sk.heads[roles[role]]
 
 
 def _rerooted(sk, root):
