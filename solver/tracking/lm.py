@@ -14,11 +14,8 @@ from __future__ import annotations
 
 import dataclasses
 
-import os
-
 import numpy as np
 
-_TRACE = bool(os.environ.get('ARTICULA_LM_TRACE'))
 REJECTED_SLACK = 5.0     # a rejected step this close to the tolerance ends the fit
 REJECTED_GAIN = 1e-3     # ... as does one whose predicted decrease is below this share of the energy
 
@@ -82,8 +79,6 @@ def minimise(body, start, terms, stopping: Stopping = Stopping(), cancel=None) -
         e_trial = trial.energy(body, terms)
         predicted = -(step @ lin.g) - 0.5 * step @ lin.H @ step
         gain = (energy - e_trial) / max(predicted, 1e-300)
-        if _TRACE:
-            print(f"    it {it} E {energy:.4g} trial {e_trial:.4g} gain {gain:.3f} mu {mu:.3g} step {np.abs(step).max():.3g}")
         if e_trial < energy:
             state, done = trial, small_step(step, stopping) or energy - e_trial <= stopping.rel_energy * energy
             energy = e_trial

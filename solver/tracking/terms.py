@@ -54,11 +54,12 @@ class ScanToModel:
     A fixed sample of ``count`` capture points (seeded; the same every update, so energies compare),
     each matched to the closest point on the one-ring of its nearest posed vertex
     (:meth:`Body.surface`); the residual is the distance along that triangle's normal, its derivative
-    the barycentric combination of the triangle's vertex Jacobians (:func:`normal_jacobian`).  Pairs whose capture normal points
-    against the face normal (below ``min_cos``) or farther than ``reach`` metres are left out; the rest
-    weigh by Charbonnier with ``eps`` (about the capture noise, metres).  ``weight`` scales the energy
-    per point (energy = weight * mean penalty * 1, so terms with other point counts compare); ``shared``:
-    a :class:`Sample` to use instead of drawing one (its closest points serve every term on it)."""
+    the barycentric combination of the triangle's vertex Jacobians (:func:`normal_jacobian`).  Pairs whose
+    capture normal points against the face normal (below ``min_cos``) or farther than ``reach`` metres are
+    left out; the rest weigh by Charbonnier with ``eps`` (about the capture noise, metres).  ``weight``
+    scales the energy per point (energy = weight * mean penalty * 1, so terms with other point counts
+    compare); ``shared``: a :class:`Sample` to use instead of drawing one (its closest points serve every
+    term on it)."""
 
     def __init__(self, points, normals, count: int = 5000, eps: float = 0.002, reach: float = 0.05,
                  min_cos: float = 0.2, weight: float = 1.0, seed: int = 0, shared: "Sample" = None):

@@ -12,7 +12,8 @@ from scipy.spatial import cKDTree
 from articula.sample_scenes import registered, unregistered
 from articula.solver.errors import ArticulaInputError
 from articula.solver.geometry.inside import winding_numbers
-from articula.solver.geometry.rotations import matrix_to_quat, quat_mul, quat_to_matrix, rotvec_to_matrix, rotvec_to_quat
+from articula.solver.geometry.rotations import (matrix_to_quat, quat_mul, quat_to_matrix, rotvec_to_matrix,
+                                                rotvec_to_quat)
 from articula.solver.rig.kinematics import forward_kinematics
 from articula.solver.rig.model import Model, Poses, Skeleton
 from articula.solver.rig.skinning import hybrid_skin
@@ -325,7 +326,8 @@ def test_hinge_angles_closed_form(subject):
     side_axis /= np.linalg.norm(side_axis)
     bent = turned(model, pose, "Leg.L", side_axis, 20)
     flexion, side = checks.hinge_angles(knee, *(a[0] for a in forward_kinematics(model.skeleton, bent)))
-    assert abs(side - rest_side) == pytest.approx(20.0, abs=0.1) and flexion == pytest.approx(rest_flexion + 50, abs=0.5)
+    assert abs(side - rest_side) == pytest.approx(20.0, abs=0.1)
+    assert flexion == pytest.approx(rest_flexion + 50, abs=0.5)
 
 
 def test_voxel_components_against_brute_force():

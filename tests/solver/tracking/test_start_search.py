@@ -4,7 +4,8 @@ sampled on the true posed surface and turned into a Z-up, a Y-up and a 30-degree
 
 Thresholds: the best hypothesis's hips (the body's root; bone 0 on cmu_mb, a child of a ground "root"
 bone on game_engine and default) within 30 degrees of the truth's world rotation, and one of the best
-four with a mean vertex error under 100 mm: the core's search fit (solver.tracking.frame, SEARCH stages) brought starts of
+four with a mean vertex error under 100 mm: the core's search fit (solver.tracking.frame, SEARCH stages)
+brought starts of
 77-105 mm (the truth with every bone turned 10 deg) to the level it reaches from the truth's
 neighbourhood, and did not from 240 mm (20 deg per bone).  The truth's world rotation is its bone
 matrix turned by the world rotation."""
