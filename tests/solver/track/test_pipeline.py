@@ -139,6 +139,30 @@ def test_a_search_replaces_a_fit_only_when_it_explains_the_capture_clearly_bette
     assert explains_better(tracker, capture, truth, State(tracker, turned))
 
 
+def test_a_searched_fit_is_settled_until_its_last_stage_stops_improving_it(body):
+    """``first_frame._settled``: the last search stage run again from its own result (its hold on weakly
+    seen directions re-anchored each time) ends no worse than it started and where one more run gains
+    less than ``SETTLE_GAIN``; from a start 0.2 rad off on every bone (one run: 7.9 mm mean vertex error)
+    it comes nearer the truth (measured 6.2 mm, the score 2.4x lower)."""
+    from articula.solver.track import first_frame as ff
+    from articula.solver.track.frame_fit import Capture
+    from articula.solver.tracking.body import Body
+    from articula.solver.tracking.frame import SEARCH, FrameSettings
+    pose = _motion(body, 3).take(2)
+    capture = Capture.from_mesh(hybrid_skin(body, pose)[0], body.faces)
+    tracker = Body(body)
+    rng = np.random.default_rng(5)
+    start = tracker.moved(pose, rng.normal(0.0, 0.2 / np.sqrt(3), tracker.size) * (np.arange(tracker.size) >= 3))
+    once = ff._fit(tracker, capture, start, (), SEARCH[-1:], FrameSettings(), None)
+    score = ff.coverage_score(tracker, capture, once.state)
+    settled, settled_score = ff._settled(tracker, capture, once.pose, score, (), FrameSettings(), None)
+    again = ff._fit(tracker, capture, settled, (), SEARCH[-1:], FrameSettings(), None)
+    assert settled_score < 0.7 * score
+    assert ff.coverage_score(tracker, capture, again.state) > (1.0 - ff.SETTLE_GAIN) * settled_score
+    error = lambda p: np.linalg.norm(hybrid_skin(body, p)[0] - hybrid_skin(body, pose)[0], axis=1).mean()
+    assert error(settled) < 0.9 * error(once.pose), (error(once.pose), error(settled))
+
+
 def test_units_check_names_millimetres(body):
     with pytest.raises(ArticulaInputError, match="millimetres"):
         check_units(body, body.rest_vertices * 1000.0)
