@@ -55,7 +55,7 @@ DISTINCT_DEG = 20.0      # recombined orientations differ by more than this
 RECOMBINE = 3            # refined hypotheses whose limbs are recombined
 LIMB_CANDIDATES = 48     # start poses whose limbs are tried (the set is in farthest-point order)
 DIRECTIONS = 48          # directions tried per segment in the segment search (about 30 deg apart)
-PLACING = ("neck", "upper_arm.L", "upper_arm.R", "forearm.L", "forearm.R", "thigh.L", "thigh.R", "shin.L", "shin.R")
+PLACING = ("thigh.L", "thigh.R")   # joints placing a start whose hips bone starts at the chest
 SEGMENT_SEARCH = tuple((f"{a}.{s}", f"{b}.{s}") for s in "LR" for a, b in (
     ("thigh", "shin"), ("shin", "foot"), ("upper_arm", "forearm"), ("forearm", "hand")))
 TRUNK_SEGMENTS = (("hips", "chest"), ("chest", "neck"), ("neck", "head.end"), ("upper_arm.R", "upper_arm.L"),
@@ -104,20 +104,22 @@ def recombined_start(model: Model, poser: RigPoser, joints, points, pose_set: Po
                      seed: int = 0) -> Poses:
     """One-frame :class:`Poses` of ``model`` from ``joints (R, 3)``: the :data:`POSE_ROLES` joints
     estimated on the capture ``points (N, 3)`` (its world, metres), put on the rig by ``poser`` and each
-    limb then searched as the start poses' are (:func:`_recombined`); placed by the joints of
-    :data:`PLACING` (a learned rig's hips bone may start at its chest)."""
+    limb then searched as the start poses' are (:func:`_recombined`); placed by its hips joint, or by the
+    joints of :data:`PLACING` when its hips bone does not carry the chest (a learned rig's starts there)."""
     ix = POSE_ROLES.index
-    pelvis = 0.5 * (joints[ix("thigh.L")] + joints[ix("thigh.R")])
-    up = _unit_vector(joints[ix("neck")] - pelvis)
+    hips = poser.roles["hips"]
+    carries = "chest" in poser.roles and poser.below[hips][poser.roles["chest"]]
+    placing = ("hips",) if carries else PLACING
+    rows, bones = (np.array(x) for x in zip(*[(ix(r), poser.roles[r]) for r in placing]))
+    origin = joints[rows].mean(axis=0)
+    up = _unit_vector(joints[ix("neck")] - origin)
     left = joints[ix("thigh.L")] - joints[ix("thigh.R")]
     left = _unit_vector(left - up * (left @ up))
     frame = np.stack([left, np.cross(up, left), up], axis=1)           # columns left, back, up
     height = float(np.ptp(model.rest_vertices @ poser.frame[:, 2]))
-    body = (joints - pelvis) @ frame / height
+    body = (joints - origin) @ frame / height
     R = frame @ poser.frame.T
     _, H = poser.world(_as_set(body[None]))
-    placed = [(ix(r), poser.roles[r]) for r in PLACING if r in poser.roles and np.isfinite(joints[ix(r)]).all()]
-    rows, bones = (np.array(x) for x in zip(*placed))
     t = (joints[rows] - H[0, bones] @ R.T).mean(axis=0)
     rng = np.random.default_rng(seed)
     points = _check(points, 1)
