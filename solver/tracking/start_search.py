@@ -55,7 +55,8 @@ DISTINCT_DEG = 20.0      # recombined orientations differ by more than this
 RECOMBINE = 3            # refined hypotheses whose limbs are recombined
 LIMB_CANDIDATES = 48     # start poses whose limbs are tried (the set is in farthest-point order)
 DIRECTIONS = 48          # directions tried per segment in the segment search (about 30 deg apart)
-PLACING = ("thigh.L", "thigh.R")   # joints placing a start whose hips bone starts at the chest
+PLACING = ("neck", "upper_arm.L", "upper_arm.R", "forearm.L", "forearm.R", "thigh.L", "thigh.R", "shin.L",
+           "shin.R")            # joints placing a start whose hips bone starts at the chest
 SEGMENT_SEARCH = tuple((f"{a}.{s}", f"{b}.{s}") for s in "LR" for a, b in (
     ("thigh", "shin"), ("shin", "foot"), ("upper_arm", "forearm"), ("forearm", "hand")))
 TRUNK_SEGMENTS = (("hips", "chest"), ("chest", "neck"), ("neck", "head.end"), ("upper_arm.R", "upper_arm.L"),
@@ -111,7 +112,7 @@ def recombined_start(model: Model, poser: RigPoser, joints, points, pose_set: Po
     carries = "chest" in poser.roles and poser.below[hips][poser.roles["chest"]]
     placing = ("hips",) if carries else PLACING
     rows, bones = (np.array(x) for x in zip(*[(ix(r), poser.roles[r]) for r in placing]))
-    origin = joints[rows].mean(axis=0)
+    origin = joints[ix("hips")] if carries else 0.5 * (joints[ix("thigh.L")] + joints[ix("thigh.R")])
     up = _unit_vector(joints[ix("neck")] - origin)
     left = joints[ix("thigh.L")] - joints[ix("thigh.R")]
     left = _unit_vector(left - up * (left @ up))
