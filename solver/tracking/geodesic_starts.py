@@ -16,7 +16,8 @@ images"), in any pose and any world orientation:
 4. **Joints**: on the model, each chain joint is the centre of the band of its chain end's geodesic field
    at the level whose centre lies nearest the joint; the capture's band at the scaled level gives the
    joint.  The joints where a limb meets the trunk (hip, shoulder, neck) are put one segment length from
-   the next joint along the axis through the segment's middle band; the trunk's joints follow rigidly.
+   the next joint along the axis through the segment's middle band; the trunk's joints (and any not
+   found) follow them rigidly.
 5. **Pose**: the joints onto the rig through the start poses' transfer (:class:`.start_poses.RigPoser`),
    then each limb's start-pose and segment-direction search of :mod:`.start_search`.
 
@@ -53,7 +54,6 @@ CHAINS = (("head.end", "head"), ("hand.L.end", "hand.L", "forearm.L"), ("hand.R.
           ("toe.L.end", "toe.L", "foot.L", "shin.L"), ("toe.R.end", "toe.R", "foot.R", "shin.R"))
 ROOTS = (("neck", "head"), ("upper_arm.L", "forearm.L"), ("upper_arm.R", "forearm.R"), ("thigh.L", "shin.L"),
          ("thigh.R", "shin.R"))
-TRUNK = ("hips", "hip.L", "hip.R", "spine", "chest", "shoulder.L", "shoulder.R")
 
 _END_BONES = {"head.end": ("head", "neck")} | {f"{a}.{s}.end": (f"{a}.{s}", f"{b}.{s}")
                                                 for s in "LR" for a, b in (("hand", "forearm"), ("toe", "foot"))}
@@ -211,10 +211,8 @@ class Landmarks:
             u = c - found[child]
             found[root] = found[child] + scale * length * u / max(np.linalg.norm(u), 1e-12)
         ix = POSE_ROLES.index
-        J = self.rest.copy()
         R, t = _kabsch(self.rest[[ix(r) for r, _ in ROOTS]], np.array([found[r] for r, _ in ROOTS]))
-        for role in TRUNK:
-            J[ix(role)] = R @ self.rest[ix(role)] + t
+        J = self.rest @ R.T + t                                 # the trunk's, and any joint not found
         if not self.poser.below[self.poser.roles["hips"]][self.poser.roles.get("chest", 0)]:
             # a rig rooted at the chest: its hips bone starts there; the start poses' hips joint is the pelvis
             J[ix("hips")] = 0.5 * (J[ix("thigh.L")] + J[ix("thigh.R")])
