@@ -11,6 +11,8 @@ model unexplained wins, and its last stage is run again while that improves it (
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from ..errors import ArticulaInputError
@@ -85,12 +87,13 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
 
 
 def _settled(body, capture, pose, score, priors, settings, cancel):
-    """``(pose, score)``: the last search stage run again from its own result while the coverage score
-    drops by ``SETTLE_GAIN`` (at most ``SETTLE_RUNS`` times): a stage holds weakly seen directions at
-    its start, so a part the hypothesis had wrong (a learned rig's hand turned, its head bent) moves
-    only so far in one run."""
+    """``(pose, score)``: the last search stage run again from its own result, without the hold on small
+    parts, while the coverage score drops by ``SETTLE_GAIN`` (at most ``SETTLE_RUNS`` times): a stage
+    holds weakly seen directions at its start and the search holds small parts there, so a part the
+    hypothesis had wrong (a learned rig's head anchoring few vertices, turned 37 deg) moves only so far."""
+    last = dataclasses.replace(SEARCH[-1], small_held=False)
     for _ in range(SETTLE_RUNS):
-        fit = _fit(body, capture, pose, priors, SEARCH[-1:], settings, cancel)
+        fit = _fit(body, capture, pose, priors, (last,), settings, cancel)
         again = coverage_score(body, capture, fit.state)
         if again > (1.0 - SETTLE_GAIN) * score:
             break

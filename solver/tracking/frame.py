@@ -100,13 +100,11 @@ def fit_frame(body, points, normals, start, target=None, priors=(), stages=TRACK
 
 def small_bones(model, share: float = SMALL_SHARE) -> np.ndarray:
     """Bones (indices, sorted) of small parts branching off a larger one, and everything below them: a
-    bone whose subtree moves fewer than ``share`` of the model's vertices and under a quarter of its
+    bone whose subtree anchors fewer than ``share`` of the model's vertices and under a quarter of its
     parent's subtree (fingers off a hand; a coarse learned rig's hand, a third of its forearm's subtree,
-    is no such part).  A vertex counts for the bone that moves it most (:func:`_movers`: a learned rig's
-    foot may anchor no vertex and carry the whole foot by its swing weights).  Any rig: by vertex counts,
-    not names."""
+    is no such part).  Any rig: by vertex counts, not names."""
     parents = model.skeleton.parents
-    count = np.bincount(_movers(model), minlength=len(parents)).astype(float)
+    count = np.bincount(model.anchor, minlength=len(parents)).astype(float)
     for b in range(len(parents) - 1, 0, -1):             # parents[b] < b: children before their parents
         if parents[b] >= 0:
             count[parents[b]] += count[b]
@@ -115,14 +113,6 @@ def small_bones(model, share: float = SMALL_SHARE) -> np.ndarray:
         p = parents[b]
         small[b] = p >= 0 and (small[p] or (count[b] < share * model.num_vertices and count[b] < 0.25 * count[p]))
     return np.flatnonzero(small)
-
-
-def _movers(model) -> np.ndarray:
-    """``(V,)`` the bone that moves each vertex most: the one whose swing weight on it is at least a half,
-    else its anchor."""
-    w = model.swing_weights
-    top = np.argmax(w, axis=1)
-    return np.where(w[np.arange(len(w)), top] >= 0.5, top, model.anchor)
 
 
 def _small_held(body, start, largest):

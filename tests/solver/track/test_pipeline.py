@@ -163,6 +163,28 @@ def test_a_searched_fit_is_settled_until_its_last_stage_stops_improving_it(body)
     assert error(settled) < 0.9 * error(once.pose), (error(once.pose), error(settled))
 
 
+def test_settling_frees_the_small_parts_the_search_held(body):
+    """The search holds small parts (a hand anchoring few vertices) at the start; settling runs the last
+    stage without that hold, so a small hand started 0.3 rad off comes to the capture (a learned rig's
+    head anchoring 138 vertices stayed 37 deg off with the hold)."""
+    from articula.solver.track import first_frame as ff
+    from articula.solver.track.frame_fit import Capture
+    from articula.solver.tracking.body import Body
+    from articula.solver.tracking.frame import SEARCH, FrameSettings
+    from tests.solver.tracking.test_core import _small_hand
+    small, hand = _small_hand(body)
+    pose = _motion(small, 3).take(2)
+    capture = Capture.from_mesh(hybrid_skin(small, pose)[0], small.faces)
+    tracker = Body(small)
+    start = Poses(pose.rotations.copy(), pose.translations.copy(), pose.scales.copy())
+    start.rotations[0, hand] = quat_mul(start.rotations[0, hand], rotvec_to_quat(np.array([0.0, 0.0, 0.3])))
+    held = ff._fit(tracker, capture, start, (), SEARCH[-1:], FrameSettings(), None)
+    settled, _ = ff._settled(tracker, capture, held.pose, ff.coverage_score(tracker, capture, held.state), (),
+                             FrameSettings(), None)
+    angle = lambda p: 2 * np.arccos(min(1.0, abs(float(np.sum(p.rotations[0, hand] * pose.rotations[0, hand])))))
+    assert angle(held.pose) > 0.25 and angle(settled) < 0.05, (angle(held.pose), angle(settled))
+
+
 def test_units_check_names_millimetres(body):
     with pytest.raises(ArticulaInputError, match="millimetres"):
         check_units(body, body.rest_vertices * 1000.0)

@@ -263,11 +263,10 @@ def _small_hand(model):
     small part branching off a larger one (as a finger off a hand)."""
     names = model.skeleton.names
     hand, forearm = names.index("hand.R"), names.index("forearm.R")
-    anchor, swing = model.anchor.copy(), model.swing_weights.copy()
+    anchor = model.anchor.copy()
     mine = np.flatnonzero(anchor == hand)
     anchor[mine[: int(0.8 * len(mine))]] = forearm
-    swing[:, hand] = 0.0                                  # nor does it bend the wrist
-    return dataclasses.replace(model, anchor=anchor, swing_weights=swing), hand
+    return dataclasses.replace(model, anchor=anchor), hand
 
 
 def test_small_bones_are_small_parts_off_a_larger_one(tube):
@@ -278,19 +277,6 @@ def test_small_bones_are_small_parts_off_a_larger_one(tube):
     small, hand = _small_hand(model)
     assert small_bones(small).tolist() == [hand]
     assert small_bones(small, share=0.001).tolist() == []
-
-
-def test_a_part_bending_its_vertices_is_not_small(tube):
-    """A part that anchors no vertex but moves them by its swing weights (a learned rig's foot bone, the
-    foot's vertices anchored on the shin) is as large as the vertices it moves."""
-    model, _ = tube
-    hand = model.skeleton.names.index("hand.R")
-    mine = np.flatnonzero(model.anchor == hand)
-    anchor, swing = model.anchor.copy(), model.swing_weights.copy()
-    anchor[mine], swing[:, hand] = model.skeleton.parents[hand], 0.0
-    assert small_bones(dataclasses.replace(model, anchor=anchor, swing_weights=swing)).tolist() == [hand]
-    swing[mine, hand] = 1.0
-    assert small_bones(dataclasses.replace(model, anchor=anchor, swing_weights=swing)).tolist() == []
 
 
 def test_a_stage_holding_small_parts_keeps_them_at_the_start(tube):
