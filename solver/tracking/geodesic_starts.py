@@ -34,12 +34,13 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
-from .start_poses import POSE_ROLES, REQUIRED, PoseSet, RigPoser
+from ..errors import ArticulaInputError
+from .start_poses import POSE_ROLES, REQUIRED, RigPoser
 from .start_search import recombined_start
 
 GRAPH_POINTS = 10000   # capture points of the surface graph
 NEIGHBOURS = 10        # nearest neighbours tried as edges
-SPACING = 1.25          # an edge is at most this many times the median distance to the
+SPACING = 1.25         # an edge is at most this many times the median distance to the
 SPACING_NEIGHBOUR = 5  # ... 6th nearest neighbour (uniform over a scan's grid and a random sample)
 FACING = 0.5           # the two normals of an edge agree at least this much (cosine)
 ACROSS = 0.6           # an edge runs along the surface: |cos| to either normal below this
@@ -226,7 +227,7 @@ class Landmarks:
 def _poser(model):
     try:
         poser = RigPoser(model.skeleton)
-    except Exception:       # a rig without the roles the start poses need
+    except ArticulaInputError:       # a rig without the roles the start poses need
         return None
     return poser if all(r in poser.roles for r in REQUIRED) else None
 

@@ -8,7 +8,7 @@ import pytest
 
 from articula.sample_scenes import synthetic
 from articula.solver.errors import ArticulaInputError, Cancelled
-from articula.solver.geometry.rotations import quat_mul, quat_to_rotvec, rotation_between, rotvec_to_quat
+from articula.solver.geometry.rotations import quat_mul, quat_to_rotvec, rotvec_to_quat
 from articula.solver.rig.model import Poses
 from articula.solver.rig.skinning import hybrid_skin
 from articula.solver.track import captures as cp
