@@ -35,6 +35,7 @@ from scipy.spatial import cKDTree
 from ..depth import camera as cam
 from ..errors import ArticulaInputError
 from ..geometry.mesh_graph import adjacency, edges_of
+from ..geometry.normals import vertex_areas
 from ..learn.role_names import recognise as recognise_geometry
 from ..rig.kinematics import forward_kinematics
 from ..rig.model import Poses
@@ -197,14 +198,6 @@ def _bone_regions(skeleton, roles):
     return out
 
 
-def _vertex_areas(vertices, faces):
-    """A third of the area of every triangle at each vertex ``(V,)`` m²."""
-    f = np.asarray(faces, dtype=np.int64)
-    a = 0.5 * np.linalg.norm(np.cross(vertices[f[:, 1]] - vertices[f[:, 0]], vertices[f[:, 2]] - vertices[f[:, 0]]),
-                             axis=1)
-    return np.bincount(f.ravel(), np.repeat(a / 3.0, 3), len(vertices))
-
-
 def prepare(model) -> Body:
     """The per-model part of the checks (regions, areas, mesh graph, hinges); see :class:`Body`."""
     sk = model.skeleton
@@ -221,7 +214,7 @@ def prepare(model) -> Body:
             adjacent[a, p] = adjacent[p, a] = True
             depth[a], parent_region[a], joint_bone[a] = depth[p] + 1, p, b
     vertex_region = index[model.anchor]
-    areas = _vertex_areas(model.rest_vertices, model.faces)
+    areas = vertex_areas(model.rest_vertices, model.faces)
     e = edges_of(model.faces)
     edge = float(np.percentile(np.linalg.norm(model.rest_vertices[e[:, 0]] - model.rest_vertices[e[:, 1]], axis=1),
                                95)) if len(e) else 0.0

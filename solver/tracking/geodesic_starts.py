@@ -35,6 +35,9 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import cKDTree
 
 from ..errors import ArticulaInputError
+from ..geometry.mesh_graph import edges_of
+from ..geometry.normals import vertex_areas
+from ..geometry.procrustes import fit_rigid
 from .start_poses import POSE_ROLES, REQUIRED, RigPoser
 from .start_search import recombined_start
 
@@ -171,7 +174,7 @@ class Landmarks:
         if not np.isfinite(rest[[POSE_ROLES.index(r) for r in ENDS + ROOTS[0][:1]]]).all():
             return None
         V, f = model.rest_vertices, model.faces
-        edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+        edges = edges_of(f)
         graph, body = _largest(len(V), edges[:, 0], edges[:, 1], np.linalg.norm(V[edges[:, 0]] - V[edges[:, 1]],
                                                                                  axis=1))
         found, fields = extremities(graph, body, V, 5)
@@ -179,7 +182,7 @@ class Landmarks:
         order = min(itertools.permutations(range(5)), key=lambda p: near[list(p), range(5)].sum())
         fields = fields[list(order)]
         distances = fields[:, np.array(found)[list(order)]]
-        weights = _vertex_areas(V, f)
+        weights = vertex_areas(V, f)
         levels, roots = {}, {}
         for k, chain in enumerate(CHAINS):
             for role in chain:
@@ -212,9 +215,9 @@ class Landmarks:
             u = c - found[child]
             found[root] = found[child] + scale * length * u / max(np.linalg.norm(u), 1e-12)
         ix = POSE_ROLES.index
-        R, t = _kabsch(self.rest[[ix(r) for r, _ in ROOTS]], np.array([found[r] for r, _ in ROOTS]))
+        R, t = fit_rigid(self.rest[[ix(r) for r, _ in ROOTS]], np.array([found[r] for r, _ in ROOTS]))
         J = self.rest @ R.T + t                                 # the trunk's, and any joint not found
-        if not self.poser.below[self.poser.roles["hips"]][self.poser.roles.get("chest", 0)]:
+        if not self.poser.carries_chest:
             # a rig rooted at the chest: its hips bone starts there; the start poses' hips joint is the pelvis
             J[ix("hips")] = 0.5 * (J[ix("thigh.L")] + J[ix("thigh.R")])
         for role, c in found.items():
@@ -263,16 +266,3 @@ def _nearest_level(V, field, body, weights, target, lowest) -> float:
             if np.linalg.norm(c - target) < best[0]:
                 best = (float(np.linalg.norm(c - target)), float(level))
     return best[1]
-
-
-def _vertex_areas(V, f):
-    area = 0.5 * np.linalg.norm(np.cross(V[f[:, 1]] - V[f[:, 0]], V[f[:, 2]] - V[f[:, 0]]), axis=1)
-    return np.bincount(f.ravel(), np.repeat(area / 3.0, 3), minlength=len(V))
-
-
-def _kabsch(A, B):
-    """``(R, t)``: the rotation and translation taking points ``A (n, 3)`` nearest to ``B (n, 3)``."""
-    ma, mb = A.mean(axis=0), B.mean(axis=0)
-    U, _, Vt = np.linalg.svd((B - mb).T @ (A - ma))
-    R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
-    return R, mb - R @ ma

@@ -114,6 +114,8 @@ class RigPoser:
         segs = plan_segments(arm, arm, {r: (names[b], names[b]) for r, b in self.roles.items()})
         self.frame = body_frame(skeleton.heads, segs, "target")
         self.below = _subtree_masks(skeleton.parents)
+        roles = self.roles
+        self.carries_chest = "chest" in roles and bool(self.below[roles["hips"]][roles["chest"]])
         self.aims = self._aims(segs)
 
     def _aims(self, segs) -> dict:
@@ -150,10 +152,9 @@ class RigPoser:
         the bone's joint (as from the spine's, or the chest's, joint in the pose)."""
         by, hips = self.roles, self.roles["hips"]
         aim = out.get(hips)
-        carries = "chest" in by and self.below[hips][by["chest"]]
-        if aim is not None and aim.want[0] == "hips" and carries:
+        if aim is not None and aim.want[0] == "hips" and self.carries_chest:
             aim.b, aim.want = (by["chest"], 0), ("hips", "chest")
-        elif aim is None or aim.want[0] != "hips" or not carries:      # its own axis may point down
+        elif aim is None or aim.want[0] != "hips" or not self.carries_chest:      # its own axis may point down
             above = next((r for r in ("spine", "chest") if r in by and not self.below[hips][by[r]]), None)
             if above is not None:
                 out[hips] = _Aim(hips, (by["thigh.R"], 0), (by["thigh.L"], 0), ("thigh.R", "thigh.L"),

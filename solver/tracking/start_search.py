@@ -31,6 +31,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import ArticulaInputError
+from ..geometry.normals import vertex_areas
 from ..geometry.rotations import matrix_to_quat, quat_mul, rotation_between
 from ..rig.model import Model, Poses
 from ..rig.skinning import hybrid_skin
@@ -108,11 +109,9 @@ def recombined_start(model: Model, poser: RigPoser, joints, points, pose_set: Po
     limb then searched as the start poses' are (:func:`_recombined`); placed by its hips joint, or by the
     joints of :data:`PLACING` when its hips bone does not carry the chest (a learned rig's starts there)."""
     ix = POSE_ROLES.index
-    hips = poser.roles["hips"]
-    carries = "chest" in poser.roles and poser.below[hips][poser.roles["chest"]]
-    placing = ("hips",) if carries else PLACING
+    placing = ("hips",) if poser.carries_chest else PLACING
     rows, bones = (np.array(x) for x in zip(*[(ix(r), poser.roles[r]) for r in placing]))
-    origin = joints[ix("hips")] if carries else 0.5 * (joints[ix("thigh.L")] + joints[ix("thigh.R")])
+    origin = joints[ix("hips")] if poser.carries_chest else 0.5 * (joints[ix("thigh.L")] + joints[ix("thigh.R")])
     up = _unit_vector(joints[ix("neck")] - origin)
     left = joints[ix("thigh.L")] - joints[ix("thigh.R")]
     left = _unit_vector(left - up * (left @ up))
@@ -163,9 +162,8 @@ def _area_sample(model, n, rng, mask=None) -> np.ndarray:
     """Indices of ``n`` distinct vertices (among ``mask (V,)`` if given) drawn with probability
     proportional to their area (a third of their triangles'), so dense hands and faces do not outweigh
     the body."""
-    v, f = model.rest_vertices, model.faces
-    area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
-    w = np.bincount(f.ravel(), np.repeat(area / 3.0, 3), minlength=len(v)) + 1e-12
+    v = model.rest_vertices
+    w = vertex_areas(v, model.faces) + 1e-12
     if mask is not None:
         w = w * mask
     return np.sort(rng.choice(len(v), min(n, int(np.count_nonzero(w))), replace=False, p=w / w.sum()))
