@@ -15,6 +15,7 @@ from dataclasses import replace
 
 import bpy
 
+from ..addon import preferences
 from ..addon.jobs import JobOperator
 from ..addon.rig import reader
 from ..addon.track import inputs, result, solve
@@ -142,7 +143,8 @@ class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
         if depth_inputs.uses_depth_tracker(ob, self.method):
             return self._prepare_depth(context, ob)
         options = TrackOptions(adapt=self.adapt.lower(), prior=self.prior.lower(), temporal=self.temporal,
-                               fit_scale=self.fit_scale, max_points=self.max_points).validate()
+                               fit_scale=self.fit_scale, max_points=self.max_points,
+                               workers=preferences.threads(context)).validate()
         if self.bundle.strip():
             if self.start_from_rig:
                 raise ArticulaInputError("Start From Rig's Pose needs a rig in the scene, not a bundle file")

@@ -38,12 +38,14 @@ from .common import call_operator, check_blend_output, editing, finish, write_js
 from .scans import add_axis_arguments, axis_props
 
 # TrackOptions field -> the flag that sets it (error messages name the flag the user typed)
-FLAGS = {"adapt": "--adapt", "prior": "--prior", "max_points": "--max-points", "frames": "--frames"}
+FLAGS = {"adapt": "--adapt", "prior": "--prior", "max_points": "--max-points", "frames": "--frames",
+         "workers": "--threads"}
 
 
 def _options(args, count: int) -> TrackOptions:
     options = TrackOptions(adapt="off" if args.no_adapt else args.adapt, prior=args.prior,
-                           temporal=not args.no_temporal, fit_scale=args.fit_scale, max_points=args.max_points)
+                           temporal=not args.no_temporal, fit_scale=args.fit_scale, max_points=args.max_points,
+                           workers=args.threads)
     if args.frames is not None:
         options = replace(options, frames=parse_frames(args.frames, count))
     try:
@@ -162,6 +164,9 @@ def add_commands(sub):
     p.add_argument("--fit-scale", action="store_true", help="also fit one uniform scale")
     p.add_argument("--max-points", type=int, default=default.max_points,
                    help=f"thin captures to about this many points (default {default.max_points}; 0: keep all)")
+    p.add_argument("--threads", type=int, default=default.workers,
+                   help=f"solver threads for the capture tracker (default {default.workers}: one per CPU core; the "
+                        f"result does not depend on it)")
     add_axis_arguments(p)
     p.set_defaults(func=run)
     m = sub.add_parser("merge-tracks", help="join tracked chunks (track --frames A:B, overlapping) into one")

@@ -358,17 +358,24 @@ def _kid_block(bt, a, c, wt_k, ws_k, L3Jdq, vt, keys):
 def dense_jacobian(model, poses, cols, width, groups=None, heads=False, frame_basis=None):
     """Posed vertices ``(N, V, 3)`` and the Jacobian ``(N, V, 3, width)`` with the pieces at the columns
     ``cols`` (:func:`group_jacobian`), zero elsewhere.  ``groups``: optional :class:`AnchorGroups`."""
-    check_pose_shapes(model, poses)
     groups = _groups_for(model, groups)
+    posed, J = sorted_jacobian(model, poses, cols, width, groups, heads, frame_basis)
+    inv = groups.inverse
+    return posed[:, inv], J[:, inv]
+
+
+def sorted_jacobian(model, poses, cols, width, groups, heads=False, frame_basis=None, dtype=np.float64):
+    """:func:`dense_jacobian` in the anchor-sorted vertex order of ``groups`` (row ``groups.inverse[v]``
+    is vertex v's) and of ``dtype``: what a caller that looks rows up keeps, without the reordered copy."""
+    check_pose_shapes(model, poses)
     bt = jacobian_terms(model, poses, heads, frame_basis)
     N, V = len(poses), model.num_vertices
     posed = np.empty((N, V, 3))
-    J = np.empty((N, V, 3, width))                                   # in AnchorGroups order until the end
+    J = np.empty((N, V, 3, width), dtype=dtype)
     for group in groups.groups:
         xp, R, T = group_jacobian(bt, groups, group, cols, width)
         posed[:, group[2]:group[3]], J[:, group[2]:group[3]] = xp, _per_frame_matmul(R, T)
-    inv = groups.inverse
-    return posed[:, inv], J[:, inv]
+    return posed, J
 
 
 def factored_gram(R, T):

@@ -16,6 +16,7 @@ import dataclasses
 import numpy as np
 
 from ..errors import ArticulaInputError
+from ..parallel import map_pieces
 from ..rig.model import Poses
 from ..tracking.checks import check_frame
 from ..tracking.geodesic_starts import geodesic_starts
@@ -69,21 +70,33 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
     else:
         starts = turned_rests(body.model, capture.points)
     starts += list(extra)
-    coarse = []
-    for start in starts:
-        fit = _fit(body, capture, start, priors, SEARCH[:1], settings, cancel)
-        coarse.append((coverage_score(body, capture, fit.state), fit.pose))
-    coarse.sort(key=lambda item: item[0])
+
+    def coarse_fit(item):
+        fit = _fit(body, capture, item[1], priors, SEARCH[:1], settings, cancel, slot=("start", item[0]))
+        return coverage_score(body, capture, fit.state), fit.pose
+
+    coarse = sorted(map_pieces(coarse_fit, enumerate(starts)), key=lambda item: item[0])
+
+    def fine_fit(item):
+        fit = _fit(body, capture, item[1][1], priors, SEARCH[1:], settings, cancel, slot=("start", item[0]))
+        return fit.pose, coverage_score(body, capture, fit.state), _verdict(body, capture, fit, checked)
+
     best = None
-    for k, (_, pose) in enumerate(coarse):
-        if k >= KEEP and best[2] == 0:
+    for pose, score, lost in map_pieces(fine_fit, enumerate(coarse[:KEEP])):
+        best = _better(best, (pose, score, lost))
+    for item in enumerate(coarse[KEEP:], KEEP):
+        if best[2] == 0:
             break
-        fit = _fit(body, capture, pose, priors, SEARCH[1:], settings, cancel)
-        lost, score = _verdict(body, capture, fit, checked), coverage_score(body, capture, fit.state)
-        if best is None or score * LOST_PENALTY ** lost < best[1] * LOST_PENALTY ** best[2]:
-            best = (fit.pose, score, lost)
+        best = _better(best, fine_fit(item))
     pose, score = _settled(body, capture, best[0], best[1], priors, settings, cancel)
     return pose, score, len(starts)
+
+
+def _better(best, fit):
+    """The better of two ``(pose, score, lost)``: a lost verdict counts as ``LOST_PENALTY`` times the score."""
+    if best is None or fit[1] * LOST_PENALTY ** fit[2] < best[1] * LOST_PENALTY ** best[2]:
+        return fit
+    return best
 
 
 def _settled(body, capture, pose, score, priors, settings, cancel):
@@ -109,9 +122,12 @@ def _verdict(body, capture, fit, checked) -> int:
     return int(check_frame(body.model, fit.pose, fit.state.posed, capture, checked).verdict == "lost")
 
 
-def _fit(body, capture, start, priors, stages, settings, cancel):
-    return fit_frame(body, capture.points, capture.normals, start, priors=priors, stages=stages,
-                     settings=settings, cancel=cancel, weak_ratio=SEARCH_HOLD)
+def _fit(body, capture, start, priors, stages, settings, cancel, slot=0):
+    try:
+        return fit_frame(body, capture.points, capture.normals, start, priors=priors, stages=stages,
+                         settings=settings, cancel=cancel, weak_ratio=SEARCH_HOLD, slot=slot)
+    finally:
+        body.release(slot)
 
 
 def humanoid(skeleton) -> bool:

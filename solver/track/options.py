@@ -27,7 +27,9 @@ class TrackOptions:
     hypotheses: start poses refined on the first frame and on lost frames; lost_factor, lost_mm: a frame
     whose median capture-to-model distance exceeds both ``lost_factor`` times the running median and
     ``lost_mm`` is re-initialised, and lost if that does not help; poor_fit_mm: a median above it is
-    reported as a poor fit; checks: the truth-free checks of every frame (:mod:`solver.tracking.checks`)."""
+    reported as a poor fit; checks: the truth-free checks of every frame (:mod:`solver.tracking.checks`);
+    workers: threads for the fits that do not depend on each other (the first frame's start hypotheses, a
+    window's frames, the report's frames; 0: one per CPU core); the result does not depend on it."""
     adapt: str = "off"
     adapt_every: int = 25
     temporal: bool = True
@@ -45,6 +47,7 @@ class TrackOptions:
     lost_mm: float = 15.0
     poor_fit_mm: float = 10.0
     checks: bool = True
+    workers: int = 0
 
     def validate(self) -> "TrackOptions":
         """Raise :class:`ArticulaInputError` naming the first setting out of range; returns self."""
@@ -53,7 +56,7 @@ class TrackOptions:
         if self.prior not in PRIOR_CHOICES:
             raise ArticulaInputError(f"prior: expected one of {', '.join(PRIOR_CHOICES)}, got {self.prior!r}")
         for name, lo, hi in (("adapt_every", 1, 10_000), ("window", 3, 101), ("hypotheses", 1, 64),
-                             ("max_points", 0, 10_000_000), ("samples", 200, 1_000_000)):
+                             ("max_points", 0, 10_000_000), ("samples", 200, 1_000_000), ("workers", 0, 1024)):
             value = getattr(self, name)
             if int(value) != value or not lo <= value <= hi:
                 raise ArticulaInputError(f"{name}: expected a whole number in {lo}..{hi}, got {value}")

@@ -27,7 +27,7 @@ import time
 import numpy as np
 
 from ..errors import ArticulaInputError
-from ..parallel import single_blas_thread
+from ..parallel import single_blas_thread, using
 from ..rig.model import Model, Poses
 from ..tracking.body import Body
 from ..tracking.checks import prepare
@@ -84,7 +84,7 @@ def track_sequence(model, source, options: TrackOptions = TrackOptions(), traini
     :class:`..errors.Cancelled`."""
     options.validate()
     model.validate()
-    with single_blas_thread():
+    with single_blas_thread(), using(options.workers):
         clock, say = Clock(), Progress(progress)
         rec = Recording(source, options)
         prior, prior_name = clock.run("prior", choose_prior, model, training_poses, options.prior)

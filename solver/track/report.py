@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..parallel import map_pieces, workers
 from ..tracking.checks import check_frame
 from . import metrics
 
@@ -18,23 +19,30 @@ def assess(body, rec, poses, checked=None) -> list:
     """Fill every usable frame's entry with its distances and, when ``options.checks``, its verdict and
     reasons (``checked``: the model prepared by :func:`solver.tracking.checks.prepare`, None: no checks).
     Returns the input frames the checks flag (doubtful or lost): their poses are kept (a check
-    can be wrong where the subject really touches itself) and the report says so."""
-    doubtful = []
-    for i in rec.usable():
-        pose = poses.take(i)
-        posed = body.pose(pose)
-        capture = rec.capture(i)
-        d = metrics.point_to_mesh(capture.points, posed, body.model.faces) * 1e3
-        stats = metrics.robust_stats(d)
-        entry = rec.entries[i]
-        entry.update(mean_mm=stats["mean"], median_mm=stats["median"], mad_mm=stats["mad"], iqr_mm=stats["iqr"])
-        if checked is None:
-            continue
-        verdict = check_frame(body.model, pose, posed, capture, checked)
-        entry.update(verdict=verdict.verdict, checks=list(verdict.reasons))
-        if verdict.verdict != "good":
-            doubtful.append(rec.range[i])
+    can be wrong where the subject really touches itself) and the report says so.  Frames are assessed
+    on the solver's threads a few at a time (captures are read in this thread: the recording's cache is
+    not shared)."""
+    doubtful, usable = [], rec.usable()
+    batch = 2 * workers()
+    for first in range(0, len(usable), batch):
+        chunk = [(i, poses.take(i), rec.capture(i)) for i in usable[first:first + batch]]
+        for (i, _, _), (stats, verdict) in zip(chunk, map_pieces(lambda item: _assessed(body, checked, *item[1:]),
+                                                                 chunk)):
+            entry = rec.entries[i]
+            entry.update(mean_mm=stats["mean"], median_mm=stats["median"], mad_mm=stats["mad"], iqr_mm=stats["iqr"])
+            if verdict is None:
+                continue
+            entry.update(verdict=verdict.verdict, checks=list(verdict.reasons))
+            if verdict.verdict != "good":
+                doubtful.append(rec.range[i])
     return doubtful
+
+
+def _assessed(body, checked, pose, capture):
+    """``(distance statistics (mm), verdict or None)`` of one frame."""
+    posed = body.pose(pose)
+    stats = metrics.robust_stats(metrics.point_to_mesh(capture.points, posed, body.model.faces) * 1e3)
+    return stats, None if checked is None else check_frame(body.model, pose, posed, capture, checked)
 
 
 def notes(rec, prior_name, options, doubtful) -> list:

@@ -10,10 +10,11 @@ column; the subject's scale stays what the pose says.  Shapes: posed vertices ``
 from __future__ import annotations
 
 import numpy as np
+from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 
 from ..errors import ArticulaInputError
-from ..rig.jacobians import apply_pose_increment, pose_jacobian
+from ..rig.jacobians import apply_pose_increment, pose_jacobian, sorted_jacobian
 from ..rig.model import Model, Poses
 from ..rig.skinning import AnchorGroups, hybrid_skin
 
@@ -34,6 +35,7 @@ class Body:
         self.num_bones = model.skeleton.num_bones
         self.size = 3 + 3 * self.num_bones
         self.columns = np.r_[0:3, 4:4 + 3 * self.num_bones]     # of the rig's full layout (no scale)
+        self.pieces = {"t": 0, **{("rot", b): 3 + 3 * b for b in range(self.num_bones)}}   # the same, by piece
         self.faces = np.asarray(model.faces, dtype=np.int64)
         self.ring = one_ring(self.faces, model.num_vertices)
         self._jacobians = {}                                           # slot -> (pose, J float32)
@@ -44,26 +46,36 @@ class Body:
         ``slot`` keeps one such evaluation per frame of a window.  Why: a fit moves the pose by little
         between its later iterations, and a Jacobian a few hundredths of a radian old changes only the
         Gauss–Newton steps, not the residuals, so not the pose the fit converges to."""
-        return self._held(pose, slot, tolerance)[np.asarray(vertices, dtype=np.int64)].astype(np.float64)
+        rows = self.groups.inverse[np.asarray(vertices, dtype=np.int64)]
+        return self._held(pose, slot, tolerance)[rows].astype(np.float64)
 
     def combined_jacobian(self, pose: Poses, vertices, coefficients, slot=0) -> np.ndarray:
         """``(K, P)`` = ``sum_c coefficients[k, c] . J(vertices[k, c])``: rows of held vertex Jacobians
         (:meth:`jacobian_near`) combined by ``coefficients (K, C, 3)`` in single precision (what a
         Gauss–Newton step needs), returned in double."""
-        J = self._held(pose, slot, JACOBIAN_REUSE_RAD)[np.asarray(vertices, dtype=np.int64)]   # (K, C, 3, P)
-        return np.einsum("kcj,kcjp->kp", coefficients.astype(np.float32), J, optimize=True).astype(np.float64)
+        J = self._held(pose, slot, JACOBIAN_REUSE_RAD)                          # (V, 3, P), anchor order
+        K, C = coefficients.shape[:2]
+        rows = self.groups.inverse[np.asarray(vertices, dtype=np.int64).reshape(K, C, 1)]
+        columns = (3 * rows + np.arange(3)).ravel()
+        combine = csr_matrix((coefficients.astype(np.float32).ravel(), columns, np.arange(0, 3 * C * K + 1, 3 * C)),
+                             shape=(K, J.shape[0] * 3))       # one sparse row per combination: no gathered copy
+        return np.asarray(combine @ J.reshape(-1, J.shape[2]), dtype=np.float64)
 
     def _held(self, pose, slot, tolerance):
         held = self._jacobians.get(slot)
         if held is None or _turned(held[0], pose) > tolerance:
-            J = pose_jacobian(self.model, pose, self.groups)[1][0][..., self.columns]
-            held = self._jacobians[slot] = (pose, J.astype(np.float32))
+            J = sorted_jacobian(self.model, pose, self.pieces, self.size, self.groups, dtype=np.float32)[1][0]
+            held = self._jacobians[slot] = (pose, J)
         return held[1]
 
     def forget(self, keep=()) -> None:
         """Drop the held Jacobians (memory: V x 3 x P float32 each) but those of the slots ``keep``."""
         for slot in [s for s in self._jacobians if s not in keep]:
-            del self._jacobians[slot]
+            self.release(slot)
+
+    def release(self, slot) -> None:
+        """Drop the held Jacobian of ``slot`` (if any)."""
+        self._jacobians.pop(slot, None)
 
     def pose(self, pose: Poses) -> np.ndarray:
         """Posed vertices ``(V, 3)`` of one frame."""
@@ -106,7 +118,9 @@ class Surface:
         edge = np.max([np.linalg.norm(x - y, axis=1) for x, y in ((a, b), (b, c), (c, a))], axis=0)   # (F,)
         self.by_edge = np.argsort(-edge, kind="stable")                  # triangles, longest edge first
         self.edge = edge[self.by_edge]
-        n = np.cross(b - a, c - a)
+        self.corner, self.ab, self.ac = a, b - a, c - a
+        self.gram = np.stack([_dot(self.ab, self.ab), _dot(self.ab, self.ac), _dot(self.ac, self.ac)], axis=1)
+        n = np.cross(self.ab, self.ac)
         self.face_normals = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
 
     def closest(self, queries):
@@ -165,18 +179,39 @@ class Surface:
 
     def _on_rings(self, queries, k: int):
         """Closest points on the triangles around each query's ``k`` nearest vertices: ``(face, bary,
-        foot, distance, nearest vertex, distance of the k-th nearest vertex)``."""
+        foot, distance, nearest vertex, distance of the k-th nearest vertex)``.  Each triangle is tried
+        once per query (the rings of neighbouring vertices share most of theirs)."""
         gap, near = self.tree.query(queries, k=k)
         near, gap = near.reshape(len(queries), -1), gap.reshape(len(queries), -1)
-        tris = self.ring[near].reshape(len(queries), -1)                 # (Q, k R), -1 padding
-        valid = tris >= 0
-        tri = self.faces[np.maximum(tris, 0)]                            # (Q, kR, 3)
-        bary = closest_barycentric(queries[:, None, :], *(self.vertices[tri[..., c]] for c in range(3)))
-        foot = np.einsum("qrk,qrkj->qrj", bary, self.vertices[tri])
-        d2 = np.where(valid, np.sum((foot - queries[:, None, :]) ** 2, axis=2), np.inf)
-        best = np.argmin(d2, axis=1)
-        rows = np.arange(len(queries))
-        return tris[rows, best], bary[rows, best], foot[rows, best], np.sqrt(d2[rows, best]), near[:, 0], gap[:, -1]
+        tris = np.sort(self.ring[near].reshape(len(queries), -1), axis=1)   # (Q, k R), -1 padding first
+        fresh = tris >= 0
+        fresh[:, 1:] &= tris[:, 1:] != tris[:, :-1]
+        row, col = np.nonzero(fresh)                                       # grouped by row, in order
+        tri = tris[row, col]
+        vw, d2 = self._on_triangles(queries[row], tri)
+        lowest = np.full(len(queries), np.inf)
+        seen = np.flatnonzero(fresh.any(axis=1))                           # rows with a triangle
+        if len(seen):
+            lowest[seen] = np.minimum.reduceat(d2, np.searchsorted(row, seen))
+        pick = np.flatnonzero(d2 <= lowest[row])
+        pick = pick[np.r_[True, row[pick][1:] != row[pick][:-1]]]          # the first closest of each row
+        face = np.zeros(len(queries), np.int64)
+        v, w = np.zeros(len(queries)), np.zeros(len(queries))
+        dist = np.full(len(queries), np.inf)
+        at = row[pick]
+        face[at], v[at], w[at], dist[at] = tri[pick], vw[0][pick], vw[1][pick], np.sqrt(d2[pick])
+        bary = np.stack([1.0 - v - w, v, w], axis=1)
+        foot = self.corner[face] + v[:, None] * self.ab[face] + w[:, None] * self.ac[face]
+        return face, bary, foot, dist, near[:, 0], gap[:, -1]
+
+    def _on_triangles(self, points, tri):
+        """``((v, w), squared distance)`` of the closest point ``a + v ab + w ac`` on triangles ``tri (M,)``
+        to ``points (M, 3)``, from the triangles' edge vectors and Gram entries (:func:`_regions`)."""
+        ap = points - self.corner[tri]
+        ab, ac = self.ab[tri], self.ac[tri]
+        v, w = _regions(_dot(ab, ap), _dot(ac, ap), *self.gram[tri].T)
+        off = v[:, None] * ab + w[:, None] * ac - ap
+        return (v, w), _dot(off, off)
 
 
 def one_ring(faces, num_vertices: int) -> np.ndarray:
@@ -195,45 +230,42 @@ def one_ring(faces, num_vertices: int) -> np.ndarray:
 
 def closest_barycentric(p, a, b, c):
     """Barycentric coordinates ``(..., 3)`` of the closest point to ``p`` on triangles ``(a, b, c)``
-    (all ``(..., 3)``, broadcast): the region tests of the point-triangle distance (Ericson,
-    Real-Time Collision Detection §5.1.5), vectorised.  Degenerate triangles give a corner or an edge."""
+    (all ``(..., 3)``, broadcast), by :func:`_regions`."""
     ab, ac, ap = b - a, c - a, p - a
-    d1, d2 = _dot(ab, ap), _dot(ac, ap)
-    bp = p - b
-    d3, d4 = _dot(ab, bp), _dot(ac, bp)
-    cp = p - c
-    d5, d6 = _dot(ab, cp), _dot(ac, cp)
+    v, w = _regions(_dot(ab, ap), _dot(ac, ap), _dot(ab, ab), _dot(ab, ac), _dot(ac, ac))
+    return np.stack([1.0 - v - w, v, w], axis=-1)
+
+
+def _regions(d1, d2, d00, d01, d11):
+    """``(v, w)`` of the closest point ``a + v ab + w ac`` of a triangle to a point p, from ``d1 = ab.ap``,
+    ``d2 = ac.ap`` and the Gram entries ``ab.ab, ab.ac, ac.ac`` (arrays, broadcast): the region tests of the
+    point-triangle distance (Ericson, Real-Time Collision Detection §5.1.5), vectorised, with the dot
+    products at b and c written through the Gram entries (``ab.bp = d1 - ab.ab`` ...).  Degenerate
+    triangles give a corner or an edge."""
+    d3, d4, d5, d6 = d1 - d00, d2 - d01, d1 - d01, d2 - d11
     va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
     den = va + vb + vc
     inside = np.where(np.abs(den) > 1e-300, 1.0 / np.where(den == 0, 1.0, den), 0.0)
     v, w = vb * inside, vc * inside
-    out = np.stack([1.0 - v - w, v, w], axis=-1)
-    cases = (
-        ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), _edge(d4 - d3, (d4 - d3) + (d5 - d6), 1, 2)),
-        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), _edge(d2, d2 - d6, 0, 2)),
-        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), _edge(d1, d1 - d3, 0, 1)),
-        ((d6 >= 0) & (d5 <= d6), _corner(2, d1.shape)),
-        ((d3 >= 0) & (d4 <= d3), _corner(1, d1.shape)),
-        ((d1 <= 0) & (d2 <= 0), _corner(0, d1.shape)),
+    zero, one = np.zeros_like(v), np.ones_like(v)
+    bc = _fraction(d4 - d3, (d4 - d3) + (d5 - d6))
+    cases = (                                 # later cases take precedence, as in the sequential tests
+        ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), 1.0 - bc, bc),          # edge bc
+        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), zero, _fraction(d2, d2 - d6)),      # edge ac
+        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), _fraction(d1, d1 - d3), zero),      # edge ab
+        ((d6 >= 0) & (d5 <= d6), zero, one),                                     # corner c
+        ((d3 >= 0) & (d4 <= d3), one, zero),                                     # corner b
+        ((d1 <= 0) & (d2 <= 0), zero, zero),                                     # corner a
     )
-    for mask, value in cases:                 # later cases take precedence, as in the sequential tests
-        out = np.where(mask[..., None], value, out)
-    return out
+    for mask, cv, cw in cases:
+        v, w = np.where(mask, cv, v), np.where(mask, cw, w)
+    return v, w
 
 
 def _dot(x, y):
-    return np.sum(x * y, axis=-1)
+    return np.einsum("...i,...i->...", x, y)
 
 
-def _edge(num, den, i, j):
-    """Barycentrics of the point ``t = num/den`` along the edge from corner i to corner j."""
-    t = np.clip(num / np.where(den == 0, 1.0, den), 0.0, 1.0)
-    out = np.zeros(t.shape + (3,))
-    out[..., i], out[..., j] = 1.0 - t, t
-    return out
-
-
-def _corner(i, shape):
-    out = np.zeros(shape + (3,))
-    out[..., i] = 1.0
-    return out
+def _fraction(num, den):
+    """``num / den`` clipped to [0, 1] (0 where ``den`` is 0): the parameter along an edge."""
+    return np.clip(num / np.where(den == 0, 1.0, den), 0.0, 1.0)

@@ -55,53 +55,86 @@ def kmeans_pp(X, K, rng) -> np.ndarray:
 
 def log_components(X, mix: Mixture) -> np.ndarray:
     """``(N, K)`` log of ``weight_k * N(x_n | mean_k, precision_k^-1)`` (normalised Gaussians)."""
+    return _log_components(X, mix.weights[None], mix.means[None], mix.precisions[None])[0]
+
+
+def _log_components(X, weights, means, precisions) -> np.ndarray:
+    """``(F, N, K)``: :func:`log_components` of ``F`` mixtures stacked as ``weights (F, K)``, ``means
+    (F, K, D)``, ``precisions (F, K, D, D)`` at the same samples ``X (N, D)``."""
     D = X.shape[1]
-    diff = X[:, None, :] - mix.means[None]
-    maha = np.einsum("nki,kij,nkj->nk", diff, mix.precisions, diff)
-    _, logdet = np.linalg.slogdet(mix.precisions)
+    diff = X[None, :, None, :] - means[:, None]
+    maha = np.einsum("fnki,fkij,fnkj->fnk", diff, precisions, diff)
+    _, logdet = np.linalg.slogdet(precisions)
     with np.errstate(divide="ignore"):
-        logw = np.log(mix.weights)
-    return logw + 0.5 * logdet - 0.5 * D * np.log(2 * np.pi) - 0.5 * maha
+        logw = np.log(weights)
+    return (logw + 0.5 * logdet - 0.5 * D * np.log(2 * np.pi))[:, None, :] - 0.5 * maha
 
 
 def log_likelihood(X, mix: Mixture) -> np.ndarray:
     """``(N,)`` log density of the (normalised) mixture at ``X (N, D)``."""
-    lc = log_components(X, mix)
-    m = lc.max(axis=1, keepdims=True)
-    return (m + np.log(np.exp(lc - m).sum(axis=1, keepdims=True)))[:, 0]
+    return _logsumexp(log_components(X, mix))
 
 
-def _m_step(X, resp, reg):
-    """Weights, means, precisions from responsibilities ``resp (N, K)``; empty components keep a tiny
-    weight, the data mean and the regularised data covariance."""
-    N, D = X.shape
-    nk = resp.sum(axis=0)
+def _logsumexp(lc):
+    m = lc.max(axis=-1, keepdims=True)
+    return (m + np.log(np.exp(lc - m).sum(axis=-1, keepdims=True)))[..., 0]
+
+
+def _m_step(X, resp, reg, rows):
+    """Weights ``(F, K)``, means ``(F, K, D)``, precisions ``(F, K, D, D)`` from responsibilities ``resp
+    (F, N, K)`` (zero on the rows a mixture leaves out) and ``rows (F, N)``, the rows each mixture sees;
+    empty components keep a tiny weight, the mean and the regularised covariance of those rows."""
+    D = X.shape[1]
+    nk = resp.sum(axis=1)
     safe = np.maximum(nk, 1e-12)
-    means = (resp.T @ X) / safe[:, None]
+    means = np.einsum("fnk,nd->fkd", resp, X) / safe[..., None]
+    diff = X[None, :, None, :] - means[:, None]
+    cov = np.einsum("fnk,fnki,fnkj->fkij", resp, diff, diff) / safe[..., None, None]
     empty = nk < 1e-9
-    means[empty] = X.mean(axis=0)
-    diff = X[:, None, :] - means[None]
-    cov = np.einsum("nk,nki,nkj->kij", resp, diff, diff) / safe[:, None, None]
-    cov[empty] = np.cov(X.T, bias=True).reshape(D, D)
+    if empty.any():
+        f = np.nonzero(empty)[0]
+        count = rows[f].sum(axis=1)[:, None]
+        centre = rows[f].astype(float) @ X / count
+        d = (X[None] - centre[:, None]) * rows[f][..., None]
+        means[empty] = centre
+        cov[empty] = np.einsum("fni,fnj->fij", d, d) / count[..., None]
     cov += reg * np.eye(D)
-    weights = np.maximum(nk, 1e-12) / max(nk.sum(), 1e-300)
-    return Mixture(weights / weights.sum(), means, np.linalg.inv(cov))
+    weights = np.maximum(nk, 1e-12) / np.maximum(nk.sum(axis=1, keepdims=True), 1e-300)
+    return weights / weights.sum(axis=1, keepdims=True), means, np.linalg.inv(cov)
 
 
 def em(X, start: Mixture, reg: float, max_iter: int = 200, tol: float = 1e-8):
     """EM iterations from ``start`` on ``X (N, D)``: ``(mixture, log-likelihood history (T,))``, stopping
     when the mean log-likelihood gains less than ``tol``.  With a negligible ``reg`` this is exact EM and
     the history is non-decreasing; the covariance load can make it dip by amounts of the order of ``reg``."""
-    mix, history = start, []
+    fits, history = _em(X, np.ones((1, len(X)), dtype=bool), start, reg, max_iter, tol)
+    return fits[0], history[0]
+
+
+def _em(X, rows, start: Mixture, reg: float, max_iter: int, tol: float = 1e-8):
+    """EM of ``F`` mixtures at once, mixture f on the rows ``rows[f] (F, N)`` of ``X``, all from
+    ``start``, each stopping on its own (:func:`em`): ``(F mixtures, F histories)``."""
+    F = len(rows)
+    w = np.repeat(start.weights[None], F, axis=0)
+    m = np.repeat(start.means[None], F, axis=0)
+    L = np.repeat(start.precisions[None], F, axis=0)
+    count = rows.sum(axis=1)
+    history = [[] for _ in range(F)]
+    active = np.arange(F)
     for _ in range(max_iter):
-        lc = log_components(X, mix)
-        m = lc.max(axis=1, keepdims=True)
-        ll = m[:, 0] + np.log(np.exp(lc - m).sum(axis=1))
-        history.append(ll.mean())
-        if len(history) > 1 and history[-1] - history[-2] < tol:
+        lc = _log_components(X, w[active], m[active], L[active])
+        ll = _logsumexp(lc)
+        mean = np.where(rows[active], ll, 0.0).sum(axis=1) / count[active]
+        go = np.ones(len(active), dtype=bool)
+        for i, f in enumerate(active):
+            history[f].append(mean[i])
+            go[i] = len(history[f]) < 2 or history[f][-1] - history[f][-2] >= tol
+        if not go.any():
             break
-        mix = _m_step(X, np.exp(lc - ll[:, None]), reg)
-    return mix, np.array(history)
+        active, lc, ll = active[go], lc[go], ll[go]
+        resp = np.exp(lc - ll[..., None]) * rows[active][..., None]
+        w[active], m[active], L[active] = _m_step(X, resp, reg, rows[active])
+    return [Mixture(w[f], m[f], L[f]) for f in range(F)], [np.array(h) for h in history]
 
 
 def fit(X, K: int, seed: int = 0, reg: float = None, max_iter: int = 200) -> Mixture:
@@ -111,21 +144,38 @@ def fit(X, K: int, seed: int = 0, reg: float = None, max_iter: int = 200) -> Mix
     reg = regularisation(X) if reg is None else reg
     centres = kmeans_pp(X, K, np.random.default_rng(seed))
     nearest = np.argmin(np.sum((X[:, None, :] - centres[None]) ** 2, axis=2), axis=1)
-    resp = np.zeros((len(X), K))
-    resp[np.arange(len(X)), nearest] = 1.0
-    return em(X, _m_step(X, resp, reg), reg, max_iter)[0]
+    resp = np.zeros((1, len(X), K))
+    resp[0, np.arange(len(X)), nearest] = 1.0
+    w, m, L = _m_step(X, resp, reg, np.ones((1, len(X)), dtype=bool))
+    return em(X, Mixture(w[0], m[0], L[0]), reg, max_iter)[0]
 
 
 def loo_fits(X, full: Mixture, reg: float, max_iter: int = 50) -> list:
     """Leave-one-out mixtures: for each n, EM on ``X`` without row n, started from ``full`` (the fit on
     all rows; a warm start, so each refit needs few iterations)."""
-    keep = ~np.eye(len(X), dtype=bool)
-    return [em(X[keep[n]], full, reg, max_iter)[0] for n in range(len(X))]
+    return _em(X, ~np.eye(len(X), dtype=bool), full, reg, max_iter)[0]
 
 
 def loo_score(X, fits: list) -> float:
     """Mean held-out log-likelihood of the rows of ``X`` under their leave-one-out fits."""
-    return float(np.mean([log_likelihood(X[n:n + 1], f)[0] for n, f in enumerate(fits)]))
+    return _held_out(X, *_stacked(fits))
+
+
+def _stacked(fits: list):
+    """``(weights (F, K), means (F, K, D), precisions (F, K, D, D))`` of mixtures with one component count."""
+    return (np.array([f.weights for f in fits]), np.array([f.means for f in fits]),
+            np.array([f.precisions for f in fits]))
+
+
+def _held_out(X, weights, means, precisions) -> float:
+    """Mean over n of the log density of row n of ``X (N, D)`` under stacked mixture n."""
+    D = X.shape[1]
+    diff = X[:, None, :] - means
+    maha = np.einsum("nki,nkij,nkj->nk", diff, precisions, diff)
+    _, logdet = np.linalg.slogdet(precisions)
+    with np.errstate(divide="ignore"):
+        lc = np.log(weights) + 0.5 * logdet - 0.5 * D * np.log(2 * np.pi) - 0.5 * maha
+    return float(np.mean(_logsumexp(lc)))
 
 
 def select_components(X, k_max: int, seed: int = 0, floor: float = REG_ABS):
@@ -148,31 +198,40 @@ def select_components(X, k_max: int, seed: int = 0, floor: float = REG_ABS):
 
 def is_positive_definite(P) -> bool:
     """True when the symmetric matrices ``P (..., D, D)`` all have eigenvalues above ``PD_MIN_EIG``."""
-    return bool(np.all(np.linalg.eigvalsh(P) > PD_MIN_EIG))
+    return bool(np.all(_positive_definite(P)))
+
+
+def _positive_definite(P) -> np.ndarray:
+    """``(...)`` per matrix of ``P (..., D, D)``: eigenvalues all above ``PD_MIN_EIG``."""
+    return np.linalg.eigvalsh(P).min(axis=-1) > PD_MIN_EIG
 
 
 def apply_zeros(P, entries):
-    """Precision ``P (D, D)`` with the symmetric ``entries`` [(i, j), ...] set to zero; if that loses
-    positive definiteness, those entries are shrunk towards zero only as far as it stays positive
-    definite (bisection on a common factor; the original matrix is positive definite)."""
+    """Precision ``P (..., D, D)`` (one or a stack) with the symmetric ``entries`` [(i, j), ...] set to
+    zero; a matrix that would lose positive definiteness gets those entries shrunk towards zero only as
+    far as it stays positive definite (bisection on a common factor, per matrix; the originals are
+    positive definite)."""
     if not entries:
         return P
-    mask = np.zeros(P.shape, dtype=bool)
+    mask = np.zeros(P.shape[-2:], dtype=bool)
     for i, j in entries:
         mask[i, j] = mask[j, i] = True
-    scaled = lambda s: np.where(mask, s * P, P)
-    if is_positive_definite(scaled(0.0)):
-        return scaled(0.0)
-    lo, hi = 0.0, 1.0               # scaled(hi) is PD, scaled(lo) is not
-    for _ in range(40):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (lo, mid) if is_positive_definite(scaled(mid)) else (mid, hi)
-    return scaled(hi)
+    stack = P.reshape((-1,) + P.shape[-2:])
+    factor = np.zeros(len(stack))
+    bad = np.flatnonzero(~_positive_definite(np.where(mask, 0.0, stack)))
+    if len(bad):
+        lo, hi = np.zeros(len(bad)), np.ones(len(bad))          # the factor hi keeps PD, lo does not
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            ok = _positive_definite(np.where(mask, mid[:, None, None] * stack[bad], stack[bad]))
+            lo, hi = np.where(ok, lo, mid), np.where(ok, mid, hi)
+        factor[bad] = hi
+    return np.where(mask, factor[:, None, None] * stack, stack).reshape(P.shape)
 
 
 def sparsified(mix: Mixture, entries) -> Mixture:
     """The mixture with :func:`apply_zeros` applied to every component's precision."""
-    return Mixture(mix.weights, mix.means, np.array([apply_zeros(P, entries) for P in mix.precisions]))
+    return Mixture(mix.weights, mix.means, apply_zeros(mix.precisions, entries))
 
 
 def greedy_zero_pattern(X, fits: list, candidates) -> tuple:
@@ -180,10 +239,11 @@ def greedy_zero_pattern(X, fits: list, candidates) -> tuple:
     entry whose zeroing gives the best leave-one-out score of ``fits`` (the held-out fits of ``X``), as
     long as the score does not drop.  Returns ``(chosen entries, score without zeros, final score)``.
     The dissertation searches all patterns; a greedy search is the cheaper choice of §4.1.1's note."""
-    base = current = loo_score(X, fits)
+    weights, means, precisions = _stacked(fits)
+    base = current = _held_out(X, weights, means, precisions)
     chosen, left = [], list(candidates)
     while left:
-        trial = [(loo_score(X, [sparsified(f, chosen + [e]) for f in fits]), e) for e in left]
+        trial = [(_held_out(X, weights, means, apply_zeros(precisions, chosen + [e])), e) for e in left]
         score, e = max(trial, key=lambda t: t[0])
         if score < current:
             break

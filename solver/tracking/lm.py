@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve
 
 REJECTED_SLACK = 5.0     # a rejected step this close to the tolerance ends the fit
 REJECTED_GAIN = 1e-3     # ... as does one whose predicted decrease is below this share of the energy
@@ -75,7 +76,7 @@ def minimise(body, start, terms, stopping: Stopping = Stopping(), cancel=None) -
         if cancel is not None:
             cancel()
         step = damped_step(lin.H, lin.g, mu)
-        trial = State(body, body.moved(state.pose, step))
+        trial = State(body, body.moved(state.pose, step), state.slot)
         e_trial = trial.energy(body, terms)
         predicted = -(step @ lin.g) - 0.5 * step @ lin.H @ step
         gain = (energy - e_trial) / max(predicted, 1e-300)
@@ -103,8 +104,7 @@ def damped_step(H, g, mu):
     d = np.diag(H).copy()
     A = H + np.diag(mu * (d + 1e-12 * max(float(d.max(initial=0.0)), 1e-30)))
     try:
-        L = np.linalg.cholesky(A)
-        return -np.linalg.solve(L.T, np.linalg.solve(L, g))
+        return -cho_solve(cho_factor(A, check_finite=False), g, check_finite=False)
     except np.linalg.LinAlgError:
         return -np.linalg.lstsq(A, g, rcond=None)[0]
 

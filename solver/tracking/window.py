@@ -22,6 +22,7 @@ import numpy as np
 
 from ..geometry.rotations import quat_conj, quat_mul, quat_to_rotvec
 from ..rig.model import Poses
+from ..parallel import map_pieces
 from .lm import State, Stopping, damped_step, small_step
 from .priors import TowardPose, weak_directions
 from .terms import ScanToModel
@@ -93,9 +94,13 @@ def fit_window(body, captures, starts, w_temp: float, settings, iterations: int 
     data = [ScanToModel(c.points, c.normals, settings.samples, FINAL_EPS, FINAL_REACH, seed=k)
             for k, c in enumerate(captures)]
     slots = slots or [("window", k) for k in range(len(starts))]
-    states = [State(body, p, slot) for p, slot in zip(starts, slots)]
     P, n = body.size, len(starts)
-    lins = [t.linearise(body, s) for t, s in zip(data, states)]
+
+    def started(k):
+        state = State(body, starts[k], slots[k])
+        return state, data[k].linearise(body, state)
+
+    states, lins = map(list, zip(*map_pieces(started, range(n))))
     weight = w_temp * float(np.mean([np.linalg.eigvalsh(l.H)[-1] for l in lins]))
     terms = [[t, TowardPose(s.pose, weak_directions(l.H, WINDOW_HOLD * settings.weak_ratio))]
              for t, s, l in zip(data, states, lins)]
@@ -105,14 +110,19 @@ def fit_window(body, captures, starts, w_temp: float, settings, iterations: int 
     for _ in range(iterations):
         H, g = _system(lins, states, weight, P)
         step = damped_step(H, g, mu).reshape(n, P)
-        trial = [State(body, body.moved(s.pose, d), s.slot) for s, d in zip(states, step)]
-        e_trial = sum(s.energy(body, ts) for ts, s in zip(terms, trial)) + temporal_energy(trial, weight)
+
+        def tried(k):
+            state = State(body, body.moved(states[k].pose, step[k]), states[k].slot)
+            return state, state.energy(body, terms[k])
+
+        trial, energies = map(list, zip(*map_pieces(tried, range(n))))
+        e_trial = sum(energies) + temporal_energy(trial, weight)
         if e_trial < energy:
             done = all(small_step(d, WINDOW_STOP) for d in step)
             states, energy, mu = trial, e_trial, mu / 3.0
             if done:
                 break
-            lins = [s.linearise(body, ts) for s, ts in zip(states, terms)]
+            lins = map_pieces(lambda k: states[k].linearise(body, terms[k]), range(n))
             energy = sum(l.energy for l in lins) + temporal_energy(states, weight)
         else:
             mu *= 4.0
