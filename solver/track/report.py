@@ -8,8 +8,6 @@ limits; a frame that fails them is "doubtful" or "lost" whatever its residual.
 """
 from __future__ import annotations
 
-import numpy as np
-
 from ..parallel import map_pieces, workers
 from ..tracking.checks import check_frame
 from . import metrics

@@ -21,7 +21,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry.rotations import quat_conj, quat_mul, quat_to_rotvec
-from ..rig.model import Poses
 from ..parallel import map_pieces
 from .lm import State, Stopping, damped_step, small_step
 from .priors import TowardPose, weak_directions
