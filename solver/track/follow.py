@@ -59,6 +59,7 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
     for i in range(first + 1, len(rec)):
         t0 = time.perf_counter()
         capture = rec.capture(i)
+        rec.prefetch(i + 1)
         if rec.too_few(i):
             continue
         guess = predict(history)

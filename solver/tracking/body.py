@@ -9,11 +9,14 @@ column; the subject's scale stays what the pose says.  Shapes: posed vertices ``
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 
 from ..errors import ArticulaInputError
+from ..parallel import map_pieces, workers
 from ..rig.jacobians import apply_pose_increment, pose_jacobian, sorted_jacobian
 from ..rig.model import Model, Poses
 from ..rig.skinning import AnchorGroups, hybrid_skin
@@ -24,6 +27,7 @@ EXACT_BEYOND = 0.003
 EXACT_WITHIN = 0.1
 EXACT_SHARE = 0.1            # ... and then the mesh's exact closest point while at most this share is that far
 JACOBIAN_REUSE_RAD = 0.08    # a vertex Jacobian serves poses this close (per bone, radians)
+PIECE = 1000                 # closest-point queries per thread at least
 
 
 class Body:
@@ -115,13 +119,18 @@ class Surface:
         self.vertices, self.faces, self.ring = vertices, faces, ring
         self.tree = cKDTree(vertices)
         a, b, c = (vertices[faces[:, k]] for k in range(3))
-        edge = np.max([np.linalg.norm(x - y, axis=1) for x, y in ((a, b), (b, c), (c, a))], axis=0)   # (F,)
-        self.by_edge = np.argsort(-edge, kind="stable")                  # triangles, longest edge first
-        self.edge = edge[self.by_edge]
         self.corner, self.ab, self.ac = a, b - a, c - a
         self.gram = np.stack([_dot(self.ab, self.ab), _dot(self.ab, self.ac), _dot(self.ac, self.ac)], axis=1)
         n = np.cross(self.ab, self.ac)
         self.face_normals = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+    @functools.cached_property
+    def _by_edge(self):
+        """``(triangles longest edge first (F,), their longest edges (F,))``: only the exact pass needs them."""
+        bc = self.ac - self.ab
+        edge = np.sqrt(np.max([_dot(self.ab, self.ab), _dot(bc, bc), _dot(self.ac, self.ac)], axis=0))
+        order = np.argsort(-edge, kind="stable")
+        return order, edge[order]
 
     def closest(self, queries):
         """``(face (Q,), barycentric (Q, 3), foot (Q, 3), vertex (Q,))`` of each query ``(Q, 3)``: the
@@ -131,10 +140,10 @@ class Surface:
         triangles that search can have missed (:meth:`_missed`)."""
         if len(queries) == 0:
             return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64)
-        face, bary, foot, dist, near, _ = self._on_rings(queries, NEAREST)
+        face, bary, foot, dist, near, _ = self._rings(queries, NEAREST)
         far = np.flatnonzero((dist > EXACT_BEYOND) & (dist < EXACT_WITHIN))
         if len(far):
-            f2, b2, p2, d2, _, reach = self._on_rings(queries[far], WIDE)
+            f2, b2, p2, d2, _, reach = self._rings(queries[far], WIDE)
             better = d2 < dist[far]
             rows = far[better]
             face[rows], bary[rows], foot[rows], dist[rows] = f2[better], b2[better], p2[better], d2[better]
@@ -148,13 +157,14 @@ class Surface:
         the ball of radius ``reach``, so its longest edge is at least ``sqrt(3 (reach^2 - dist^2))`` (an
         edge subtending 120 degrees or more at p): only triangles that long are searched, and of those
         only the ones whose bounding sphere (centroid, farthest corner) comes within ``dist``."""
+        by_edge, longest = self._by_edge
         need = np.sqrt(3.0 * np.maximum(reach ** 2 - dist[rows] ** 2, 0.0))
-        keep = need <= self.edge[0]
+        keep = need <= longest[0]
         rows, need = rows[keep], need[keep]
         if not len(rows) or len(rows) > EXACT_SHARE * len(queries):
             return
-        count = np.searchsorted(-self.edge, -need.min(), side="right")
-        subset, edge = self.by_edge[:count], self.edge[:count]
+        count = np.searchsorted(-longest, -need.min(), side="right")
+        subset, edge = by_edge[:count], longest[:count]
         corners = self.vertices[self.faces[subset]]                                # (S, 3, 3)
         centre = corners.mean(axis=1)
         radius = np.sqrt(np.max(np.sum((corners - centre[:, None]) ** 2, axis=2), axis=1))
@@ -176,6 +186,14 @@ class Surface:
         r = rows[at[first]]
         face[r], bary[r], dist[r] = subset[tri[first]], b[first], d[first]
         foot[r] = np.einsum("nk,nkj->nj", b[first], corners[tri[first]])
+
+    def _rings(self, queries, k: int):
+        """:meth:`_on_rings` in one piece per solver thread (rows are independent: the same answer)."""
+        n = workers()
+        if n < 2 or len(queries) < PIECE * n:
+            return self._on_rings(queries, k)
+        pieces = map_pieces(lambda rows: self._on_rings(queries[rows], k), np.array_split(np.arange(len(queries)), n))
+        return tuple(np.concatenate(part) for part in zip(*pieces))
 
     def _on_rings(self, queries, k: int):
         """Closest points on the triangles around each query's ``k`` nearest vertices: ``(face, bary,

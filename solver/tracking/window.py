@@ -29,7 +29,8 @@ from .terms import ScanToModel
 FINAL_EPS = 0.002       # Charbonnier scale of the windows' data term (m), as the frame fit's last stage
 FINAL_REACH = 0.04
 WINDOW_HOLD = 0.1       # frames held to their starts along weak directions at this share of the frame ratio
-WINDOW_STOP = Stopping(step_rad=5e-4, step_m=1e-4)   # every frame's step below these ends a window's fit
+WINDOW_STOP = Stopping(step_rad=5e-4, step_m=1e-4, rel_energy=1e-3)   # every frame's step below these, or a
+                                                   # step lowering the energy by less than this share, ends it
 
 
 def schedule(frames, numbers, size: int, step: int) -> list:
@@ -117,7 +118,8 @@ def fit_window(body, captures, starts, w_temp: float, settings, iterations: int 
         trial, energies = map(list, zip(*map_pieces(tried, range(n))))
         e_trial = sum(energies) + temporal_energy(trial, weight)
         if e_trial < energy:
-            done = all(small_step(d, WINDOW_STOP) for d in step)
+            done = (all(small_step(d, WINDOW_STOP) for d in step)
+                    or energy - e_trial <= WINDOW_STOP.rel_energy * energy)
             states, energy, mu = trial, e_trial, mu / 3.0
             if done:
                 break
