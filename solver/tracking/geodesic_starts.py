@@ -50,6 +50,7 @@ ACROSS = 0.6           # an edge runs along the surface: |cos| to either normal 
 EXTREMITIES = 7        # capture extremities found (five of them are matched)
 LABELLINGS = 4         # labellings kept (the body's left-right symmetry gives four)
 BAND = 0.015           # half-width of a level band (m)
+THIN_BAND = 5          # points of a band widened where it holds fewer than three
 RADIUS = 0.12          # a band's points farther than this from its median are left out (m)
 LEVEL_STEP = 0.005     # levels tried on the model (m)
 MIN_BODY = 0.5         # the graph's largest part must hold this share of the points
@@ -137,8 +138,14 @@ def extremities(graph, body, X, count: int):
 
 def band_centre(X, field, inside, level, weights=None):
     """``(3,)`` weighted centre of the points of ``X`` within ``BAND`` of ``level`` on ``field`` (and
-    ``RADIUS`` of the band's median), or None when there are fewer than three."""
-    band = inside & (np.abs(field - level) < BAND)
+    ``RADIUS`` of the band's median), or None when there are fewer than three.  A band of fewer points is
+    widened to the ``THIN_BAND`` nearest the level within ``2 BAND`` (a sparse capture's band near an end)."""
+    gap = np.where(inside, np.abs(field - level), np.inf)
+    band = gap < BAND
+    if band.sum() < 3:
+        nearest = np.argsort(gap, kind="stable")[:THIN_BAND]
+        band = np.zeros(len(gap), bool)
+        band[nearest[gap[nearest] < 2 * BAND]] = True
     if band.sum() < 3:
         return None
     Q = X[band]
@@ -250,10 +257,12 @@ def rest_joints(skeleton, roles) -> np.ndarray:
 
 
 def _nearest_level(V, field, body, weights, target, lowest) -> float:
-    """The level (from ``lowest``) of ``field`` whose band centre (:func:`band_centre`) lies nearest
+    """The level (from ``lowest``, and at least ``BAND``: a band nearer the end is a cap a sparse capture
+    may hold no three points of) of ``field`` whose band centre (:func:`band_centre`) lies nearest
     ``target (3,)``."""
     order = np.flatnonzero(body)[np.argsort(field[body])]
     g, X, w = field[order], V[order], weights[order]
+    lowest = max(lowest, BAND)
     best = (np.inf, lowest)
     for level in np.arange(lowest, g[-1], LEVEL_STEP):
         a, b = np.searchsorted(g, [level - BAND, level + BAND])

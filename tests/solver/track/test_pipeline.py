@@ -369,3 +369,42 @@ def test_a_subject_whose_legs_touch_keeps_its_fits_through_the_checks():
     fitted = hybrid_skin(model, res.poses)
     for k in range(5):
         assert np.median(point_to_mesh(pts[k], fitted[k], model.faces)) < 1.5e-3, k
+
+
+def test_the_result_does_not_depend_on_the_thread_count(body):
+    """The first frame's search (start fits side by side), the windows (their frames side by side), the
+    report and the reader thread: one thread and two give the same poses and report, to the bit."""
+    poses = _motion(body, 6, seed=4)
+    _, pts = _source(body, poses)
+    src = cp.CaptureSource.from_arrays(pts, [body.faces] * 6)
+    runs = [pipeline.track_sequence(body, src, TrackOptions(adapt="off", prior="none", window=4, step=2, hypotheses=2,
+                                                            workers=n))
+            for n in (1, 2)]
+    assert np.array_equal(runs[0].poses.rotations, runs[1].poses.rotations)
+    assert np.array_equal(runs[0].poses.translations, runs[1].poses.translations)
+    assert [f["median_mm"] for f in runs[0].frames] == [f["median_mm"] for f in runs[1].frames]
+    assert [f["verdict"] for f in runs[0].frames] == [f["verdict"] for f in runs[1].frames]
+
+
+def test_a_capture_read_ahead_is_the_one_read_and_its_failure_is_raised_where_it_is_used(body):
+    from articula.solver.parallel import using
+    from articula.solver.track.recording import Recording
+    poses = _motion(body, 3)
+    _, pts = _source(body, poses)
+    src = cp.CaptureSource.from_arrays(pts, [body.faces] * 3)
+    with using(2):
+        rec = Recording(src, TrackOptions())
+        rec.prefetch(1)
+        assert np.array_equal(rec.capture(1).points, src[1].points) and rec.entries[1]["frame"] == 1
+
+        class Failing:
+            def __len__(self):
+                return 2
+
+            def __getitem__(self, i):
+                raise OSError(f"capture {i}: unreadable")
+
+        bad = Recording(Failing(), TrackOptions())
+        bad.prefetch(1)
+        with pytest.raises(OSError, match="capture 1"):
+            bad.capture(1)

@@ -119,3 +119,16 @@ def test_rig_without_roles_gives_no_starts(raised):
         assert gs.geodesic_starts(copy.deepcopy(model), points, normals) == []
     finally:
         sk.names = sk_names
+
+
+def test_a_thin_band_is_widened_to_the_points_nearest_its_level():
+    """Points along a line 2 cm apart in their field: the band of +-1.5 cm around 5.1 cm holds two (4 and
+    6 cm), so it takes those nearest the level within twice the band (4, 6 and 8 cm; 2 cm is 3.1 cm off);
+    a level with no three points within twice the band gives None."""
+    from articula.solver.tracking.geodesic_starts import BAND, band_centre
+    field = np.arange(10) * 0.02
+    X = np.column_stack([field, np.zeros(10), np.zeros(10)])
+    inside = np.ones(10, bool)
+    assert np.sum(np.abs(field - 0.051) < BAND) == 2
+    np.testing.assert_allclose(band_centre(X, field, inside, 0.051), [0.06, 0.0, 0.0], atol=1e-12)
+    assert band_centre(X, field, inside, 0.2) is None
