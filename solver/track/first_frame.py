@@ -8,6 +8,10 @@ start pose, the last good pose), each fitted with the coarse stage of the core's
 (:data:`solver.tracking.frame.SEARCH`), the best ``KEEP`` by :func:`coverage_score` through the finer
 stages, the pose prior guiding the limbs; the fit that leaves the least of the capture and of the
 model unexplained wins, and its last stage is run again while that improves it (:func:`_settled`).
+When the truth-free checks call every such fit lost, the winner's limbs are aimed at the capture regions
+it leaves unexplained (:func:`solver.tracking.aimed_starts.aimed_starts`: a forearm folded onto the
+belly while the capture's hangs by the thigh) and those starts fitted too.  Independent fits run on the
+solver's threads, each with its own Jacobian slot.
 """
 from __future__ import annotations
 
@@ -18,6 +22,7 @@ import numpy as np
 from ..errors import ArticulaInputError
 from ..parallel import map_pieces
 from ..rig.model import Poses
+from ..tracking.aimed_starts import aimed_starts
 from ..tracking.checks import check_frame
 from ..tracking.geodesic_starts import geodesic_starts
 from ..tracking.frame import SEARCH, SEARCH_HOLD, FrameSettings, fit_frame
@@ -35,6 +40,8 @@ FINE_EPS = 0.002        # Charbonnier scale of the capture score (m): that of th
 LOST_PENALTY = 2.0      # a fit the checks call lost ranks as if its score were this many times higher
 SETTLE_RUNS = 3         # the winner's last stage is run again at most this often ...
 SETTLE_GAIN = 0.05      # ... while each run lowers its coverage score by this share
+AIM_ROUNDS = 2          # a lost winner's unexplained capture is aimed at by its limbs this often at most
+AIM_REGIONS = 2         # ... the largest this many regions
 
 
 def check_units(model, points) -> None:
@@ -78,22 +85,33 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
     coarse = sorted(map_pieces(coarse_fit, enumerate(starts)), key=lambda item: item[0])
 
     def fine_fit(item):
-        fit = _fit(body, capture, item[1][1], priors, SEARCH[1:], settings, cancel, slot=("start", item[0]))
-        return fit.pose, coverage_score(body, capture, fit.state), _verdict(body, capture, fit, checked)
+        fit = _fit(body, capture, item[1], priors, SEARCH[1:], settings, cancel, slot=("start", item[0]))
+        check = None if checked is None else check_frame(body.model, fit.pose, fit.state.posed, capture, checked)
+        return fit.pose, coverage_score(body, capture, fit.state), int(_lost(check)), check
 
     best = None
-    for pose, score, lost in map_pieces(fine_fit, enumerate(coarse[:KEEP])):
-        best = _better(best, (pose, score, lost))
-    for item in enumerate(coarse[KEEP:], KEEP):
+    for result in map_pieces(fine_fit, enumerate(pose for _, pose in coarse[:KEEP])):
+        best = _better(best, result)
+    for item in enumerate((pose for _, pose in coarse[KEEP:]), KEEP):
         if best[2] == 0:
             break
         best = _better(best, fine_fit(item))
+    for _ in range(AIM_ROUNDS):
+        if not best[2]:
+            break
+        aimed = aimed_starts(body.model, best[0], unexplained_centres(best[3]))
+        before = best
+        for result in map_pieces(fine_fit, enumerate(aimed, len(starts))):
+            best = _better(best, result)
+        if best is before:
+            break
     pose, score = _settled(body, capture, best[0], best[1], priors, settings, cancel)
     return pose, score, len(starts)
 
 
 def _better(best, fit):
-    """The better of two ``(pose, score, lost)``: a lost verdict counts as ``LOST_PENALTY`` times the score."""
+    """The better of two ``(pose, score, lost, ...)``: a lost verdict counts as ``LOST_PENALTY`` times the
+    score."""
     if best is None or fit[1] * LOST_PENALTY ** fit[2] < best[1] * LOST_PENALTY ** best[2]:
         return fit
     return best
@@ -114,12 +132,18 @@ def _settled(body, capture, pose, score, priors, settings, cancel):
     return pose, score
 
 
-def _verdict(body, capture, fit, checked) -> int:
-    """1 when the truth-free checks call the fit lost, else 0 (a doubtful fit ranks with the good: a body
-    whose parts touch at rest is doubtful in its true pose)."""
-    if checked is None:
-        return 0
-    return int(check_frame(body.model, fit.pose, fit.state.posed, capture, checked).verdict == "lost")
+def _lost(check) -> bool:
+    """True when the truth-free checks call the fit lost (a doubtful fit ranks with the good: a body whose
+    parts touch at rest is doubtful in its true pose)."""
+    return check is not None and check.verdict == "lost"
+
+
+def unexplained_centres(check) -> list:
+    """Centres ``[(3,)]`` of the capture regions the checks found unexplained, largest first (at most
+    ``AIM_REGIONS``)."""
+    if check is None:
+        return []
+    return [f.numbers["centre"] for f in check.findings if f.check == "unexplained"][:AIM_REGIONS]
 
 
 def _fit(body, capture, start, priors, stages, settings, cancel, slot=0):
