@@ -40,8 +40,9 @@ FINE_EPS = 0.002        # Charbonnier scale of the capture score (m): that of th
 LOST_PENALTY = 2.0      # a fit the checks call lost ranks as if its score were this many times higher
 SETTLE_RUNS = 3         # the winner's last stage is run again at most this often ...
 SETTLE_GAIN = 0.05      # ... while each run lowers its coverage score by this share
-AIM_ROUNDS = 2          # a lost winner's unexplained capture is aimed at by its limbs this often at most
-AIM_REGIONS = 2         # ... the largest this many regions
+AIM_ROUNDS = 2          # lost fits' unexplained capture is aimed at by their limbs this often at most,
+AIM_FITS = 3            # ... from the best this many lost fits
+AIM_REGIONS = 2         # ... at their largest this many regions
 
 
 def check_units(model, points) -> None:
@@ -89,32 +90,35 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
         check = None if checked is None else check_frame(body.model, fit.pose, fit.state.posed, capture, checked)
         return fit.pose, coverage_score(body, capture, fit.state), int(_lost(check)), check
 
-    best = None
-    for result in map_pieces(fine_fit, enumerate(pose for _, pose in coarse[:KEEP])):
-        best = _better(best, result)
+    fits = map_pieces(fine_fit, enumerate(pose for _, pose in coarse[:KEEP]))
     for item in enumerate((pose for _, pose in coarse[KEEP:]), KEEP):
-        if best[2] == 0:
+        if not _ranked(fits)[0][2]:
             break
-        best = _better(best, fine_fit(item))
-    for _ in range(AIM_ROUNDS):
-        if not best[2]:
+        fits.append(fine_fit(item))
+    sources, slot = fits, len(starts)
+    for _ in range(AIM_ROUNDS):              # every fit lost: limbs aimed at what the best ones leave unexplained
+        if not _ranked(fits)[0][2]:
             break
-        aimed = aimed_starts(body.model, best[0], unexplained_centres(best[3]))
-        before = best
-        for result in map_pieces(fine_fit, enumerate(aimed, len(starts))):
-            best = _better(best, result)
-        if best is before:
+        aimed = [a for fit in _ranked(sources)[:AIM_FITS] if fit[2]
+                 for a in aimed_starts(body.model, fit[0], unexplained_centres(fit[3]))]
+        more = map_pieces(fine_fit, enumerate(aimed, slot))
+        slot += len(aimed)
+        if not more or _penalised(_ranked(more)[0]) >= _penalised(_ranked(fits)[0]):
             break
+        fits, sources = fits + more, more
+    best = _ranked(fits)[0]
     pose, score = _settled(body, capture, best[0], best[1], priors, settings, cancel)
     return pose, score, len(starts)
 
 
-def _better(best, fit):
-    """The better of two ``(pose, score, lost, ...)``: a lost verdict counts as ``LOST_PENALTY`` times the
-    score."""
-    if best is None or fit[1] * LOST_PENALTY ** fit[2] < best[1] * LOST_PENALTY ** best[2]:
-        return fit
-    return best
+def _ranked(fits) -> list:
+    """Fitted starts ``(pose, score, lost, check)`` best first by :func:`_penalised` (stable)."""
+    return sorted(fits, key=_penalised)
+
+
+def _penalised(fit) -> float:
+    """A fit's coverage score, times ``LOST_PENALTY`` when the checks call it lost."""
+    return fit[1] * LOST_PENALTY ** fit[2]
 
 
 def _settled(body, capture, pose, score, priors, settings, cancel):
