@@ -8,9 +8,9 @@ start pose, the last good pose), each fitted with the coarse stage of the core's
 (:data:`solver.tracking.frame.SEARCH`), the best ``KEEP`` by :func:`coverage_score` through the finer
 stages, the pose prior guiding the limbs; the fit that leaves the least of the capture and of the
 model unexplained wins, and its last stage is run again while that improves it (:func:`_settled`).
-When the truth-free checks call every such fit lost, the winner's limbs are aimed at the capture regions
-it leaves unexplained (:func:`solver.tracking.aimed_starts.aimed_starts`: a forearm folded onto the
-belly while the capture's hangs by the thigh) and those starts fitted too.  Independent fits run on the
+When the truth-free checks call every such fit lost, the limbs of the best lost fits are aimed at the
+capture regions they leave unexplained (:func:`solver.tracking.aimed_starts.aimed_starts`: a forearm folded
+onto the belly while the capture's hangs by the thigh) and those starts fitted too (:func:`_aimed`).  Independent fits run on the
 solver's threads, each with its own Jacobian slot.
 """
 from __future__ import annotations
@@ -95,20 +95,28 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
         if not _ranked(fits)[0][2]:
             break
         fits.append(fine_fit(item))
-    sources, slot = fits, len(starts)
-    for _ in range(AIM_ROUNDS):              # every fit lost: limbs aimed at what the best ones leave unexplained
+    best = _ranked(_aimed(body.model, fits, fine_fit, len(starts)))[0]
+    pose, score = _settled(body, capture, best[0], best[1], priors, settings, cancel)
+    return pose, score, len(starts)
+
+
+def _aimed(model, fits, fine_fit, slot) -> list:
+    """``fits`` and, while the best is lost (at most ``AIM_ROUNDS`` times), the fits of the starts that aim
+    the limbs of the best ``AIM_FITS`` lost fits at the capture they leave unexplained (a round's are kept
+    when they beat every fit so far, and the next round aims from them).  ``fine_fit((slot, start))``
+    fits a start; fits are ``(pose, score, lost, check)``."""
+    sources = fits
+    for _ in range(AIM_ROUNDS):
         if not _ranked(fits)[0][2]:
             break
         aimed = [a for fit in _ranked(sources)[:AIM_FITS] if fit[2]
-                 for a in aimed_starts(body.model, fit[0], unexplained_centres(fit[3]))]
+                 for a in aimed_starts(model, fit[0], unexplained_centres(fit[3]))]
         more = map_pieces(fine_fit, enumerate(aimed, slot))
         slot += len(aimed)
         if not more or _penalised(_ranked(more)[0]) >= _penalised(_ranked(fits)[0]):
             break
         fits, sources = fits + more, more
-    best = _ranked(fits)[0]
-    pose, score = _settled(body, capture, best[0], best[1], priors, settings, cancel)
-    return pose, score, len(starts)
+    return fits
 
 
 def _ranked(fits) -> list:
