@@ -25,6 +25,7 @@ from ..rig.model import Poses
 from ..tracking.aimed_starts import aimed_starts
 from ..tracking.checks import check_frame
 from ..tracking.geodesic_starts import geodesic_starts
+from ..tracking.lm import State
 from ..tracking.frame import SEARCH, SEARCH_HOLD, FrameSettings, fit_frame
 from ..geometry.rotations import matrix_to_quat, rotvec_to_matrix
 from ..roles import role_bones
@@ -42,7 +43,8 @@ SETTLE_RUNS = 3         # the winner's last stage is run again at most this ofte
 SETTLE_GAIN = 0.05      # ... while each run lowers its coverage score by this share
 AIM_ROUNDS = 2          # lost fits' unexplained capture is aimed at by their limbs this often at most,
 AIM_FITS = 3            # ... from the best this many lost fits
-AIM_REGIONS = 2         # ... at their largest this many regions
+AIM_REGIONS = 2         # ... at their largest this many regions,
+AIM_KEEP = 4            # ... the aimed starts with the best unfitted coverage score fitted
 
 
 def check_units(model, points) -> None:
@@ -95,22 +97,25 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
         if not _ranked(fits)[0][2]:
             break
         fits.append(fine_fit(item))
-    best = _ranked(_aimed(body.model, fits, fine_fit, len(starts)))[0]
+    start_score = lambda start: coverage_score(body, capture, State(body, start))
+    best = _ranked(_aimed(body.model, fits, fine_fit, start_score, len(starts)))[0]
     pose, score = _settled(body, capture, best[0], best[1], priors, settings, cancel)
     return pose, score, len(starts)
 
 
-def _aimed(model, fits, fine_fit, slot) -> list:
+def _aimed(model, fits, fine_fit, start_score, slot) -> list:
     """``fits`` and, while the best is lost (at most ``AIM_ROUNDS`` times), the fits of the starts that aim
-    the limbs of the best ``AIM_FITS`` lost fits at the capture they leave unexplained (a round's are kept
-    when they beat every fit so far, and the next round aims from them).  ``fine_fit((slot, start))``
-    fits a start; fits are ``(pose, score, lost, check)``."""
+    the limbs of the best ``AIM_FITS`` lost fits at the capture they leave unexplained, the ``AIM_KEEP``
+    best of them by ``start_score(start)`` (a round's are kept when they beat every fit so far, and the
+    next round aims from them).  ``fine_fit((slot, start))`` fits a start; fits are ``(pose, score,
+    lost, check)``."""
     sources = fits
     for _ in range(AIM_ROUNDS):
         if not _ranked(fits)[0][2]:
             break
         aimed = [a for fit in _ranked(sources)[:AIM_FITS] if fit[2]
                  for a in aimed_starts(model, fit[0], unexplained_centres(fit[3]))]
+        aimed = sorted(aimed, key=start_score)[:AIM_KEEP]
         more = map_pieces(fine_fit, enumerate(aimed, slot))
         slot += len(aimed)
         if not more or _penalised(_ranked(more)[0]) >= _penalised(_ranked(fits)[0]):
