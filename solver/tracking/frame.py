@@ -30,8 +30,7 @@ class Stage:
     rel_energy: the stage ends when a step lowers the energy by less than this share (a coarse stage
     only brings the pose near, the next one converges); small_held: the bones of small parts (fingers,
     toes: :func:`small_bones`) stay at the start (while the body is centimetres off, their few points
-    pull them onto surfaces they cannot leave later); samples: capture points of the stage's sample (0: the
-    settings'; a coarse stage needs fewer)."""
+    pull them onto surfaces they cannot leave later)."""
     eps: float
     reach: float
     coverage: float
@@ -39,7 +38,6 @@ class Stage:
     guided: bool = True
     rel_energy: float = 1e-4
     small_held: bool = False
-    samples: int = 0
 
 
 TRACKING = (Stage(0.01, 0.1, 0.0, 8, rel_energy=1e-3), Stage(0.002, 0.05, 0.0, 12))
@@ -82,23 +80,16 @@ def fit_frame(body, points, normals, start, target=None, priors=(), stages=TRACK
     Jacobian (:meth:`.body.Body.jacobian_near`; fits running side by side need their own)."""
     target = start if target is None else target
     spread = sample(body.model.num_vertices, settings.coverage_vertices, seed + 1)
-    shared = {}                                       # one sample per size: closest points found once per state
-
-    def drawn(stage):
-        count = stage.samples or settings.samples
-        if count not in shared:
-            shared[count] = Sample(points, normals, count, seed)
-        return shared[count]
-
+    shared = Sample(points, normals, settings.samples, seed)           # closest points found once per state
     at, used, hold, largest = State(body, start, slot), 0, None, 0.0
     for stage in stages:
-        data = [ScanToModel(points, normals, eps=stage.eps, reach=stage.reach, shared=drawn(stage))]
+        data = [ScanToModel(points, normals, eps=stage.eps, reach=stage.reach, shared=shared)]
         if stage.coverage:
             data.append(ModelToScan(points, normals, spread, stage.eps, stage.reach, weight=stage.coverage))
         if hold is None:            # from the finest stage's pairs at the start (see docs/track.md "Design")
             last = stages[-1]
             hold, largest = _hold(body, at, [ScanToModel(points, normals, eps=last.eps, reach=last.reach,
-                                                         shared=drawn(last))], target, settings, weak_ratio)
+                                                         shared=shared)], target, settings, weak_ratio)
         elif priors and not stage.guided:     # what the priors decided where the data are weak is kept
             hold = TowardPose(at.pose, hold.W)
         held = [_small_held(body, start, largest)] if stage.small_held else []
