@@ -21,6 +21,7 @@ from ..rig.jacobians import apply_pose_increment
 from ..rig.kinematics import forward_kinematics
 from ..rig.model import Poses
 from ..roles import role_bones
+from .start_poses import subtree_masks
 
 SEGMENTS = tuple(f"{role}.{side}" for side in "LR" for role in ("upper_arm", "forearm", "thigh", "shin"))
 REACH_SLACK = 1.2       # a centre farther from the joint than this times the limb's reach is not the limb's
@@ -56,11 +57,7 @@ def aimed_starts(model, pose: Poses, centres) -> list:
 def limb_reach(model) -> np.ndarray:
     """``(B,)`` per bone the largest rest distance from its joint to a vertex of its subtree (m)."""
     sk = model.skeleton
-    below = np.eye(sk.num_bones, dtype=bool)           # below[a, b]: b in a's subtree
-    for b in range(1, sk.num_bones):                   # parents come first
-        p = sk.parents[b]
-        if p >= 0:
-            below[:, b] |= below[:, p]
+    below = subtree_masks(sk.parents)
     reach = np.zeros(sk.num_bones)
     for a in range(sk.num_bones):
         mine = below[a][model.anchor]

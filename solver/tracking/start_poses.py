@@ -113,7 +113,7 @@ class RigPoser:
         names = skeleton.names
         segs = plan_segments(arm, arm, {r: (names[b], names[b]) for r, b in self.roles.items()})
         self.frame = body_frame(skeleton.heads, segs, "target")
-        self.below = _subtree_masks(skeleton.parents)
+        self.below = subtree_masks(skeleton.parents)
         roles = self.roles
         self.carries_chest = "chest" in roles and bool(self.below[roles["hips"]][roles["chest"]])
         self.aims = self._aims(segs)
@@ -267,7 +267,7 @@ def _armature(sk) -> ArmatureRest:
     return ArmatureRest("model", list(sk.names), parents, rest, sk.tails, connected, np.eye(4))
 
 
-def _subtree_masks(parents) -> np.ndarray:
+def subtree_masks(parents) -> np.ndarray:
     """``(B, B)`` bool: ``[a, c]`` when bone c is a or below it."""
     B = len(parents)
     out = np.eye(B, dtype=bool)
