@@ -26,7 +26,7 @@ from ..tracking.aimed_starts import aimed_starts
 from ..tracking.checks import check_frame
 from ..tracking.geodesic_starts import geodesic_starts
 from ..tracking.lm import State
-from ..tracking.frame import SEARCH, SEARCH_HOLD, FrameSettings, fit_frame
+from ..tracking.frame import SEARCH, SEARCH_HOLD, FrameSettings, end_chains, fit_frame
 from ..geometry.rotations import matrix_to_quat, rotvec_to_matrix
 from ..roles import role_bones
 from ..tracking.start_poses import REQUIRED
@@ -140,6 +140,7 @@ def _settled(body, capture, pose, score, priors, settings, cancel):
     holds weakly seen directions at its start and the search holds small parts there, so a part the
     hypothesis had wrong (a learned rig's head anchoring few vertices, turned 37 deg) moves only so far."""
     last = dataclasses.replace(SEARCH[-1], small_held=False)
+    pose, score = _ends_at_rest(body, capture, pose, score, priors, last, settings, cancel)
     for _ in range(SETTLE_RUNS):
         fit = _fit(body, capture, pose, priors, (last,), settings, cancel)
         again = coverage_score(body, capture, fit.state)
@@ -147,6 +148,21 @@ def _settled(body, capture, pose, score, priors, settings, cancel):
             break
         pose, score = fit.pose, again
     return pose, score
+
+
+def _ends_at_rest(body, capture, pose, score, priors, stage, settings, cancel):
+    """``(pose, score)``: ``pose`` or, when it explains the capture better, the fit of ``stage`` from
+    ``pose`` with the rig's end chains (toes, fingers: :func:`solver.tracking.frame.end_chains`) at rest.
+    The coarse search stages reach far, and a toe a few points see can end turned through its foot
+    (114 deg on a tilted capture), a minimum the finer stages do not leave; from rest it is in reach."""
+    ends = end_chains(body.model)
+    if not len(ends):
+        return pose, score
+    rest = pose.rotations.copy()
+    rest[:, ends] = (1.0, 0.0, 0.0, 0.0)
+    fit = _fit(body, capture, Poses(rest, pose.translations, pose.scales), priors, (stage,), settings, cancel)
+    again = coverage_score(body, capture, fit.state)
+    return (fit.pose, again) if again < score else (pose, score)
 
 
 def _lost(check) -> bool:

@@ -1,8 +1,10 @@
 """Pass 1 of the scan tracker: every frame in order from its constant-velocity prediction.
 
 Frame n starts at the pose predicted from the last two good frames (``q_n = q_{n-1} (q_{n-2}^-1
-q_{n-1})`` per bone, the root moving on as it moved) and is held to that prediction only along the
-directions its data barely constrain (:func:`solver.tracking.priors.weak_directions`).  A frame whose
+q_{n-1})`` per bone, the root moving on as it moved) and is held along the directions its data barely
+constrain (:func:`solver.tracking.priors.weak_directions`) to a prediction carrying on half that velocity
+(``HOLD_CARRY``): a direction no data see (a finger with no capture points) would otherwise keep any
+velocity it once had for ever, while the velocity decays there.  A frame whose
 median capture-to-model distance jumps (above ``lost_factor`` x the running median and ``lost_mm``) is
 searched again from the start hypotheses and the last good pose (:func:`.first_frame.find_pose`) and
 listed as lost when that does not bring it back; the next frame then starts from the last good pose.
@@ -17,7 +19,7 @@ import time
 
 import numpy as np
 
-from ..geometry.rotations import quat_conj, quat_mul, quat_normalize
+from ..geometry.rotations import quat_conj, quat_mul, quat_normalize, quat_to_rotvec, rotvec_to_quat
 from ..rig.model import Poses
 from ..tracking.frame import SEARCH, SEARCH_HOLD, TRACKING, FrameSettings, fit_frame
 from ..tracking.checks import check_frame
@@ -26,15 +28,20 @@ from .first_frame import capture_score, find_pose
 
 RUNNING = 10            # frames in the running median that lost-frame detection compares with
 BETTER = 0.8            # a search replaces a flagged frame's fit when its capture score is below this share
+HOLD_CARRY = 0.5        # share of the last velocity the weak directions' hold target carries on
 
 
-def predict(history) -> Poses:
-    """The next pose from the last one or two good poses (one frame each)."""
+def predict(history, carry: float = 1.0) -> Poses:
+    """The next pose from the last one or two good poses (one frame each), moving on by ``carry`` times
+    the last frame's motion (1: constant velocity; 0: the last pose)."""
     if len(history) < 2:
         return history[-1]
     a, b = history[-2], history[-1]
-    rot = quat_normalize(quat_mul(b.rotations, quat_mul(quat_conj(a.rotations), b.rotations)))
-    return Poses(rot, 2 * b.translations - a.translations, b.scales.copy())
+    turn = quat_mul(quat_conj(a.rotations), b.rotations)
+    if carry != 1.0:
+        turn = rotvec_to_quat(carry * quat_to_rotvec(turn))    # the shorter way
+    rot = quat_normalize(quat_mul(b.rotations, turn))
+    return Poses(rot, b.translations + carry * (b.translations - a.translations), b.scales.copy())
 
 
 def median_mm(state, points) -> float:
@@ -63,8 +70,8 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
         if rec.too_few(i):
             continue
         guess = predict(history)
-        fit = fit_frame(body, capture.points, capture.normals, guess, settings=settings, stages=TRACKING,
-                        cancel=cancel, seed=i)
+        fit = fit_frame(body, capture.points, capture.normals, guess, target=predict(history, HOLD_CARRY),
+                        settings=settings, stages=TRACKING, cancel=cancel, seed=i)
         med = median_mm(fit.state, _sample(capture.points))
         limit = max(options.lost_factor * float(np.median(medians[-RUNNING:])) if medians else 0.0,
                     options.lost_mm)

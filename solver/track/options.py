@@ -41,7 +41,7 @@ class TrackOptions:
     frames: tuple = None
     max_points: int = 20_000
     samples: int = 4000
-    weak_ratio: float = 3e-5
+    weak_ratio: float = 1e-5
     hypotheses: int = 4
     lost_factor: float = 3.0
     lost_mm: float = 15.0

@@ -45,6 +45,7 @@ SEARCH_HOLD = 1e-6      # weak-direction ratio of a searched frame: only what th
 SEARCH = (Stage(0.02, 0.25, 1.0, 12, small_held=True), Stage(0.006, 0.08, 1.0, 10, small_held=True),
           Stage(0.002, 0.04, 0.0, 12, guided=False, small_held=True))
 SMALL_SHARE = 0.025     # a bone whose subtree holds less than this share of the vertices is a small part's
+END_SHARE = 0.06        # an end chain (a toe, a finger) anchors less than this share of the vertices
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,7 +56,7 @@ class FrameSettings:
     pull towards the target on every parameter, relative to the largest eigenvalue (0: none)."""
     samples: int = 4000
     coverage_vertices: int = 1500
-    weak_ratio: float = 3e-5
+    weak_ratio: float = 1e-5
     hold: float = 0.0
     step_rad: float = 2e-4
     step_m: float = 5e-5
@@ -115,6 +116,26 @@ def small_bones(model, share: float = SMALL_SHARE) -> np.ndarray:
         p = parents[b]
         small[b] = p >= 0 and (small[p] or (count[b] < share * model.num_vertices and count[b] < 0.25 * count[p]))
     return np.flatnonzero(small)
+
+
+def end_chains(model, share: float = END_SHARE) -> np.ndarray:
+    """Bones (indices, sorted) of the rig's end chains: the unbranched chains that end a branch of the
+    skeleton (a finger, a toe, a head on its neck) whose bones together anchor fewer than ``share`` of the
+    model's vertices.  Any rig: by the hierarchy and vertex counts, not names."""
+    parents = model.skeleton.parents
+    B = len(parents)
+    children = np.bincount(parents[parents >= 0], minlength=B)
+    count = np.bincount(model.anchor, minlength=B).astype(float)
+    out = []
+    for leaf in np.flatnonzero(children == 0):
+        chain, b, total = [], leaf, 0.0
+        while b >= 0 and children[b] <= 1 and parents[b] >= 0 and total + count[b] < share * model.num_vertices:
+            chain.append(b)
+            total += count[b]
+            b = parents[b]
+        if total > 0:
+            out += chain
+    return np.array(sorted(out), dtype=int)
 
 
 def _small_held(body, start, largest):

@@ -113,6 +113,18 @@ def test_prediction_continues_a_constant_angular_velocity(body):
     assert predict([poses.take(1)]) is not None
 
 
+def test_the_hold_target_carries_on_a_share_of_the_velocity(body):
+    """``predict(history, carry)``: half the last frame's turn and move on (closed form: the motion turns
+    at a constant rate, so half a step from frame 1 is frame 1.5); carry 0 is the last pose."""
+    poses = _motion(body, 3)
+    half = predict([poses.take(0), poses.take(1)], 0.5)
+    mid = _motion(body, 4, step=0.02).take(3)                  # the same rates at half the step: frame 1.5
+    assert np.allclose(np.abs(np.sum(half.rotations[0] * mid.rotations[0], axis=1)), 1.0, atol=1e-12)
+    assert np.allclose(half.translations, [[0.03, 0.0, 0.0]], atol=1e-12)
+    still = predict([poses.take(0), poses.take(1)], 0.0)
+    assert np.allclose(np.abs(np.sum(still.rotations[0] * poses.rotations[1], axis=1)), 1.0, atol=1e-12)
+
+
 def test_a_search_replaces_a_fit_only_when_it_explains_the_capture_clearly_better(body):
     """The rule for a frame the checks flag: a re-fit that only fits the noise a little better (a few per
     cent lower capture score than the true pose) does not replace the fit; a fit with a limb turned off
@@ -184,6 +196,31 @@ def test_settling_frees_the_small_parts_the_search_held(body):
                              FrameSettings(), None)
     angle = lambda p: 2 * np.arccos(min(1.0, abs(float(np.sum(p.rotations[0, hand] * pose.rotations[0, hand])))))
     assert angle(held.pose) > 0.25 and angle(settled) < 0.05, (angle(held.pose), angle(settled))
+
+
+def test_an_end_part_turned_through_its_parent_comes_back_from_rest(body):
+    """``first_frame._ends_at_rest``: a foot turned 2.5 rad through its shin (as a tilted capture's toe
+    ended after the far-reaching coarse stages, 114 deg off) stays there under the last search stage (a
+    local minimum); refitted from the end chains at rest it comes back, and a right fit stays right."""
+    from articula.solver.track import first_frame as ff
+    from articula.solver.track.frame_fit import Capture
+    from articula.solver.tracking.body import Body
+    from articula.solver.tracking.frame import SEARCH, FrameSettings
+    B = body.skeleton.num_bones
+    pose = Poses(rotvec_to_quat(np.random.default_rng(1).normal(0.0, 0.1, (1, B, 3))), np.zeros((1, 3)), np.ones(1))
+    capture = Capture.from_mesh(hybrid_skin(body, pose)[0], body.faces)
+    tracker, foot = Body(body), body.skeleton.names.index("foot.L")
+    start = Poses(pose.rotations.copy(), pose.translations.copy(), pose.scales.copy())
+    start.rotations[0, foot] = quat_mul(start.rotations[0, foot], rotvec_to_quat(np.array([2.5, 0.0, 0.0])))
+    last = dataclasses.replace(SEARCH[-1], small_held=False)
+    once = ff._fit(tracker, capture, start, (), (last,), FrameSettings(), None)
+    score = ff.coverage_score(tracker, capture, once.state)
+    back, back_score = ff._ends_at_rest(tracker, capture, once.pose, score, (), last, FrameSettings(), None)
+    angle = lambda p: 2 * np.arccos(min(1.0, abs(float(np.sum(p.rotations[0, foot] * pose.rotations[0, foot])))))
+    assert angle(once.pose) > 1.5 and angle(back) < 0.05, (angle(once.pose), angle(back))
+    assert back_score < 0.01 * score
+    kept, kept_score = ff._ends_at_rest(tracker, capture, back, back_score, (), last, FrameSettings(), None)
+    assert kept_score <= back_score and angle(kept) < 0.05
 
 
 def test_units_check_names_millimetres(body):

@@ -14,7 +14,8 @@ from articula.solver.rig.skinning import hybrid_skin
 from articula.solver.track.metrics import closest_points
 from articula.solver.tracking import window
 from articula.solver.tracking.body import Body, closest_barycentric
-from articula.solver.tracking.frame import SEARCH, SEARCH_HOLD, TRACKING, FrameSettings, Stage, fit_frame, small_bones
+from articula.solver.tracking.frame import (SEARCH, SEARCH_HOLD, TRACKING, FrameSettings, Stage, end_chains, fit_frame,
+                                           small_bones)
 from articula.solver.tracking.lm import State, minimise
 from articula.solver.tracking.priors import TowardPose, pose_difference, weak_directions
 from articula.solver.tracking.terms import ScanToModel, normal_jacobian
@@ -277,6 +278,20 @@ def test_small_bones_are_small_parts_off_a_larger_one(tube):
     small, hand = _small_hand(model)
     assert small_bones(small).tolist() == [hand]
     assert small_bones(small, share=0.001).tolist() == []
+
+
+def test_end_chains_are_the_unbranched_ends_by_vertex_count(tube):
+    """The tube body's ends: the hands, feet and head (72 of 2,736 vertices each); the neck, forearms and
+    shins (144 more) join their chains only when the share allows 216; a chain stops at a branching bone
+    (the chest, the pelvis)."""
+    model, _ = tube
+    names = model.skeleton.names
+    ends = lambda share: sorted(names[b] for b in end_chains(model, share))
+    assert ends(0.06) == ["foot.L", "foot.R", "hand.L", "hand.R", "head"]
+    assert ends(0.08) == ["foot.L", "foot.R", "forearm.L", "forearm.R", "hand.L", "hand.R", "head", "neck",
+                          "shin.L", "shin.R"]
+    assert ends(0.02) == []
+    assert "chest" not in ends(0.9) and "pelvis" not in ends(0.9)
 
 
 def test_a_stage_holding_small_parts_keeps_them_at_the_start(tube):
