@@ -7,17 +7,19 @@ capture's principal axes for any other rig (:func:`turned_rests`), plus the call
 start pose, the last good pose), each fitted with the coarse stage of the core's search
 (:data:`solver.tracking.frame.SEARCH`), the best ``KEEP`` by :func:`coverage_score` through the finer
 stages, the pose prior guiding the limbs; the fit that leaves the least of the capture and of the
-model unexplained wins, and its last stage is run again while that improves it (:func:`_settled`).
-When the truth-free checks call every such fit lost, the limbs of the best lost fits are aimed at the
-capture regions they leave unexplained (:func:`solver.tracking.aimed_starts.aimed_starts`: a forearm folded
-onto the belly while the capture's hangs by the thigh) and those starts fitted too (:func:`_aimed`).  Independent fits run on the
-solver's threads, each with its own Jacobian slot.
+model unexplained wins, its end chains (toes, fingers) are tried at rest one by one (:func:`_ends_at_rest`)
+and its last stage is run again while that improves it (:func:`_settled`).  When the truth-free checks
+call every such fit lost, the limbs of the best lost fits are aimed at the capture regions they leave
+unexplained (:func:`solver.tracking.aimed_starts.aimed_starts`: a forearm folded onto the belly while the
+capture's hangs by the thigh) and those starts fitted too (:func:`_aimed`).  Independent fits run on
+the solver's threads, each with its own Jacobian slot.
 """
 from __future__ import annotations
 
 import dataclasses
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..errors import ArticulaInputError
 from ..parallel import map_pieces
@@ -45,6 +47,7 @@ AIM_ROUNDS = 2          # lost fits' unexplained capture is aimed at by their li
 AIM_FITS = 3            # ... from the best this many lost fits
 AIM_REGIONS = 2         # ... at their largest this many regions,
 AIM_KEEP = 4            # ... the aimed starts with the best unfitted coverage score fitted
+CHAIN_REACH = 0.02      # capture points this near an end chain (m) judge how it is turned
 
 
 def check_units(model, points) -> None:
@@ -151,18 +154,50 @@ def _settled(body, capture, pose, score, priors, settings, cancel):
 
 
 def _ends_at_rest(body, capture, pose, score, priors, stage, settings, cancel):
-    """``(pose, score)``: ``pose`` or, when it explains the capture better, the fit of ``stage`` from
-    ``pose`` with the rig's end chains (toes, fingers: :func:`solver.tracking.frame.end_chains`) at rest.
-    The coarse search stages reach far, and a toe a few points see can end turned through its foot
-    (114 deg on a tilted capture), a minimum the finer stages do not leave; from rest it is in reach."""
-    ends = end_chains(body.model)
-    if not len(ends):
+    """``(pose, score)``: ``pose`` with each of the rig's end chains (toes, fingers:
+    :func:`solver.tracking.frame.end_chains`) turned as in the fit of ``stage`` from the chains at rest
+    wherever that explains the chain's own surroundings better (:func:`chain_errors`), fitted once more;
+    ``pose`` itself when no chain is better so.  The coarse search stages reach far, and a toe a few
+    points see can end turned through its foot (114 deg on a tilted capture), a minimum the finer stages
+    do not leave; from rest it is in reach.  Chain by chain, because the whole-body score cannot tell a
+    toe put right from fingers a little worse at rest."""
+    chains = end_chains(body.model)
+    if not chains:
         return pose, score
     rest = pose.rotations.copy()
-    rest[:, ends] = (1.0, 0.0, 0.0, 0.0)
-    fit = _fit(body, capture, Poses(rest, pose.translations, pose.scales), priors, (stage,), settings, cancel)
-    again = coverage_score(body, capture, fit.state)
-    return (fit.pose, again) if again < score else (pose, score)
+    rest[:, np.concatenate(chains)] = (1.0, 0.0, 0.0, 0.0)
+    rested = _fit(body, capture, Poses(rest, pose.translations, pose.scales), priors, (stage,), settings, cancel)
+    states, tree = (State(body, pose), rested.state), cKDTree(capture.points)
+    better = [c for c in chains if np.argmin(chain_errors(body.model, capture.points, tree, states, c)) == 1]
+    if not better:
+        return pose, score
+    mixed = pose.rotations.copy()
+    turned = np.concatenate(better)
+    mixed[:, turned] = rested.pose.rotations[:, turned]
+    fit = _fit(body, capture, Poses(mixed, pose.translations, pose.scales), priors, (stage,), settings, cancel)
+    return fit.pose, coverage_score(body, capture, fit.state)
+
+
+def chain_errors(model, points, tree, states, chain) -> list:
+    """For each of ``states``: how badly it explains the capture around the bones ``chain`` (Charbonnier
+    at ``SCORE_EPS``, m^2): the mean over the chain's vertices of their distance to the capture
+    ``points`` (``tree``: their KD-tree) plus the mean over the capture points within ``CHAIN_REACH`` of
+    the chain in any of the states of their distance to that state's surface.  The same points judge
+    every state."""
+    verts = np.isin(model.anchor, chain)
+    near = set()
+    for state in states:
+        for hits in tree.query_ball_point(state.posed[verts], CHAIN_REACH):
+            near.update(hits)
+    near = points[np.fromiter(near, dtype=int, count=len(near))]
+    rho = lambda d: SCORE_EPS ** 2 * (np.sqrt(1.0 + (d / SCORE_EPS) ** 2) - 1.0)
+    out = []
+    for state in states:
+        err = float(rho(tree.query(state.posed[verts])[0]).mean())
+        if len(near):
+            err += float(rho(np.linalg.norm(near - state.surface.closest(near)[2], axis=1)).mean())
+        out.append(err)
+    return out
 
 
 def _lost(check) -> bool:

@@ -118,10 +118,11 @@ def small_bones(model, share: float = SMALL_SHARE) -> np.ndarray:
     return np.flatnonzero(small)
 
 
-def end_chains(model, share: float = END_SHARE) -> np.ndarray:
-    """Bones (indices, sorted) of the rig's end chains: the unbranched chains that end a branch of the
-    skeleton (a finger, a toe, a head on its neck) whose bones together anchor fewer than ``share`` of the
-    model's vertices.  Any rig: by the hierarchy and vertex counts, not names."""
+def end_chains(model, share: float = END_SHARE) -> list:
+    """The rig's end chains, each an array of bone indices (the leaf first): the unbranched chains that end
+    a branch of the skeleton (a finger, a toe, a head on its neck) whose bones together anchor fewer than
+    ``share`` of the model's vertices (and at least one).  Any rig: by the hierarchy and vertex counts,
+    not names."""
     parents = model.skeleton.parents
     B = len(parents)
     children = np.bincount(parents[parents >= 0], minlength=B)
@@ -134,8 +135,8 @@ def end_chains(model, share: float = END_SHARE) -> np.ndarray:
             total += count[b]
             b = parents[b]
         if total > 0:
-            out += chain
-    return np.array(sorted(out), dtype=int)
+            out.append(np.array(chain, dtype=int))
+    return out
 
 
 def _small_held(body, start, largest):

@@ -223,6 +223,27 @@ def test_an_end_part_turned_through_its_parent_comes_back_from_rest(body):
     assert kept_score <= back_score and angle(kept) < 0.05
 
 
+def test_an_end_chain_is_judged_by_the_capture_around_it(body):
+    """``first_frame.chain_errors``: of two fits differing in one foot, the one with the foot where the
+    capture is explains the foot's chain better, and the chain of the other foot, the same in both, the
+    same."""
+    from scipy.spatial import cKDTree
+    from articula.solver.track import first_frame as ff
+    from articula.solver.tracking.body import Body
+    from articula.solver.tracking.lm import State
+    names = body.skeleton.names
+    pose = _motion(body, 3).take(2)
+    points = hybrid_skin(body, pose)[0]
+    turned = Poses(pose.rotations.copy(), pose.translations.copy(), pose.scales.copy())
+    turned.rotations[0, names.index("foot.L")] = rotvec_to_quat(np.array([0.6, 0.0, 0.0]))
+    tracker = Body(body)
+    states = (State(tracker, turned), State(tracker, pose))
+    left = ff.chain_errors(body, points, cKDTree(points), states, np.array([names.index("foot.L")]))
+    right = ff.chain_errors(body, points, cKDTree(points), states, np.array([names.index("foot.R")]))
+    assert left[1] < 1e-9 < 1e-6 < left[0], left
+    assert right[0] == pytest.approx(right[1], abs=1e-12)
+
+
 def test_units_check_names_millimetres(body):
     with pytest.raises(ArticulaInputError, match="millimetres"):
         check_units(body, body.rest_vertices * 1000.0)

@@ -286,12 +286,14 @@ def test_end_chains_are_the_unbranched_ends_by_vertex_count(tube):
     (the chest, the pelvis)."""
     model, _ = tube
     names = model.skeleton.names
-    ends = lambda share: sorted(names[b] for b in end_chains(model, share))
+    ends = lambda share: sorted(names[b] for c in end_chains(model, share) for b in c)
     assert ends(0.06) == ["foot.L", "foot.R", "hand.L", "hand.R", "head"]
     assert ends(0.08) == ["foot.L", "foot.R", "forearm.L", "forearm.R", "hand.L", "hand.R", "head", "neck",
                           "shin.L", "shin.R"]
     assert ends(0.02) == []
     assert "chest" not in ends(0.9) and "pelvis" not in ends(0.9)
+    arm = [names.index(n) for n in ("hand.L", "forearm.L", "upper_arm.L", "shoulder.L")]
+    assert any(c.tolist() == arm for c in end_chains(model, 0.9))            # one chain, the leaf first
 
 
 def test_a_stage_holding_small_parts_keeps_them_at_the_start(tube):
