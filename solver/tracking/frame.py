@@ -121,8 +121,8 @@ def small_bones(model, share: float = SMALL_SHARE) -> np.ndarray:
 def end_chains(model, share: float = END_SHARE) -> list:
     """The rig's end chains, each an array of bone indices (the leaf first): the unbranched chains that end
     a branch of the skeleton (a finger, a toe, a head on its neck) whose bones together anchor fewer than
-    ``share`` of the model's vertices (and at least one).  Any rig: by the hierarchy and vertex counts,
-    not names."""
+    ``share`` of the model's vertices (none counts: a learned rig's foot anchoring no vertex can still
+    move a thousand by its swing weights).  Any rig: by the hierarchy and vertex counts, not names."""
     parents = model.skeleton.parents
     B = len(parents)
     children = np.bincount(parents[parents >= 0], minlength=B)
@@ -134,7 +134,7 @@ def end_chains(model, share: float = END_SHARE) -> list:
             chain.append(b)
             total += count[b]
             b = parents[b]
-        if total > 0:
+        if chain:
             out.append(np.array(chain, dtype=int))
     return out
 

@@ -294,6 +294,9 @@ def test_end_chains_are_the_unbranched_ends_by_vertex_count(tube):
     assert "chest" not in ends(0.9) and "pelvis" not in ends(0.9)
     arm = [names.index(n) for n in ("hand.L", "forearm.L", "upper_arm.L", "shoulder.L")]
     assert any(c.tolist() == arm for c in end_chains(model, 0.9))            # one chain, the leaf first
+    foot, shin = names.index("foot.L"), names.index("shin.L")
+    bare = dataclasses.replace(model, anchor=np.where(model.anchor == foot, shin, model.anchor))
+    assert [c.tolist() for c in end_chains(bare) if foot in c] == [[foot]]    # anchoring none, still an end
 
 
 def test_a_stage_holding_small_parts_keeps_them_at_the_start(tube):
