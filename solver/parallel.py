@@ -30,7 +30,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
-_STATE = {"workers": 1, "pool": None, "pool_size": 0}
+_STATE = {"workers": 1, "pool": None, "pool_size": 0, "reader": None}
 _LOCK = threading.Lock()
 _LOCAL = threading.local()
 
@@ -116,12 +116,23 @@ def map_in_order(fn, pieces, workers, on_result=None):
 
 
 def shutdown():
-    """Stop the pool's idle threads (a later :func:`map_pieces` starts a new pool); e.g. when the add-on
-    is disabled."""
+    """Stop the pool's idle threads and the reader thread (a later :func:`map_pieces` or :func:`reader`
+    starts new ones); e.g. when the add-on is disabled."""
     with _LOCK:
         pool, _STATE["pool"], _STATE["pool_size"] = _STATE["pool"], None, 0
-    if pool is not None:
-        pool.shutdown(wait=True)
+        ahead, _STATE["reader"] = _STATE["reader"], None
+    for executor in (pool, ahead):
+        if executor is not None:
+            executor.shutdown(wait=True)
+
+
+def reader() -> ThreadPoolExecutor:
+    """The one thread that reads input ahead beside the pool (a recording's next capture), started on
+    first use and stopped by :func:`shutdown`."""
+    with _LOCK:
+        if _STATE["reader"] is None:
+            _STATE["reader"] = ThreadPoolExecutor(1, thread_name_prefix="articula-reader")
+        return _STATE["reader"]
 
 
 def piece_size(count, largest):

@@ -9,9 +9,8 @@ prefetch`).
 from __future__ import annotations
 
 import collections
-from concurrent.futures import ThreadPoolExecutor
 
-from ..parallel import workers
+from ..parallel import reader, workers
 from .captures import CaptureSource
 from .options import TrackOptions, frame_range
 
@@ -54,7 +53,7 @@ class Recording:
                 or (self._ahead is not None and self._ahead[0] == i)):
             return
         self._drop_ahead()
-        self._ahead = (i, _reader().submit(self.source.__getitem__, self.range[i]))
+        self._ahead = (i, reader().submit(self.source.__getitem__, self.range[i]))
 
     def _read(self, i):
         if self._ahead is not None and self._ahead[0] == i:
@@ -91,12 +90,3 @@ class Recording:
 def _bytes(captures) -> int:
     return sum(c.points.nbytes + c.normals.nbytes for c in captures)
 
-
-_READER = []
-
-
-def _reader() -> ThreadPoolExecutor:
-    """The one reader thread of every recording (captures read ahead one at a time)."""
-    if not _READER:
-        _READER.append(ThreadPoolExecutor(1, thread_name_prefix="articula-reader"))
-    return _READER[0]

@@ -120,6 +120,18 @@ def test_shutdown_stops_the_pool_and_a_new_one_starts_on_demand():
     parallel.shutdown()
 
 
+def test_shutdown_stops_the_reader_thread_too():
+    """The thread reading a recording's next capture ahead is stopped with the pool (the add-on's
+    unregister calls :func:`parallel.shutdown`), and a later read starts a new one."""
+    first = parallel.reader().submit(threading.current_thread).result()
+    assert first.name.startswith("articula-reader") and first.is_alive()
+    parallel.shutdown()
+    assert not first.is_alive()
+    again = parallel.reader().submit(threading.current_thread).result()
+    assert again is not first and again.is_alive()
+    parallel.shutdown()
+
+
 linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="ForkedCall forks on Linux only")
 
 
