@@ -23,7 +23,8 @@ class TrackOptions:
     scale on the first frame; frames: ``(a, b)`` tracks input frames a..b-1 only (None: all);
     max_points: captures are thinned to about this many points (0: never); samples: capture points
     fitted per frame (a fixed seeded sample); weak_ratio: directions whose data curvature is below this
-    share of the largest are held to the predicted pose (:func:`solver.tracking.priors.weak_directions`);
+    share of the largest are held to a prediction carrying on half the last frame's motion
+    (:func:`solver.tracking.priors.weak_directions`, :data:`.follow.HOLD_CARRY`);
     hypotheses: start poses refined on the first frame and on lost frames; lost_factor, lost_mm: a frame
     whose median capture-to-model distance exceeds both ``lost_factor`` times the running median and
     ``lost_mm`` is re-initialised, and lost if that does not help; poor_fit_mm: a median above it is
