@@ -33,7 +33,7 @@ from ..geometry.rotations import matrix_to_quat, quat_mul, rotvec_to_matrix, rot
 from ..roles import role_bones
 from ..tracking.start_poses import REQUIRED, subtree_masks
 from ..tracking.start_search import start_hypotheses
-from ..tracking.terms import ModelToScan, ScanToModel, sample
+from ..tracking.terms import ModelToScan, ScanToModel, charbonnier, sample
 
 SIZE_RATIO = (0.4, 2.5)  # a capture's extent (1st-99th percentile) over the model's height outside this is refused
 KEEP = 2                # starts fitted to the end after the coarse stage
@@ -145,8 +145,8 @@ def _twisted(body, capture, pose, score, priors, settings, cancel):
     """``(pose, score)``: ``pose``, or its fit through the finer search stages with a forearm (by role,
     :data:`TWISTED`) turned about its own axis by one of :data:`TWISTS` when that explains the capture
     better (both forearms turned as their best fits, fitted once more, when both are).  A forearm with its
-    hand is near a cylinder, and a learned rig's ended turned 90-180 deg with the hands 50-77 mm off,
-    while the turned fits scored 24-28 % lower: the score knew, the search had not tried."""
+    hand is near a cylinder: a learned rig's two forearms ended turned 90-180 deg with the hands 50-77 mm
+    off, while the turned fits scored 24-28 % lower: the score knew, the search had not tried."""
     roles = role_bones(body.model.skeleton.names)
     starts = [(roles[r], _turned(pose, roles[r], angle)) for r in TWISTED if r in roles for angle in TWISTS]
 
@@ -239,7 +239,7 @@ def chain_errors(model, points, tree, states, chain) -> list:
         for hits in tree.query_ball_point(state.posed[verts], CHAIN_REACH):
             near.update(hits)
     near = points[np.fromiter(near, dtype=int, count=len(near))]
-    rho = lambda d: SCORE_EPS ** 2 * (np.sqrt(1.0 + (d / SCORE_EPS) ** 2) - 1.0)
+    rho = lambda d: charbonnier(d, SCORE_EPS)[0]
     out = []
     for state in states:
         err = float(rho(tree.query(state.posed[verts])[0]).mean()) if verts.any() else 0.0
