@@ -7,8 +7,9 @@ capture's principal axes for any other rig (:func:`turned_rests`), plus the call
 start pose, the last good pose), each fitted with the coarse stage of the core's search
 (:data:`solver.tracking.frame.SEARCH`), the best ``KEEP`` by :func:`coverage_score` through the finer
 stages, the pose prior guiding the limbs; the fit that leaves the least of the capture and of the
-model unexplained wins, its end chains (toes, fingers) are tried at rest one by one (:func:`_ends_at_rest`)
-and its last stage is run again while that improves it (:func:`_settled`).  When the truth-free checks
+model unexplained wins; its forearms are tried turned about their own axis (:func:`_twisted`), its end
+chains (toes, fingers) at rest, whole and one by one (:func:`_ends_at_rest`), and its last stage is run
+again while that improves it (:func:`_settled`).  When the truth-free checks
 call every such fit lost, the limbs of the best lost fits are aimed at the capture regions they leave
 unexplained (:func:`solver.tracking.aimed_starts.aimed_starts`: a forearm folded onto the belly while the
 capture's hangs by the thigh) and those starts fitted too (:func:`_aimed`).  Independent fits run on
@@ -181,8 +182,9 @@ def _turned(pose, bone, angle) -> Poses:
 
 
 def _settled(body, capture, pose, score, priors, settings, cancel):
-    """``(pose, score)``: the last search stage run again from its own result, without the hold on small
-    parts, while the coverage score drops by ``SETTLE_GAIN`` (at most ``SETTLE_RUNS`` times): a stage
+    """``(pose, score)``: ``pose`` with its end chains tried at rest (:func:`_ends_at_rest`), then the last
+    search stage run again from its own result, without the hold on small parts, while the coverage score
+    drops by ``SETTLE_GAIN`` (at most ``SETTLE_RUNS`` times): a stage
     holds weakly seen directions at its start and the search holds small parts there, so a part the
     hypothesis had wrong (a learned rig's head anchoring few vertices, turned 37 deg) moves only so far."""
     last = dataclasses.replace(SEARCH[-1], small_held=False)

@@ -3,10 +3,10 @@
 Frame n starts at the pose predicted from the last two good frames (``q_n = q_{n-1} (q_{n-2}^-1
 q_{n-1})`` per bone, the root moving on as it moved) and is held along the directions its data barely
 constrain (:func:`solver.tracking.priors.weak_directions`) to a prediction carrying on half that velocity
-(``HOLD_CARRY``): a direction no data see (a finger with no capture points) would otherwise keep any
-velocity it once had for ever, while the velocity decays there.  A frame whose
-median capture-to-model distance jumps (above ``lost_factor`` x the running median and ``lost_mm``) is
-searched again from the start hypotheses and the last good pose (:func:`.first_frame.find_pose`) and
+(``HOLD_CARRY``): held to the full prediction, a direction no data see (a finger with no capture
+points) keeps any velocity it once had for ever; held to this one, its velocity halves every frame.  A
+frame whose median capture-to-model distance jumps (above ``lost_factor`` x the running median and
+``lost_mm``) is searched again from the start hypotheses and the last good pose (:func:`.first_frame.find_pose`) and
 listed as lost when that does not bring it back; the next frame then starts from the last good pose.
 A frame the truth-free checks call lost is fitted again from the last good pose with coverage and keeps
 the new fit only when it explains the capture clearly better: a limb on a wrong surface leaves capture
