@@ -96,8 +96,8 @@ def run(args) -> int:
     model_input = inputs.model_from_bundle(os.path.abspath(args.model))
     model_input.matrix = np.eye(4)
     if args.start_pose:
-        model_input.start_pose, model_input.start_label = inputs.bundle_start_pose(args.start_pose,
-                                                                                   model_input.model)
+        model_input.start_pose, model_input.start_label, model_input.resume = inputs.bundle_start_pose(
+            args.start_pose, model_input.model)
     captures = inputs.captures_from_files(paths)
     outcome = solve.track(model_input, captures, options, jobs.Progress("track", echo=True),
                           with_point_errors=bool(args.blend))

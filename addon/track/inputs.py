@@ -24,6 +24,7 @@ from ...solver.formats.polymesh import PolyMesh
 from ...solver.formats.scan_files import list_scan_files, natural_sorted
 from ...solver.rig.model import Model
 from ...solver.track.captures import POINT_EXTENSIONS, CaptureSource, read_capture_file
+from ...solver.track.trail import resume_at
 from ...solver.tracking.provenance import model_digest
 from ..rig import bundle_io, reader
 from ..sequences import playback, points, scans
@@ -63,8 +64,9 @@ def model_from_rig(arm) -> ModelInput:
 
 
 def bundle_start_pose(spec: str, model: Model, flag: str = "--start-pose") -> tuple:
-    """``(pose (one frame), label)`` from ``spec`` = ``BUNDLE.npz[:K]``: pose K (default 0) of a bundle whose
-    bones are ``model``'s (names and order), in the captures' coordinates like the tracked output."""
+    """``(pose (one frame), label, resume)`` from ``spec`` = ``BUNDLE.npz[:K]``: pose K (default 0) of a
+    bundle whose bones are ``model``'s (names and order), in the captures' coordinates like the tracked
+    output; ``resume``: pass 1's state there when the bundle was tracked with ``model`` (else None)."""
     path, k = spec, 0
     head, sep, tail = spec.rpartition(":")
     if sep and tail.isdigit() and head:
@@ -80,7 +82,23 @@ def bundle_start_pose(spec: str, model: Model, flag: str = "--start-pose") -> tu
     count = 0 if bundle.poses is None else len(bundle.poses)
     if not 0 <= k < count:
         raise ArticulaInputError(f"{flag}: {path} has {count} pose(s); pose {k} asked for (0-based)")
-    return bundle.poses.take([k]), f"pose {k} of {os.path.basename(path)}"
+    return bundle.poses.take([k]), f"pose {k} of {os.path.basename(path)}", _resume(bundle, k, model, path, flag)
+
+
+def _resume(bundle, k: int, model: Model, path: str, flag: str):
+    """Pass 1's state after pose ``k`` of a tracked bundle made with ``model`` (:mod:`solver.track.trail`),
+    or None (another model, not tracked, or that frame lost in pass 1)."""
+    prov = bundle.provenance
+    if prov.get("source") != "track" or prov.get("model_sha256") != model_digest(model):
+        return None
+    try:
+        resume = resume_at(bundle.extra, k, int(prov.get("first_frame", 0)), model.skeleton.num_bones)
+    except ArticulaInputError as exc:
+        raise ArticulaInputError(f"{flag}: {path}: {exc}") from None
+    names = prov.get("frame_names") or []
+    if resume is not None and k < len(names):
+        resume.frame_name = str(names[k])
+    return resume
 
 
 def _training_action(arm):

@@ -56,9 +56,10 @@ def provenance(outcome) -> dict:
 
 def save(path: str, outcome) -> None:
     """Write the tracked (adapted) model and one pose per tracked frame, in the solve frame's
-    coordinates (the capture files' own for the batch command), with :func:`provenance`."""
+    coordinates (the capture files' own for the batch command), with :func:`provenance` and pass 1's state
+    per frame (``pass1_*`` arrays: ``track --start-pose`` of one of its frames goes on from it)."""
     check_output_path(path)
     try:
-        save_bundle(path, outcome.model, outcome.poses, provenance(outcome))
+        save_bundle(path, outcome.model, outcome.poses, provenance(outcome), getattr(outcome.result, "pass1", None))
     except OSError as exc:
         raise ArticulaInputError(f"{path}: cannot write the bundle ({exc.strerror or exc})") from None

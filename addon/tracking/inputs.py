@@ -28,6 +28,7 @@ class ModelInput:
     training_action: str = ""
     start_pose: Poses = None          # the first frame's start (one frame); None: found automatically
     start_label: str = ""             # where start_pose came from (the report's input.start)
+    resume: object = None             # pass 1's state of another run at start_pose (solver.track.trail.Resume)
 
 
 def parse_frames(text: str, count: int, flag: str = "--frames"):

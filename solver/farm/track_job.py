@@ -136,8 +136,8 @@ class TrackJob:
             self.start_from[j] = (i, self.ranges[j][0] - self.ranges[i][0])
             self.tracked_in[j] = self.repairs
             done.discard(j)
-            lines.append(f"chunk {j} disagreed with chunk {i} on frame {cut['frame']} by {cut['max_vertex_mm']:.0f} "
-                         f"mm: tracked again from chunk {i}'s pose")
+            lines.append(f"chunk {j} disagreed with chunk {i} on frame {cut['frame']} {merge.gap_text(cut)}: "
+                         f"tracked again from chunk {i}'s pose")
         return "; ".join(lines)
 
     def _can_restart(self, i: int, j: int) -> bool:
@@ -149,6 +149,6 @@ class TrackJob:
         i, j = cut["indices"]
         how = (f"after it was tracked again from chunk {i}'s pose at frame {self.ranges[j][0]}" if stuck else
                f"after {self.repairs} repair round(s) (at most {self.max_repairs})")
-        return (f"chunk {j} still disagrees with chunk {i} on frame {cut['frame']} by {cut['max_vertex_mm']:.0f} mm "
+        return (f"chunk {j} still disagrees with chunk {i} on frame {cut['frame']} {merge.gap_text(cut)} "
                 f"{how}; the merge is not submitted again (it would fail the same way): give a longer --overlap, "
                 f"or accept the join with --agree 0")

@@ -4,7 +4,8 @@ poses and provenance (docs/skinning.md).  Keys: ``format``; the model's :data:`M
 int32, ``heads``/``tails`` (B, 3) and ``frames`` (B, 3, 3) float64, ``anchor`` (V,) int32,
 ``twist_weights``/``swing_weights`` (V, B) float32, as in :class:`~..rig.model.Model`); the poses'
 :data:`POSE_KEYS` (``pose_rotations`` (N, B, 4), ``pose_translations`` (N, 3), ``pose_scales`` (N,));
-``provenance``, a JSON string.  Files are read with ``allow_pickle=False``; a broken file raises
+``provenance``, a JSON string; optionally further numeric arrays (``extra``, e.g. a tracked bundle's
+pass-1 state, :mod:`solver.track.trail`).  Files are read with ``allow_pickle=False``; a broken file raises
 :class:`ArticulaInputError` naming the key and the problem, a missing file names the path.  Pose
 quaternions whose norm is within ``QUAT_RENORM_TOL`` (1e-4) of 1 are normalised on load, with a note in
 ``Bundle.notes`` that the operators and batch commands show.
@@ -32,6 +33,7 @@ class Bundle:
     poses: Poses = None
     provenance: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)      # what loading changed (e.g. normalised quaternions)
+    extra: dict = field(default_factory=dict)      # further numeric arrays by key
 
 
 def temporary_path(path) -> str:
@@ -39,9 +41,9 @@ def temporary_path(path) -> str:
     return os.fspath(path) + ".tmp.npz"
 
 
-def save_bundle(path, model: Model, poses: Poses = None, provenance: dict = None) -> None:
-    """Validate and write ``model`` (and ``poses``, ``provenance``: a JSON-serialisable dict) to
-    ``path``.  The file is written to :func:`temporary_path` first and renamed, so a failure never
+def save_bundle(path, model: Model, poses: Poses = None, provenance: dict = None, extra: dict = None) -> None:
+    """Validate and write ``model`` (and ``poses``, ``provenance``: a JSON-serialisable dict, ``extra``:
+    further numeric or boolean arrays by key) to ``path``.  The file is written to :func:`temporary_path` first and renamed, so a failure never
     leaves a half-written bundle (nor the temporary file); a path that cannot be written raises
     :class:`ArticulaInputError`."""
     model.validate()
@@ -66,6 +68,11 @@ def save_bundle(path, model: Model, poses: Poses = None, provenance: dict = None
     except (TypeError, ValueError) as exc:
         raise ArticulaInputError(f"provenance: not JSON-serialisable ({exc})") from exc
     arrays["provenance"] = np.array(text)
+    for key, value in (extra or {}).items():
+        value = np.asarray(value)
+        if key in arrays or key in POSE_KEYS or value.dtype.kind not in "fiub":
+            raise ArticulaInputError(f"extra array {key!r}: a bundle key of its own, or not numeric ({value.dtype})")
+        arrays[key] = value
     path, tmp = os.fspath(path), temporary_path(path)
     with written_through(path, tmp, "the bundle"), open(tmp, "wb") as fh:
         np.savez_compressed(fh, **arrays)
@@ -142,7 +149,9 @@ def load_bundle(path) -> Bundle:
             raise ArticulaInputError(f"{path}: key 'provenance' is not valid JSON ({exc})") from exc
         if not isinstance(provenance, dict):
             raise ArticulaInputError(f"{path}: key 'provenance' must hold a JSON object")
-    return Bundle(model, poses, provenance, notes)
+    known = {"format", "provenance", *MODEL_KEYS, *POSE_KEYS}
+    extra = {k: a for k, a in arrays.items() if k not in known and a.dtype.kind in "fiub"}
+    return Bundle(model, poses, provenance, notes, extra)
 
 
 def _load_poses(arrays, path, num_bones):

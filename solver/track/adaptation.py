@@ -36,5 +36,5 @@ def adapt_on_keys(body, rec, poses: dict, prior, training_poses, options, settin
     for i in sorted(poses):
         c = rec.capture(i)
         refit[i] = fit_frame(adapted, c.points, c.normals, poses[i], settings=settings, stages=TRACKING,
-                             seed=i).pose
+                             seed=rec.range[i]).pose
     return adapted, refit

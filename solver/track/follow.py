@@ -25,8 +25,7 @@ from ..tracking.frame import SEARCH, SEARCH_HOLD, TRACKING, FrameSettings, fit_f
 from ..tracking.checks import check_frame
 from ..tracking.lm import State
 from .first_frame import capture_score, find_pose
-
-RUNNING = 10            # frames in the running median that lost-frame detection compares with
+from .trail import RUNNING, Resume, Trail
 BETTER = 0.8            # a search replaces a flagged frame's fit when its capture score is below this share
 HOLD_CARRY = 0.5        # share of the last velocity the weak directions' hold target carries on
 
@@ -51,7 +50,7 @@ def median_mm(state, points) -> float:
 
 
 def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings, priors=(), say=None,
-           cancel=None, checked=None) -> dict:
+           cancel=None, checked=None, resume: Resume = None, trail: Trail = None) -> dict:
     """``{tracked frame: pose}`` of pass 1 from tracked frame ``first`` at ``pose``; fills the report
     entries (median, lost, re-initialised, reason, seconds).  ``say(i, median mm)`` reports progress;
     ``checked``: the model prepared for the truth-free checks: a frame they call lost is searched again
@@ -59,10 +58,19 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
     a jump gets the full search of the first frame), and keeps its fit unless the search explains the
     capture clearly better (:func:`explains_better`) and passes them (when it does not, the frames after
     it that fail them are not searched until one passes: a subject that really touches itself fails them
-    throughout)."""
+    throughout).  ``resume``: the state another run left after this run's first frame (``pose`` is its
+    pose): pass 1 goes on as that run did; ``trail``: records the state after every frame.  A frame's fit
+    depends on that state and its capture only (its sample is seeded by its input frame number), so a
+    resumed run repeats the other's frames."""
     history, out = [pose], {first: pose}
     medians = [rec.entries[first]["median_mm"]] if rec.entries[first].get("median_mm") is not None else []
     searched_in_vain = False          # the last frame the checks failed was searched again without a better fit
+    if resume is not None:
+        history, medians, searched_in_vain = resume.history, list(resume.medians), resume.in_vain
+        if resume.held is not None:
+            body.hold(resume.held)
+    if trail is not None:
+        trail.record(first, history, medians, searched_in_vain, body.held_pose())
     for i in range(first + 1, len(rec)):
         t0 = time.perf_counter()
         capture = rec.capture(i)
@@ -71,7 +79,7 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
             continue
         guess = predict(history)
         fit = fit_frame(body, capture.points, capture.normals, guess, target=predict(history, HOLD_CARRY),
-                        settings=settings, stages=TRACKING, cancel=cancel, seed=i)
+                        settings=settings, stages=TRACKING, cancel=cancel, seed=rec.range[i])
         med = median_mm(fit.state, _sample(capture.points))
         limit = max(options.lost_factor * float(np.median(medians[-RUNNING:])) if medians else 0.0,
                     options.lost_mm)
@@ -92,6 +100,8 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
                                       f"after re-initialisation (limit {limit:.1f} mm)")
                 rec.entries[i]["seconds"] = round(time.perf_counter() - t0, 3)
                 history = history[-1:]
+                if trail is not None:
+                    trail.record(i, history, medians, searched_in_vain, body.held_pose(), fitted=False)
                 continue
             if jump or (explains_better(body, capture, searched, fit.state)
                         and not _lost(body, capture, again, searched.posed, checked)):
@@ -103,6 +113,8 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
         medians.append(med)
         history = (history + [fit_pose])[-2:]
         out[i] = fit_pose
+        if trail is not None:
+            trail.record(i, history, medians, searched_in_vain, body.held_pose())
         if say is not None:
             say(i, med)
     return out

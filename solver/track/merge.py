@@ -9,7 +9,10 @@ Chunks belong together when they share the model digest, bone names, vertex coun
 Each frame covered by several chunks is taken from the chunk where it lies furthest from a cut (a chunk
 boundary inside the merged range): near a cut a chunk has tracked only a few frames on that side (its first
 frame starts without a predecessor), further in it has the same temporal context as one run would.  Ties
-go to the earlier chunk.
+go to the earlier chunk.  A capture tracker's chunk reports per frame the window of the temporal pass it
+took its pose from (:mod:`solver.tracking.window`); a frame is taken from a chunk whose window for it is
+the one a single run over the merged range would use, when one is: there the chunk's pose is the single
+run's whenever its pass 1 was (a chunk resumed from the earlier one's state: :mod:`.trail`).
 """
 from __future__ import annotations
 
@@ -23,6 +26,9 @@ from ..formats.bundle import load_bundle
 from ..rig.model import Model, Poses
 from ..rig.skinning import hybrid_skin
 from ..tracking.provenance import SOURCE, track_provenance
+from ..tracking.window import owner, schedule
+from .trail import KEYS as TRAIL_KEYS
+from .trail import resume_at
 
 #: mm: chunks whose posed vertices differ more at a cut started on another solution (``merge-tracks`` and
 #: the farm refuse such a join by default; docs/farm.md).
@@ -38,6 +44,14 @@ class TrackChunk:
     model: Model
     poses: Poses
     provenance: dict
+    pass1: dict = None          # pass 1's state per frame (:mod:`.trail`), when the bundle has it
+
+    def pass1_pose(self, frame: int):
+        """The pass-1 pose of input ``frame`` (one frame), or None (no record, or not fitted in pass 1)."""
+        if not self.pass1:
+            return None
+        resume = resume_at(self.pass1, frame - self.start, self.start, self.model.skeleton.num_bones)
+        return None if resume is None else resume.pose
 
     @property
     def start(self) -> int:
@@ -66,7 +80,8 @@ def chunk_from_bundle(bundle, name: str) -> TrackChunk:
     if not isinstance(first, int) or not isinstance(total, int) or first < 0 or first + len(bundle.poses) > total:
         raise ArticulaInputError(f"{name}: frames {first}..{first}+{len(bundle.poses)} do not fit an input of "
                                  f"{total} frames")
-    return TrackChunk(name, bundle.model, bundle.poses, prov)
+    pass1 = {k: bundle.extra[k] for k in TRAIL_KEYS if k in bundle.extra} or None
+    return TrackChunk(name, bundle.model, bundle.poses, prov, pass1)
 
 
 def load_chunks(paths) -> list:
@@ -191,8 +206,10 @@ def _merged_frame_rows(chunks, chosen, lo) -> list:
 
 def cut_differences(chunks, chosen, lo: int) -> list:
     """At each cut (the first frame the merge takes from the next chunk) the largest distance (mm) between
-    the two chunks' posed vertices on that frame: a few mm when both settled on the same motion, far more
-    when one started on another solution of an ambiguous first frame.  ``chunks`` sorted by start."""
+    the two chunks' posed vertices on that frame (``max_vertex_mm``): a few mm when both settled on the
+    same motion, far more when one started on another solution of an ambiguous first frame; and, when
+    both chunks carry pass 1's record, the same between their pass-1 poses (``pass1_mm``: 0 for a chunk
+    resumed from the other, :mod:`.trail`).  ``chunks`` sorted by start."""
     out = []
     for k in range(1, len(chosen)):
         i, j, f = int(chosen[k - 1]), int(chosen[k]), lo + k
@@ -203,9 +220,27 @@ def cut_differences(chunks, chosen, lo: int) -> list:
             continue
         va = hybrid_skin(a.model, a.poses.take(f - a.start))[0]
         vb = hybrid_skin(b.model, b.poses.take(f - b.start))[0]
-        out.append({"chunks": [a.name, b.name], "indices": [i, j], "frame": f,
-                    "max_vertex_mm": 1000 * float(np.linalg.norm(va - vb, axis=1).max())})
+        cut = {"chunks": [a.name, b.name], "indices": [i, j], "frame": f,
+               "max_vertex_mm": 1000 * float(np.linalg.norm(va - vb, axis=1).max())}
+        pa, pb = a.pass1_pose(f), b.pass1_pose(f)
+        if pa is not None and pb is not None:
+            pa, pb = hybrid_skin(a.model, pa)[0], hybrid_skin(b.model, pb)[0]
+            cut["pass1_mm"] = 1000 * float(np.linalg.norm(pa - pb, axis=1).max())
+        out.append(cut)
     return out
+
+
+def differs(cut: dict, agree_mm: float) -> bool:
+    """Whether the chunks of ``cut`` started on different solutions: their pass-1 poses (else their poses)
+    differ there by more than ``agree_mm`` (mm; None or 0: never)."""
+    return bool(agree_mm) and cut.get("pass1_mm", cut["max_vertex_mm"]) > agree_mm
+
+
+def gap_text(cut: dict) -> str:
+    """How far the chunks of ``cut`` differ, as :func:`differs` judges it ("by 12 mm in pass 1")."""
+    if "pass1_mm" in cut:
+        return f"by {cut['pass1_mm']:.1f} mm in pass 1"
+    return f"by {cut['max_vertex_mm']:.0f} mm"
 
 
 def _choose(chunks) -> np.ndarray:
@@ -214,23 +249,53 @@ def _choose(chunks) -> np.ndarray:
     lo, hi = chunks[0].start, chunks[-1].end
     ranges, look_ahead = [(c.start, c.end) for c in chunks], _look_ahead(chunks)
     if look_ahead is None:
-        return choose_frames(ranges, lo, hi)
+        return same_windows(chunks, choose_frames(ranges, lo, hi), lo, hi)
     return choose_frames_causal(ranges, lo, hi, look_ahead)
+
+
+def same_windows(chunks, chosen, lo: int, hi: int) -> np.ndarray:
+    """``chosen`` (chunk index per frame ``lo..hi-1``) with each frame moved to a chunk whose temporal
+    window for it (its report's ``window``) is the one a single run over ``lo..hi`` would use (its
+    options' ``window`` and ``step``), when the chosen chunk's is not and another's is."""
+    options = chunks[0].provenance.get("options") or {}
+    size, step = options.get("window"), options.get("step")
+    if not isinstance(size, int) or not isinstance(step, int) or not options.get("temporal", True):
+        return chosen
+    n = hi - lo
+    windows = schedule(list(range(n)), list(range(lo, hi)), size, step)
+    target = [[lo + windows[w][0], lo + windows[w][-1]] for w in owner(windows, n)]
+    out = np.array(chosen)
+    for k in range(n):
+        if _window(chunks[out[k]], lo + k) == target[k]:
+            continue
+        same = [i for i, c in enumerate(chunks) if c.start <= lo + k < c.end and _window(c, lo + k) == target[k]]
+        if same:
+            out[k] = same[0]
+    return out
+
+
+def _window(chunk, frame: int):
+    """The temporal window ``[first, last]`` (input frames) ``chunk`` took ``frame``'s pose from, or None."""
+    rows = (chunk.provenance.get("report") or {}).get("frames")
+    if not isinstance(rows, list) or len(rows) != len(chunk.poses):
+        return None
+    row = rows[frame - chunk.start]
+    return row.get("window") if isinstance(row, dict) else None
 
 
 def disagreements(chunks, agree_mm: float) -> list:
     """The cuts (:func:`cut_differences`) where ``chunks`` (any order; sorted here) differ by more than
     ``agree_mm``; their ``indices`` refer to the chunks sorted by start."""
     chunks = sorted(chunks, key=lambda c: (c.start, c.end))
-    return [c for c in cut_differences(chunks, _choose(chunks), chunks[0].start) if c["max_vertex_mm"] > agree_mm]
+    return [c for c in cut_differences(chunks, _choose(chunks), chunks[0].start) if differs(c, agree_mm)]
 
 
 def disagreement_text(cut: dict, chunks) -> str:
     """A message for a cut whose chunks disagree, with the command that repairs it."""
     i, j = cut["indices"]
     k = chunks[j].start - chunks[i].start
-    return (f"{cut['chunks'][0]} and {cut['chunks'][1]} disagree on frame {cut['frame']} by "
-            f"{cut['max_vertex_mm']:.0f} mm (the later chunk started on another solution); track "
+    return (f"{cut['chunks'][0]} and {cut['chunks'][1]} disagree on frame {cut['frame']} {gap_text(cut)} "
+            f"(the later chunk started on another solution); track "
             f"{cut['chunks'][1]}'s frames again with --start-pose {cut['chunks'][0]}:{k}, or give more overlap, "
             f"or accept the join as it is with --agree 0")
 
@@ -248,7 +313,7 @@ def merge_chunks(chunks, agree_mm: float = None) -> MergedTrack:
     lo, hi = chunks[0].start, chunks[-1].end
     chosen = _choose(chunks)
     cuts = cut_differences(chunks, chosen, lo)
-    bad = [c for c in cuts if agree_mm and c["max_vertex_mm"] > agree_mm]
+    bad = [c for c in cuts if differs(c, agree_mm)]
     if bad:
         raise ArticulaInputError(disagreement_text(bad[0], chunks))
     idx = [lo + k - chunks[i].start for k, i in enumerate(chosen)]

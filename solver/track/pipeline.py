@@ -42,6 +42,7 @@ from .follow import follow, median_mm
 from .gaps import interpolate_gaps, stacked
 from .options import ADAPT_MIN_FRAMES, MODEL_PRIOR_MIN_POSES, TrackOptions
 from .recording import Recording
+from .trail import Resume, Trail
 from .report import assess, notes
 
 BOX_PAD = 0.1           # rad added to each side of the prior's box limits
@@ -65,6 +66,7 @@ class TrackResult:
     first_frame: int
     notes: list = dataclasses.field(default_factory=list)
     doubtful: list = dataclasses.field(default_factory=list)
+    pass1: dict = None          # pass 1's state per frame (:meth:`.trail.Trail.arrays`), for resuming
 
     def report(self) -> dict:
         """JSON-serialisable summary: everything but the poses and the model."""
@@ -76,11 +78,13 @@ class TrackResult:
 
 
 def track_sequence(model, source, options: TrackOptions = TrackOptions(), training_poses: Poses = None,
-                   progress=None, start_pose: Poses = None) -> TrackResult:
+                   progress=None, start_pose: Poses = None, resume: Resume = None) -> TrackResult:
     """Track ``model`` through ``source`` (a :class:`.captures.CaptureSource`, thinned to
     ``options.max_points``, or any indexable sequence of captures with ``points``/``normals``), module
     docstring.  training_poses: the model's poses (prior); start_pose: the first frame's start (one
-    frame) instead of the search; progress: ``progress(fraction, text)``, may raise
+    frame) instead of the search; resume: pass 1's state another run of the same input and model left
+    (:mod:`.trail`): when it is this run's first frame's, pass 1 goes on from it as that run did, else
+    its pose is the start pose; progress: ``progress(fraction, text)``, may raise
     :class:`..errors.Cancelled`."""
     options.validate()
     model.validate()
@@ -92,13 +96,17 @@ def track_sequence(model, source, options: TrackOptions = TrackOptions(), traini
         settings = FrameSettings(samples=options.samples, weak_ratio=options.weak_ratio)
         priors = [PairPrior(prior, PRIOR_WEIGHT)] if prior is not None else []
         checked = prepare(model) if options.checks else None
+        resumed = resumable(resume, rec)
+        if resumed is None and resume is not None and start_pose is None:
+            start_pose = resume.pose
         first, pose = clock.run("initialisation", first_frame, body, rec, start_pose, priors, options, settings,
-                                checked)
+                                checked, resumed)
+        trail = Trail(len(rec), model.skeleton.num_bones)
         tracked = lambda i, med: say(0.6 * (i + 1) / len(rec), f"tracking: frame {i + 1} of {len(rec)}, median "
                                                                f"{med:.1f} mm")
         tracked(first, rec.entries[first]["median_mm"])
         poses = clock.run("pass 1", follow, body, rec, first, pose, options, settings, priors, tracked,
-                          None, checked)
+                          None, checked, resumed, trail)
         adapted = adapting(options, rec)
         if adapted:
             body, poses = clock.run("adaptation", adapt_on_keys, body, rec, poses, prior, training_poses, options,
@@ -110,7 +118,8 @@ def track_sequence(model, source, options: TrackOptions = TrackOptions(), traini
     lost = [rec.range[i] for i in range(len(rec)) if rec.entries[i]["lost"]]
     skipped = [rec.range[i] for i in range(len(rec)) if rec.entries[i]["skipped"]]
     return TrackResult(full, body.model, adapted, rec.entries, lost, skipped, clock.rounded(), prior_name,
-                       rec.range.start, notes(rec, prior_name, options, doubtful), doubtful)
+                       rec.range.start, notes(rec, prior_name, options, doubtful) + resumed_note(resumed), doubtful,
+                       trail.arrays())
 
 
 def choose_prior(model, training_poses, which: str):
@@ -129,15 +138,34 @@ def choose_prior(model, training_poses, which: str):
     return widened(generic_prior(model.skeleton), None, BOX_PAD), "generic"
 
 
-def first_frame(body, rec, start_pose, priors, options, settings, checked=None):
-    """``(tracked frame, pose)`` of the first frame with enough points: fitted from ``start_pose`` or
-    found by the search."""
+def resumable(resume, rec):
+    """``resume`` when it is the state after this run's first input frame and that frame has enough
+    points, else None."""
+    if resume is None or resume.input_frame != rec.range.start:
+        return None
+    rec.capture(0)
+    return None if rec.too_few(0) else resume
+
+
+def resumed_note(resumed) -> list:
+    if resumed is None:
+        return []
+    return [f"pass 1 went on from the state another run left after input frame {resumed.input_frame} (its pose, "
+            f"velocity and running medians)"]
+
+
+def first_frame(body, rec, start_pose, priors, options, settings, checked=None, resume=None):
+    """``(tracked frame, pose)`` of the first frame with enough points: ``resume``'s pose (another run's
+    pass-1 pose of it, kept as it is), fitted from ``start_pose`` or found by the search."""
     for i in range(len(rec)):
         t0 = time.perf_counter()
         capture = rec.capture(i)
         if rec.too_few(i):
             continue
         check_units(body.model, capture.points)
+        if resume is not None:
+            rec.entries[i].update(median_mm=median_mm(State(body, resume.pose), capture.points))
+            return i, resume.pose
         if start_pose is not None:
             fit = fit_frame(body, capture.points, capture.normals, as_start(body.model, start_pose),
                             priors=priors, stages=SEARCH, settings=settings, weak_ratio=SEARCH_HOLD)

@@ -73,7 +73,7 @@ class Recording:
                 "points": int(len(capture.points)), "dropped_nan": int(info.dropped_nan) if info else 0,
                 "mean_mm": None, "median_mm": None, "mad_mm": None, "iqr_mm": None,
                 "lost": False, "skipped": False, "reinitialised": False, "reason": "", "seconds": 0.0,
-                "verdict": None, "checks": []}
+                "verdict": None, "checks": [], "window": None}
 
     def usable(self) -> list:
         """Tracked frames that were neither skipped nor lost."""

@@ -81,6 +81,23 @@ class Body:
         """Drop the held Jacobian of ``slot`` (if any)."""
         self._jacobians.pop(slot, None)
 
+    def held_pose(self, slot=0):
+        """The pose ``slot``'s held Jacobian was evaluated at, or None.  With :meth:`hold` a run that
+        continues another's repeats its steps exactly (:mod:`solver.track.trail`)."""
+        held = self._jacobians.get(slot)
+        return None if held is None else held[0]
+
+    def hold(self, pose: Poses, slot=0) -> None:
+        """Evaluate and hold ``slot``'s Jacobian at ``pose`` (what :meth:`jacobian_near` would hold)."""
+        self.release(slot)
+        self._held(pose, slot, 0.0)
+
+    def holds_at(self, slot, pose: Poses) -> bool:
+        """Whether ``slot``'s held Jacobian was evaluated at exactly ``pose``."""
+        held = self.held_pose(slot)
+        return held is not None and all(np.array_equal(a, b) for a, b in zip(
+            (held.rotations, held.translations, held.scales), (pose.rotations, pose.translations, pose.scales)))
+
     def pose(self, pose: Poses) -> np.ndarray:
         """Posed vertices ``(V, 3)`` of one frame."""
         return hybrid_skin(self.model, pose, self.groups)[0]

@@ -12,9 +12,11 @@ shared by all frames of a window free, and without the hold fingers and twists w
 from where pass 1 left them (docs/track.md "Windows").
 
 Windows are anchored at input frame numbers (a window starts where the input frame number is a multiple
-of ``step``), and each frame keeps the pose of the window it is most central in: a frame's result
-depends on the data of its own window only, so a recording cut into overlapping chunks gives what one
-run gives (docs/track.md "Farm").
+of ``step``), and each frame keeps the pose of the window it is most central in (its report entry's
+``window``: first and last input frame): a frame's result depends on its own window's data and pass-1
+poses only (a Jacobian held from an earlier window is kept only when it was evaluated at the frame's
+start), so a chunk of a recording gives what one run gives where it has the same window
+(:func:`solver.track.merge.choose_frames`, docs/track.md "Farm").
 """
 from __future__ import annotations
 
@@ -75,11 +77,12 @@ def fit_windows(body, rec, poses: dict, frames, options, settings, say=None) -> 
         if not mine:
             continue
         idx = [frames[k] for k in win]
-        body.forget(keep={("frame", i) for i in idx})
+        body.forget(keep={("frame", i) for i in idx if body.holds_at(("frame", i), poses[i])})
         fitted = fit_window(body, [rec.capture(i) for i in idx], [poses[i] for i in idx], options.w_temp,
                             settings, slots=[("frame", i) for i in idx])
         for k in mine:
             out[frames[k]] = fitted[win.index(k)]
+            rec.entries[frames[k]]["window"] = [int(numbers[win[0]]), int(numbers[win[-1]])]
         if say is not None:
             say((w + 1) / len(windows))
     body.forget()

@@ -145,9 +145,10 @@ class StubTracker:
         self.pipeline, self.model, self.poses = pkg("solver.track.pipeline"), model, poses
         self.adapted_model, self.notes, self.calls = adapted_model, list(notes), []
 
-    def __call__(self, model, source, options, training_poses=None, progress=None, start_pose=None):
+    def __call__(self, model, source, options, training_poses=None, progress=None, start_pose=None, resume=None):
         a, b = options.frames or (0, len(source))
         self.calls.append({"model": model, "points": [source[i].points for i in range(a, b)], "start": start_pose,
+                           "resume": resume,
                            "training_poses": training_poses, "options": options,
                            "cameras": getattr(source, "cameras", None)})
         rows = [{"frame": a + j, "name": source.names[a + j], "mean_mm": 1.0 + j, "median_mm": 0.5 + j,

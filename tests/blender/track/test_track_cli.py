@@ -129,6 +129,32 @@ def test_bad_input(pkg, tmp_path, truth, files, capsys):
     assert "person.npz: not a tracked bundle" in capsys.readouterr().err
 
 
+def test_start_pose_of_a_tracked_bundle_goes_on_with_its_pass_1(pkg, tmp_path, truth, files, capsys):
+    """``--start-pose TRACKED.npz:K`` of a bundle ``track`` wrote with the same model and captures: pass 1
+    goes on from the state it left after frame K (the note says so) and repeats its frames exactly; the
+    same bundle at a frame that is not this run's first, or tracked with another model, is a start pose."""
+    model, poses, captures = truth
+    path, folder = files
+    cli = pkg("addon.cli.main")
+    whole, part = str(tmp_path / "whole.npz"), str(tmp_path / "part.npz")
+    assert cli.main(["track", "--model", path, "--scans", folder, "--out", whole, *FAST]) == 0
+    assert {"pass1_last", "pass1_held"} <= set(load_bundle(whole).extra)
+    capsys.readouterr()
+    assert cli.main(["track", "--model", path, "--scans", folder, "--frames", "2:", "--start-pose", f"{whole}:2",
+                     "--out", part, *FAST]) == 0
+    assert "went on from the state another run left after input frame 2" in capsys.readouterr().out
+    np.testing.assert_array_equal(load_bundle(part).poses.rotations, load_bundle(whole).poses.rotations[2:])
+    assert cli.main(["track", "--model", path, "--scans", folder, "--frames", "1:", "--start-pose", f"{whole}:2",
+                     "--out", part, *FAST]) == 0
+    assert "went on" not in capsys.readouterr().out
+    moved = str(tmp_path / "moved.npz")
+    save_bundle(moved, Model(model.rest_vertices + 0.001, model.faces, model.skeleton, model.anchor,
+                             model.twist_weights, model.swing_weights), poses)
+    assert cli.main(["track", "--model", moved, "--scans", folder, "--frames", "2:", "--start-pose", f"{whole}:2",
+                     "--out", part, *FAST]) == 0
+    assert "went on" not in capsys.readouterr().out
+
+
 def test_model_without_poses_says_generic_prior(pkg, tmp_path, truth, monkeypatch, capsys):
     """The note of the tracker (generic prior for a model without poses) is printed; the stub stands in for
     the tracker (the generic prior itself is the solver's to test)."""

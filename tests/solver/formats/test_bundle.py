@@ -64,6 +64,20 @@ def test_roundtrip_without_poses(tmp_path, model):
     assert b.poses is None and b.provenance == {}
 
 
+def test_extra_arrays_round_trip_and_may_not_take_a_bundle_key(tmp_path, model):
+    """Further numeric arrays (a tracked bundle's pass-1 record) come back exactly; one named like a
+    bundle key, or not numeric, is refused before anything is written."""
+    extra = {"pass1_last": np.random.default_rng(0).normal(size=(3, 9)), "pass1_fitted": np.array([1, 0, 1], bool)}
+    save_bundle(tmp_path / "m.npz", model, extra=extra)
+    got = load_bundle(tmp_path / "m.npz").extra
+    assert set(got) == set(extra) and all(np.array_equal(got[k], extra[k]) for k in extra)
+    assert got["pass1_fitted"].dtype == bool
+    for bad in ({"faces": np.zeros(3)}, {"pose_scales": np.ones(2)}, {"names": np.array(["a"])}):
+        with pytest.raises(ArticulaInputError, match="extra array"):
+            save_bundle(tmp_path / "n.npz", model, extra=bad)
+    assert not os.path.exists(tmp_path / "n.npz")
+
+
 def test_missing_file_names_path(tmp_path):
     with pytest.raises(ArticulaInputError, match="nope.npz"):
         load_bundle(tmp_path / "nope.npz")

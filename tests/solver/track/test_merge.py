@@ -85,6 +85,29 @@ def test_overlap_frames_come_from_the_chunk_further_from_the_cut(model):
     assert [r["name"] for r in got.report["frame_rows"]] == got.provenance["frame_names"]
 
 
+def test_a_frame_comes_from_the_chunk_whose_temporal_window_is_a_single_runs(model):
+    """Chunks 0:10 and 4:14 (window 5, step 2): a single run over 0:14 takes frame 6 from window 4..8
+    and frame 8 from 6..10.  Frame 6 lies nearer chunk A's end, but A took it from its end window 5..9
+    and B from 4..8, so it comes from B; frame 8 is B's by the cut rule and stays there though neither
+    chunk has its window; the other frames keep the cut rule's chunk."""
+    gt = truth_poses(model, 14)
+    options = {"adapt": "off", "temporal": True, "window": 5, "step": 2}
+    a, b = chunk(model, gt, 0, 10, "a.npz", options=options), chunk(model, gt, 4, 14, "b.npz", options=options)
+    single = {0: [0, 4], 1: [0, 4], 2: [0, 4], 3: [0, 4], 4: [2, 6], 5: [2, 6], 6: [4, 8], 7: [4, 8],
+              8: [6, 10], 9: [8, 12], 10: [8, 12], 11: [9, 13], 12: [9, 13], 13: [9, 13]}
+    for f, row in enumerate(a.provenance["report"]["frames"]):
+        row["window"] = single[f] if f <= 5 else [5, 9]
+    for f, row in enumerate(b.provenance["report"]["frames"], start=4):
+        row["window"] = [4, 8] if f <= 6 else [5, 9] if f == 8 else single[f]
+    cut_rule = merge.choose_frames([(0, 10), (4, 14)], 0, 14)
+    assert cut_rule.tolist() == [0] * 7 + [1] * 7
+    got = merge.merge_chunks([a, b])
+    assert got.report["frame_chunk"] == [0] * 6 + [1] * 8
+    for c in (a, b):
+        c.provenance["options"].pop("step")              # without the windows' step: the cut rule alone
+    assert merge.merge_chunks([a, b]).report["frame_chunk"] == cut_rule.tolist()
+
+
 def test_three_chunks_inside_a_longer_input(model):
     """Chunks 4:11, 9:16, 14:20 of a 20-frame input: the merged range starts at 4, and identical chunk
     poses give the truth back."""
@@ -174,3 +197,35 @@ def test_cut_differences_are_the_posed_vertex_distance_where_the_merge_switches(
     with pytest.raises(ArticulaInputError, match=r"a.npz and b.npz disagree on frame \d+ .*--start-pose a.npz:8"):
         merge.merge_chunks([a, b], agree_mm=cut["max_vertex_mm"] - 0.01)
     assert merge.merge_chunks([a, b], agree_mm=cut["max_vertex_mm"] + 0.01).report["cuts"] == [cut]
+
+
+def _with_pass1(c, poses):
+    """``c`` with a pass-1 record whose poses are ``poses`` (its frames)."""
+    from articula.solver.track.trail import Trail
+    trail = Trail(len(c.poses), c.model.skeleton.num_bones)
+    for k in range(len(c.poses)):
+        trail.record(k, [poses.take([c.start + k])], [1.0], False)
+    c.pass1 = trail.arrays()
+    return c
+
+
+def test_chunks_disagree_by_their_pass_1_poses_when_both_have_them(model):
+    """With pass-1 records a cut is judged by the pass-1 poses: the same pass 1 (a chunk resumed from the
+    other) agrees under any threshold though the final poses differ; another pass 1 is measured by brute
+    force, and named in the message."""
+    from articula.solver.rig.skinning import hybrid_skin
+    poses = truth_poses(model)
+    a = _with_pass1(chunk(model, poses, 0, 12, "a.npz"), poses)
+    b = _with_pass1(chunk(model, poses, 8, N, "b.npz", noise=0.05, seed=4), poses)
+    (cut,) = merge.merge_chunks([a, b]).report["cuts"]
+    assert cut["max_vertex_mm"] > 1.0 and cut["pass1_mm"] == 0.0
+    assert merge.merge_chunks([a, b], agree_mm=1e-6).report["cuts"] == [cut]
+    other = Poses(poses.rotations, poses.translations + [0.0, 0.0, 0.03], poses.scales)
+    b = _with_pass1(chunk(model, poses, 8, N, "b.npz", noise=0.05, seed=4), other)
+    (cut,) = merge.disagreements([b, a], 29.0)
+    f = cut["frame"]
+    va, vb = hybrid_skin(model, poses.take(f))[0], hybrid_skin(model, other.take(f))[0]
+    assert cut["pass1_mm"] == pytest.approx(1000 * np.linalg.norm(va - vb, axis=1).max()) == pytest.approx(30.0)
+    assert merge.disagreements([a, b], 31.0) == []
+    with pytest.raises(ArticulaInputError, match=r"disagree on frame \d+ by 30.0 mm in pass 1"):
+        merge.merge_chunks([a, b], agree_mm=29.0)

@@ -491,3 +491,44 @@ def test_a_capture_read_ahead_is_the_one_read_and_its_failure_is_raised_where_it
         bad.prefetch(1)
         with pytest.raises(OSError, match="capture 1"):
             bad.capture(1)
+
+
+def test_a_chunk_resumed_from_a_runs_state_repeats_that_run(body):
+    """Pass 1 resumed at frame 4 from the whole run's trail (:mod:`solver.track.trail`) repeats the whole
+    run's pass 1 bit for bit (prediction, running medians and the held Jacobian carried over), and every
+    frame whose temporal window is the whole run's gets the whole run's pose; started from frame 4's pose
+    alone, pass 1 differs."""
+    from articula.solver.track.trail import resume_at
+    n, k = 12, 4
+    poses = _motion(body, n, step=0.05)
+    _, pts = _source(body, poses)
+    src = cp.CaptureSource.from_arrays(pts, [body.faces] * n)
+    options = dataclasses.replace(_options(), temporal=True, window=5, step=2)
+    whole = pipeline.track_sequence(body, src, options, start_pose=poses.take([0]))
+    resume = resume_at(whole.pass1, k, 0, body.skeleton.num_bones)
+    chunk = pipeline.track_sequence(body, src, dataclasses.replace(options, frames=(k, n)), resume=resume)
+    assert any("went on from the state" in note for note in chunk.notes), chunk.notes
+    for key in ("pass1_last", "pass1_before", "pass1_held", "pass1_medians"):
+        assert np.array_equal(chunk.pass1[key], whole.pass1[key][k:], equal_nan=True), key
+    same = [f for f in range(k, n) if chunk.frames[f - k]["window"] == whole.frames[f]["window"]]
+    assert len(same) >= n - k - 3, (same, [e["window"] for e in chunk.frames])
+    for f in same:
+        assert np.array_equal(chunk.poses.rotations[f - k], whole.poses.rotations[f]), f
+    alone = pipeline.track_sequence(body, src, dataclasses.replace(options, frames=(k, n), temporal=False),
+                                    start_pose=whole.poses.take([k]))
+    assert not np.array_equal(alone.pass1["pass1_last"][1:], whole.pass1["pass1_last"][k + 1:])
+
+
+def test_a_resume_at_another_frame_is_a_start_pose(body):
+    """A trail's state at frame 4 given to a run starting at frame 3: its pose is fitted as a start pose
+    (no state carried over: the note says nothing of it)."""
+    from articula.solver.track.trail import resume_at
+    n = 6
+    poses = _motion(body, n)
+    _, pts = _source(body, poses)
+    src = cp.CaptureSource.from_arrays(pts, [body.faces] * n)
+    whole = pipeline.track_sequence(body, src, _options(), start_pose=poses.take([0]))
+    resume = resume_at(whole.pass1, 4, 0, body.skeleton.num_bones)
+    res = pipeline.track_sequence(body, src, dataclasses.replace(_options(), frames=(3, n)), resume=resume)
+    assert not any("went on" in note for note in res.notes)
+    assert max(f["median_mm"] for f in res.frames) < 3.0
