@@ -13,6 +13,7 @@ the chunks that failed again (``--retries`` times), and leaves at ``--out`` the 
 ``./run track`` with the same flags would write.  Paths must lie on storage every Worker sees; the
 Manager's two-way variables map them between platforms.  Ctrl-C cancels the job.
 """
+import math
 import os
 
 from ...solver.errors import ArticulaInputError, Cancelled
@@ -21,7 +22,7 @@ from ...solver.farm.flamenco import Manager
 from ...solver.farm.follow import FarmRun
 from ...solver.depth.camera import preset_key
 from ...solver.farm.subjects_job import SubjectsJob
-from ...solver.farm.track_job import AGREE_MM
+from ...solver.farm.track_job import AGREE_MM, SCANS_AGREE_MM
 from ...solver.track_depth.options import TRACKERS
 from ..farm import inputs, job_types
 from .track_depth import CAMERAS
@@ -61,7 +62,10 @@ def run_track(args) -> int:
                            overlap, options, args.camera or "", args.work_dir or "")
     if note:
         print(note)
-    job.agree_mm = args.agree
+    if args.agree is not None:
+        if not args.agree >= 0 or not math.isfinite(args.agree):
+            raise ArticulaInputError(f"--agree: expected millimetres >= 0 (0: no check), got {args.agree}")
+        job.agree_mm = args.agree
     if not 1 <= args.adapt_frames <= 100_000:
         raise ArticulaInputError(f"--adapt-frames: expected 1..100000, got {args.adapt_frames}")
     job.adapt_frames = args.adapt_frames
@@ -147,9 +151,11 @@ def add_commands(sub):
                    help="frames a chunk tracks before its own to settle (default: 60 for --depth, 10 for --scans; "
                         "with --chunk alone, at most half the chunk)")
     q.add_argument("--work-dir", help="shared folder for the chunk bundles (default: OUT.farm beside --out)")
-    q.add_argument("--agree", type=float, default=AGREE_MM, metavar="MM",
+    q.add_argument("--agree", type=float, default=None, metavar="MM",
                    help="chunks differing more than this (mm) where the merge switches started on another solution: "
-                        "with --scans the later one is tracked again from the earlier one's pose (default %(default)s; 0: off)")
+                        f"with --scans (default {SCANS_AGREE_MM:g}, pass-1 poses) the later one goes on from the earlier "
+                        f"one's pass 1, which makes it the one process's track; with --depth (default {AGREE_MM:g}) the "
+                        f"merge refuses; 0: off")
     q.set_defaults(func=run_track)
     for name, what in (("learn", "learn a rig per subject folder (learn-rig)"),
                        ("import", "import each subject's scan sequence into a .blend (import-scans)")):

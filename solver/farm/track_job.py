@@ -13,8 +13,9 @@ from . import chunks as chunk_plan
 
 JOB_TYPE = "articula-track"
 KINDS = ("depth", "scans")
-AGREE_MM = merge.AGREE_MM     # mm: chunks differing more on a cut frame started on another solution
-MAX_REPAIRS = 3               # rounds of re-tracking disagreeing chunks before the job gives up
+AGREE_MM = merge.AGREE_MM     # mm: depth chunks differing more on a cut frame started on another solution
+SCANS_AGREE_MM = 1.0          # mm: capture chunks whose pass-1 poses differ more at a cut are tracked again
+MAX_REPAIRS = 3               # rounds of re-tracking disagreeing chunks before the job gives up (at least)
 
 
 @dataclass
@@ -24,9 +25,11 @@ class TrackJob:
     chunks' tracked ``(start, stop)``; ``work_dir``: shared folder for the chunk bundles; ``out``:
     tracked bundle; ``blend``: optional .blend to bake into; ``options``: further ``track`` flags
     (no paths); ``name``: the job's name; ``agree_mm``: the merge refuses chunks that differ more than
-    this on the frame where it switches between them (0: no check); ``start_from``: ``{chunk: (earlier
+    this on the frame where it switches between them (0: no check; None: :data:`SCANS_AGREE_MM` for
+    captures, whose chunks the repair makes equal to one run, :data:`AGREE_MM` for depth); ``start_from``: ``{chunk: (earlier
     chunk, pose index)}``, chunks to start from an earlier chunk's pose (``track --start-pose``);
-    ``max_repairs``: rounds of :meth:`repair` at most; ``repairs``: rounds done; ``tracked_in``: ``{chunk:
+    ``max_repairs``: rounds of :meth:`repair` at most (None: :data:`MAX_REPAIRS` or one per chunk after
+    the first, whichever is more: a run of disagreeing chunks is repaired front to back); ``repairs``: rounds done; ``tracked_in``: ``{chunk:
     round}`` in which a chunk was last tracked (0, absent: the first submission).  Paths absolute, as
     this machine sees the shared storage."""
     model: str
@@ -38,15 +41,21 @@ class TrackJob:
     blend: str = ""
     options: list = field(default_factory=list)
     name: str = ""
-    agree_mm: float = AGREE_MM
+    agree_mm: float = None
     start_from: dict = field(default_factory=dict)
     adapt_frames: int = 300
-    max_repairs: int = MAX_REPAIRS
+    max_repairs: int = None
     repairs: int = 0
     tracked_in: dict = field(default_factory=dict)
 
     job_type = JOB_TYPE
     unit = "chunk"
+
+    def __post_init__(self):
+        if self.agree_mm is None:
+            self.agree_mm = SCANS_AGREE_MM if self.kind == "scans" else AGREE_MM
+        if self.max_repairs is None:
+            self.max_repairs = max(MAX_REPAIRS, len(self.ranges) - 1)
 
     def chunk_path(self, k: int) -> str:
         """Where chunk ``k``'s tracked bundle lands (the output itself when there is one chunk)."""

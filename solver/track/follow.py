@@ -4,7 +4,10 @@ Frame n starts at the pose predicted from the last two good frames (``q_n = q_{n
 q_{n-1})`` per bone, the root moving on as it moved) and is held along the directions its data barely
 constrain (:func:`solver.tracking.priors.weak_directions`) to a prediction carrying on half that velocity
 (``HOLD_CARRY``): held to the full prediction, a direction no data see (a finger with no capture
-points) keeps any velocity it once had for ever; held to this one, its velocity halves every frame.  A
+points) keeps any velocity it once had for ever; held to this one, its velocity halves every frame.  The
+target's rotations are also turned a fifth of the way back to rest (``HOLD_RELAX``), so where the data
+say nothing the pose forgets where the run started: a chunk of a recording started elsewhere comes to
+the same poses within a few frames (the farm, docs/track.md "7 Dec").  A
 frame whose median capture-to-model distance jumps (above ``lost_factor`` x the running median and
 ``lost_mm``) is searched again from the start hypotheses and the last good pose (:func:`.first_frame.find_pose`) and
 listed as lost when that does not bring it back; the next frame then starts from the last good pose.
@@ -28,6 +31,7 @@ from .first_frame import capture_score, find_pose
 from .trail import RUNNING, Resume, Trail
 BETTER = 0.8            # a search replaces a flagged frame's fit when its capture score is below this share
 HOLD_CARRY = 0.5        # share of the last velocity the weak directions' hold target carries on
+HOLD_RELAX = 0.2        # share of the way back to rest the hold target's rotations turn each frame
 
 
 def predict(history, carry: float = 1.0) -> Poses:
@@ -41,6 +45,16 @@ def predict(history, carry: float = 1.0) -> Poses:
         turn = rotvec_to_quat(carry * quat_to_rotvec(turn))    # the shorter way
     rot = quat_normalize(quat_mul(b.rotations, turn))
     return Poses(rot, b.translations + carry * (b.translations - a.translations), b.scales.copy())
+
+
+def relaxed(pose: Poses, share: float = None) -> Poses:
+    """``pose`` with every bone's rotation turned ``share`` (default ``HOLD_RELAX``) of the way back to
+    rest along the shorter arc (the root's translation kept)."""
+    share = HOLD_RELAX if share is None else share
+    if not share:
+        return pose
+    rot = rotvec_to_quat((1.0 - share) * quat_to_rotvec(pose.rotations))
+    return Poses(rot, pose.translations, pose.scales)
 
 
 def median_mm(state, points) -> float:
@@ -78,7 +92,7 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
         if rec.too_few(i):
             continue
         guess = predict(history)
-        fit = fit_frame(body, capture.points, capture.normals, guess, target=predict(history, HOLD_CARRY),
+        fit = fit_frame(body, capture.points, capture.normals, guess, target=relaxed(predict(history, HOLD_CARRY)),
                         settings=settings, stages=TRACKING, cancel=cancel, seed=rec.range[i])
         med = median_mm(fit.state, _sample(capture.points))
         limit = max(options.lost_factor * float(np.median(medians[-RUNNING:])) if medians else 0.0,

@@ -83,7 +83,10 @@ def test_agreeing_chunks_and_depth_chunks_are_not_repaired(model, tmp_path):
 
 def test_the_job_carries_every_path_as_its_own_setting(tmp_path):
     settings = job_of(tmp_path).body([0, 1])["settings"]
-    assert settings["chunks"] == "0:12,8:20" and settings["run"] == "0,1" and settings["agree_mm"] == 100.0
+    assert settings["chunks"] == "0:12,8:20" and settings["run"] == "0,1" and settings["agree_mm"] == 1.0
+    assert job_of(tmp_path, "depth").body([0])["settings"]["agree_mm"] == 100.0     # depth: the merge's default
+    many = TrackJob("m.npz", "rec", "scans", [(10 * k, 10 * k + 14) for k in range(8)], str(tmp_path), "o.npz")
+    assert job_of(tmp_path).max_repairs == 3 and many.max_repairs == 7     # enough rounds to go front to back
     for key in ("model", "input", "work_dir", "out"):        # two-way variables map whole settings only
         assert settings[key].startswith(str(tmp_path))
     assert job_of(tmp_path).body([])["settings"]["run"] == "none"

@@ -532,3 +532,34 @@ def test_a_resume_at_another_frame_is_a_start_pose(body):
     res = pipeline.track_sequence(body, src, dataclasses.replace(_options(), frames=(3, n)), resume=resume)
     assert not any("went on" in note for note in res.notes)
     assert max(f["median_mm"] for f in res.frames) < 3.0
+
+
+def test_a_part_no_data_see_forgets_where_the_run_started(body, monkeypatch):
+    """Captures without the vertices the left hand moves: two runs started with that hand 0.6 rad apart
+    come within 0.05 rad in 8 frames, since the hold's target turns back towards rest each frame
+    (``HOLD_RELAX``), while without that they stay 0.6 rad apart; ``relaxed`` scales every rotation vector
+    by ``1 - share``."""
+    from articula.solver.track import follow
+    hand = body.skeleton.names.index("hand.L")
+    n = 9
+    poses = _motion(body, n, step=0.02)
+    posed, _ = _source(body, poses, noise=0.0)
+    seen = (body.anchor != hand) & (body.swing_weights[:, hand] + body.twist_weights[:, hand] == 0)
+    src = cp.CaptureSource.from_arrays([p[seen] for p in posed])
+
+    def apart():
+        ends = []
+        for turn in (0.0, 0.6):
+            start = poses.take([0])
+            start.rotations[0, hand] = quat_mul(start.rotations[0, hand], rotvec_to_quat(np.array([turn, 0, 0])))
+            res = pipeline.track_sequence(body, src, _options(), start_pose=start)
+            ends.append(res.poses.rotations[-1, hand])
+        return float(np.linalg.norm(quat_to_rotvec(quat_mul(ends[0] * [1, -1, -1, -1], ends[1]))))
+
+    assert apart() < 0.05
+    monkeypatch.setattr(follow, "HOLD_RELAX", 0.0)
+    assert apart() > 0.5
+    rv = np.random.default_rng(0).normal(0.0, 0.5, (1, body.skeleton.num_bones, 3))
+    got = follow.relaxed(Poses(rotvec_to_quat(rv), np.ones((1, 3)), np.ones(1)), 0.2)
+    np.testing.assert_allclose(quat_to_rotvec(got.rotations), 0.8 * rv, atol=1e-12)
+    np.testing.assert_array_equal(got.translations, np.ones((1, 3)))
