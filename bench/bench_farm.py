@@ -144,7 +144,8 @@ def scans_scenario(folder):
             out = os.path.join(folder, f"scans{agree}", "shared", "tracked.npz")
             check = [] if agree == "default" else ["--agree", agree]
             r, wall = _timed([RUN, "farm", "track", "--manager", farm.url, "--model", model, "--scans", root,
-                              "--out", out, "--chunk", str(SCAN_CHUNK), *check, "--poll", "2"], timeout=3600)
+                              "--out", out, "--chunk", str(SCAN_CHUNK), "--overlap", "10", *check, "--poll", "2"],
+                             timeout=3600)
         assert r.returncode == 0, r.stdout + r.stderr
         from articula.solver.formats.bundle import load_bundle
         cut = load_bundle(out).provenance["report"]["merge"]["cuts"][0]

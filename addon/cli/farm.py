@@ -23,6 +23,7 @@ from ...solver.farm.follow import FarmRun
 from ...solver.depth.camera import preset_key
 from ...solver.farm.subjects_job import SubjectsJob
 from ...solver.farm.track_job import AGREE_MM, SCANS_AGREE_MM
+from ...solver.track.options import TrackOptions
 from ...solver.track_depth.options import TRACKERS
 from ..farm import inputs, job_types
 from .track_depth import CAMERAS
@@ -62,6 +63,10 @@ def run_track(args) -> int:
                            overlap, options, args.camera or "", args.work_dir or "")
     if note:
         print(note)
+    window = TrackOptions().window
+    if kind == "scans" and len(job.ranges) > 1 and overlap < window - 1:
+        print(f"overlap {overlap} frames: under {window - 1}, the frames by a cut come from a chunk's edge window "
+              f"and may differ from one process's track by a few mm (give --overlap {window - 1} or more)")
     if args.agree is not None:
         if not args.agree >= 0 or not math.isfinite(args.agree):
             raise ArticulaInputError(f"--agree: expected millimetres >= 0 (0: no check), got {args.agree}")

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..errors import ArticulaInputError
-from ..parallel import map_pieces
+from ..parallel import map_pieces, workers
 from ..rig.model import Poses
 from ..tracking.aimed_starts import aimed_starts
 from ..tracking.checks import check_frame
@@ -100,15 +100,27 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
         return fit.pose, coverage_score(body, capture, fit.state), int(_lost(check)), check
 
     fits = map_pieces(fine_fit, enumerate(pose for _, pose in coarse[:KEEP]))
-    for item in enumerate((pose for _, pose in coarse[KEEP:]), KEEP):
-        if not _ranked(fits)[0][2]:
-            break
-        fits.append(fine_fit(item))
+    fits += _while_lost(fits, fine_fit, list(enumerate((pose for _, pose in coarse[KEEP:]), KEEP)))
     start_score = lambda start: coverage_score(body, capture, State(body, start))
     best = _ranked(_aimed(body.model, fits, fine_fit, start_score, len(starts)))[0]
     pose, score = _twisted(body, capture, best[0], best[1], priors, settings, cancel)
     pose, score = _settled(body, capture, pose, score, priors, settings, cancel)
     return pose, score, len(starts)
+
+
+def _while_lost(fits, fine_fit, items) -> list:
+    """The fits of ``items`` (``(slot, start)``) taken in order while the best of ``fits`` and those before
+    is lost: what fitting them one by one would keep, fitted as many at a time as the solver has threads
+    (those after the first that passes are dropped)."""
+    out, batch = [], max(1, workers())
+    for k in range(0, len(items), batch):
+        if not _ranked(fits + out)[0][2]:
+            break
+        for fit in map_pieces(fine_fit, items[k:k + batch]):
+            out.append(fit)
+            if not _ranked(fits + out)[0][2]:
+                break
+    return out
 
 
 def _aimed(model, fits, fine_fit, start_score, slot) -> list:

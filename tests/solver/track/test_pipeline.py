@@ -268,6 +268,32 @@ def test_an_end_chain_is_judged_by_the_capture_around_it(body):
     assert right[0] == pytest.approx(right[1], abs=1e-12)
 
 
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_further_starts_are_fitted_while_the_best_is_lost_as_one_by_one(threads):
+    """``_while_lost`` on any thread count keeps exactly the fits that fitting the starts one by one, while
+    the best so far fails the checks, would keep (brute force), and fits less than one batch more."""
+    from articula.solver.parallel import using
+    from articula.solver.track import first_frame
+    rng = np.random.default_rng(threads)
+    for _ in range(30):
+        n = int(rng.integers(0, 8))
+        scores, lost = rng.uniform(1, 2, n), rng.uniform(size=n) < 0.7
+        fit = lambda item: (None, float(scores[item[0]]), int(lost[item[0]]), None)
+        first = [(None, 1.5, 1, None)]
+        expected = []
+        for k in range(n):
+            if not first_frame._ranked(first + expected)[0][2]:
+                break
+            expected.append(fit((k, None)))
+        called = []
+        with using(threads):
+            got = first_frame._while_lost(first, lambda item: called.append(item[0]) or fit(item),
+                                          [(k, None) for k in range(n)])
+        assert got == expected
+        assert len(called) < len(expected) + threads
+    assert first_frame._while_lost([(None, 1.0, 0, None)], fit, [(0, None)]) == []
+
+
 def test_units_check_names_millimetres(body):
     with pytest.raises(ArticulaInputError, match="millimetres"):
         check_units(body, body.rest_vertices * 1000.0)
