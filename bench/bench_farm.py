@@ -11,7 +11,7 @@ Scenarios (``--only``):
   chunk bundles written and read, the merged bundle).
 * ``overhead``: the fixed cost of one task (``./run track --frames 0:2``: Blender start, model, recording
   set-up), for the chunk-size plan of docs/farm.md.
-* ``scans``: the capture tracker on 24 unregistered 4-camera scans of a turning subject, chunks of 14
+* ``scans``: the capture tracker on 24 unregistered 4-camera scans of a turning subject, chunks of 13
   with the default overlap (10), with the repair off (``--agree 0``) and on (the default): the largest
   vertex difference at the cut (and of the pass-1 poses), to the one process (target 0.5 mm), and each
   run's mean error of the 14 major joints against the ground truth.
@@ -37,7 +37,7 @@ sys.path.insert(0, os.path.join(ROOT, "tools"))
 import flamenco_local  # noqa: E402
 
 RUN = os.path.join(ROOT, "run")
-SCAN_CHUNK = 14         # capture chunks 0:14 and 4:24 with the default overlap (10 frames)
+SCAN_CHUNK = 13         # capture chunks 0:13 and 3:24 with the default overlap (10 frames)
 
 
 def _recording(frames):
