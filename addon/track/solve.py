@@ -59,12 +59,6 @@ def point_errors(model, poses: Poses, captures: CaptureInput, first_frame: int, 
     return out
 
 
-def _same_frame(resume, captures) -> bool:
-    """Whether ``resume`` (:class:`solver.track.trail.Resume`) names the same input frame of ``captures``."""
-    k = resume.input_frame
-    return 0 <= k < len(captures.names) and (not resume.frame_name or captures.names[k] == resume.frame_name)
-
-
 def track(model_input: ModelInput, captures: CaptureInput, options: TrackOptions, progress=None,
           with_point_errors: bool = True) -> TrackOutcome:
     """Track ``captures`` with ``model_input``'s model (no bpy).  ``progress(fraction, text)`` may raise
@@ -76,11 +70,8 @@ def track(model_input: ModelInput, captures: CaptureInput, options: TrackOptions
             progress(share * float(fraction), text)
 
     source = captures.source(options.max_points)
-    resume = model_input.resume
-    if resume is not None and not _same_frame(resume, captures):
-        resume = None                     # another recording: the pose is a start pose
     result = track_sequence(model_input.model, source, options, training_poses=model_input.training_poses,
-                            progress=report, start_pose=None if resume else model_input.start_pose, resume=resume)
+                            progress=report, start_pose=model_input.start_pose, resume=model_input.resume)
     errors = None
     if with_point_errors:
         errors = point_errors(result.model, result.poses, captures, int(result.first_frame), progress)

@@ -139,11 +139,13 @@ def choose_prior(model, training_poses, which: str):
 
 
 def resumable(resume, rec):
-    """``resume`` when it is the state after this run's first input frame and that frame has enough
-    points, else None."""
+    """``resume`` when it is the state after this run's first input frame (same number, and same name
+    when it names one) and that frame has enough points, else None."""
     if resume is None or resume.input_frame != rec.range.start:
         return None
     rec.capture(0)
+    if resume.frame_name and rec.entries[0]["name"] != resume.frame_name:
+        return None                   # another recording: its pose is a start pose
     return None if rec.too_few(0) else resume
 
 

@@ -546,8 +546,8 @@ def test_a_chunk_resumed_from_a_runs_state_repeats_that_run(body):
 
 
 def test_a_resume_at_another_frame_is_a_start_pose(body):
-    """A trail's state at frame 4 given to a run starting at frame 3: its pose is fitted as a start pose
-    (no state carried over: the note says nothing of it)."""
+    """A trail's state at frame 4 given to a run starting at frame 3, or at frame 3 but naming another
+    capture: its pose is fitted as a start pose (no state carried over: the note says nothing of it)."""
     from articula.solver.track.trail import resume_at
     n = 6
     poses = _motion(body, n)
@@ -558,6 +558,13 @@ def test_a_resume_at_another_frame_is_a_start_pose(body):
     res = pipeline.track_sequence(body, src, dataclasses.replace(_options(), frames=(3, n)), resume=resume)
     assert not any("went on" in note for note in res.notes)
     assert max(f["median_mm"] for f in res.frames) < 3.0
+    named = resume_at(whole.pass1, 3, 0, body.skeleton.num_bones)
+    named.frame_name = "scan_0003.ply"                    # not the source's name of frame 3
+    res = pipeline.track_sequence(body, src, dataclasses.replace(_options(), frames=(3, n)), resume=named)
+    assert not any("went on" in note for note in res.notes)
+    named.frame_name = whole.frames[3]["name"]
+    res = pipeline.track_sequence(body, src, dataclasses.replace(_options(), frames=(3, n)), resume=named)
+    assert any("went on" in note for note in res.notes)
 
 
 def test_a_part_no_data_see_forgets_where_the_run_started(body, monkeypatch):
