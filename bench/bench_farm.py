@@ -153,11 +153,13 @@ def scans_scenario(folder):
         e = _joint_error(out, gt)
         repairs = [part for line in r.stdout.splitlines() for part in line.split("; ") if "tracked again" in part]
         pass1 = f" ({cut['pass1_mm']:.2f} mm in pass 1)" if "pass1_mm" in cut else ""
-        print(f"captures, farm --agree {agree}: {wall:.0f} s; {'repaired: ' + repairs[0] if repairs else 'no repair'}; "
-              f"cut frame {cut['frame']}: {cut['max_vertex_mm']:.1f} mm between the chunks{pass1}; to the one process "
+        repaired = "repaired: " + repairs[0] if repairs else "no repair"
+        f = cut["frame"]
+        print(f"captures, farm --agree {agree}: {wall:.0f} s; {repaired}; cut frame {f}: "
+              f"{cut['max_vertex_mm']:.1f} mm between the chunks{pass1}; to the one process "
               f"{d.min():.3g}-{d.max():.3g} mm (target <= 0.5 mm: {d.max() / 0.5:.2f}x); joint error "
-              f"{e.min():.0f}-{e.max():.0f} mm (mean {e.mean():.1f}; frames {cut['frame']}+: {e[cut['frame']:].mean():.1f} "
-              f"vs one process {err[cut['frame']:].mean():.1f})", flush=True)
+              f"{e.min():.0f}-{e.max():.0f} mm (mean {e.mean():.1f}; frames {f}+: {e[f:].mean():.1f} "
+              f"vs one process {err[f:].mean():.1f})", flush=True)
 
 
 def bad_scenario(rec, folder):

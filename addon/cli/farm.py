@@ -158,9 +158,9 @@ def add_commands(sub):
     q.add_argument("--work-dir", help="shared folder for the chunk bundles (default: OUT.farm beside --out)")
     q.add_argument("--agree", type=float, default=None, metavar="MM",
                    help="chunks differing more than this (mm) where the merge switches started on another solution: "
-                        f"with --scans (default {SCANS_AGREE_MM:g}, pass-1 poses) the later one goes on from the earlier "
-                        f"one's pass 1, which makes it the one process's track; with --depth (default {AGREE_MM:g}) the "
-                        f"merge refuses; 0: off")
+                        f"with --scans (default {SCANS_AGREE_MM:g}, pass-1 poses) the later one goes on from the "
+                        f"earlier one's pass 1, which makes it the one process's track; with --depth (default "
+                        f"{AGREE_MM:g}) the merge refuses; 0: off")
     q.set_defaults(func=run_track)
     for name, what in (("learn", "learn a rig per subject folder (learn-rig)"),
                        ("import", "import each subject's scan sequence into a .blend (import-scans)")):

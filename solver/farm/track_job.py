@@ -26,12 +26,13 @@ class TrackJob:
     tracked bundle; ``blend``: optional .blend to bake into; ``options``: further ``track`` flags
     (no paths); ``name``: the job's name; ``agree_mm``: the merge refuses chunks that differ more than
     this on the frame where it switches between them (0: no check; None: :data:`SCANS_AGREE_MM` for
-    captures, whose chunks the repair makes equal to one run, :data:`AGREE_MM` for depth); ``start_from``: ``{chunk: (earlier
-    chunk, pose index)}``, chunks to start from an earlier chunk's pose (``track --start-pose``);
-    ``max_repairs``: rounds of :meth:`repair` at most (None: :data:`MAX_REPAIRS` or one per chunk after
-    the first, whichever is more: a run of disagreeing chunks is repaired front to back); ``repairs``: rounds done; ``tracked_in``: ``{chunk:
-    round}`` in which a chunk was last tracked (0, absent: the first submission).  Paths absolute, as
-    this machine sees the shared storage."""
+    captures, whose chunks the repair makes equal to one run, :data:`AGREE_MM` for depth);
+    ``start_from``: ``{chunk: (earlier chunk, pose index)}``, chunks to start from an earlier chunk's
+    pose (``track --start-pose``); ``max_repairs``: rounds of :meth:`repair` at most (None:
+    :data:`MAX_REPAIRS` or one per chunk after the first, whichever is more: a run of disagreeing chunks
+    is repaired front to back); ``repairs``: rounds done; ``tracked_in``: ``{chunk: round}`` in which a
+    chunk was last tracked (0, absent: the first submission).  Paths absolute, as this machine sees the
+    shared storage."""
     model: str
     input: str
     kind: str

@@ -43,9 +43,9 @@ def temporary_path(path) -> str:
 
 def save_bundle(path, model: Model, poses: Poses = None, provenance: dict = None, extra: dict = None) -> None:
     """Validate and write ``model`` (and ``poses``, ``provenance``: a JSON-serialisable dict, ``extra``:
-    further numeric or boolean arrays by key) to ``path``.  The file is written to :func:`temporary_path` first and renamed, so a failure never
-    leaves a half-written bundle (nor the temporary file); a path that cannot be written raises
-    :class:`ArticulaInputError`."""
+    further numeric or boolean arrays by key) to ``path``.  The file is written to :func:`temporary_path`
+    first and renamed, so a failure never leaves a half-written bundle (nor the temporary file); a path
+    that cannot be written raises :class:`ArticulaInputError`."""
     model.validate()
     sk = model.skeleton
     arrays = {

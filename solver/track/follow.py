@@ -29,6 +29,7 @@ from ..tracking.checks import check_frame
 from ..tracking.lm import State
 from .first_frame import capture_score, find_pose
 from .trail import RUNNING, Resume, Trail
+
 BETTER = 0.8            # a search replaces a flagged frame's fit when its capture score is below this share
 HOLD_CARRY = 0.5        # share of the last velocity the weak directions' hold target carries on
 HOLD_RELAX = 0.2        # share of the way back to rest the hold target's rotations turn each frame

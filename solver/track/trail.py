@@ -1,15 +1,14 @@
 """Pass 1's state after every frame, kept in the tracked bundle so that a run starting at one of its
 frames continues pass 1 exactly as this run went on (the farm's repair of a chunk that started on another
-solution: docs/farm.md "Repair").
+solution: docs/farm.md "Chunks on another solution").
 
 Pass 1 (:mod:`.follow`) carries from frame to frame the last one or two good poses (the prediction), the
 running medians (lost-frame detection), whether the last flagged frame was searched in vain, and the pose
 its held Jacobian was evaluated at (:meth:`solver.tracking.body.Body.jacobian_near`: it shapes the next
-frame's steps).  A chunk
-started from the earlier chunk's pose alone, without its velocity, took another path within three frames
-on Kinect-like captures of a turn (docs/track.md "Farm").  :class:`Trail` records that state per tracked
-frame; :meth:`Trail.arrays` gives the bundle's ``pass1_*`` arrays and :func:`resume_at` reads one frame's
-state back as a :class:`Resume`.
+frame's steps).  A chunk started from the earlier chunk's pose alone, without its velocity, took another
+path within three frames on Kinect-like captures of a turn (docs/track.md "7 Dec").  :class:`Trail`
+records that state per tracked frame; :meth:`Trail.arrays` gives the bundle's ``pass1_*`` arrays and
+:func:`resume_at` reads one frame's state back as a :class:`Resume`.
 """
 from __future__ import annotations
 

@@ -16,7 +16,7 @@ of ``step``), and each frame keeps the pose of the window it is most central in 
 ``window``: first and last input frame): a frame's result depends on its own window's data and pass-1
 poses only (a Jacobian held from an earlier window is kept only when it was evaluated at the frame's
 start), so a chunk of a recording gives what one run gives where it has the same window
-(:func:`solver.track.merge.choose_frames`, docs/track.md "Farm").
+(:func:`solver.track.merge.same_windows`, docs/track.md "7 Dec").
 """
 from __future__ import annotations
 
