@@ -596,3 +596,32 @@ def test_a_part_no_data_see_forgets_where_the_run_started(body, monkeypatch):
     got = follow.relaxed(Poses(rotvec_to_quat(rv), np.ones((1, 3)), np.ones(1)), 0.2)
     np.testing.assert_allclose(quat_to_rotvec(got.rotations), 0.8 * rv, atol=1e-12)
     np.testing.assert_array_equal(got.translations, np.ones((1, 3)))
+
+
+def test_a_trail_reads_back_and_refuses_malformed_arrays():
+    """``Trail`` rows read back exactly by ``resume_at`` (history, held pose, medians, input frame); a
+    frame not fitted or a bundle without the arrays gives None; arrays of the wrong shape are refused with
+    the key named."""
+    from articula.solver.errors import ArticulaInputError
+    from articula.solver.track.trail import Trail, resume_at
+    B = 3
+    poses = [Poses(rotvec_to_quat(np.full((1, B, 3), 0.1 * k)), np.full((1, 3), float(k)), np.ones(1))
+             for k in range(3)]
+    trail = Trail(3, B)
+    trail.record(0, poses[:1], [1.0], False)
+    trail.record(1, poses[:2], [1.0, 2.0], True, held=poses[0])
+    trail.record(2, poses[1:2], [1.0, 2.0], True, fitted=False)
+    arrays = trail.arrays()
+    got = resume_at(arrays, 1, 10, B)
+    assert got.input_frame == 11 and got.medians == [1.0, 2.0] and got.in_vain
+    for a, b in ((got.before, poses[0]), (got.pose, poses[1]), (got.held, poses[0])):
+        np.testing.assert_array_equal(a.rotations, b.rotations)
+        np.testing.assert_array_equal(a.translations, b.translations)
+    first = resume_at(arrays, 0, 10, B)
+    assert first.before is None and first.held is None and len(first.history) == 1
+    assert resume_at(arrays, 2, 10, B) is None and resume_at(arrays, 5, 10, B) is None
+    assert resume_at({k: v for k, v in arrays.items() if k != "pass1_held"}, 1, 10, B) is None
+    with pytest.raises(ArticulaInputError, match="pass1_medians: expected shape"):
+        resume_at(dict(arrays, pass1_medians=np.zeros((3, 4))), 1, 10, B)
+    with pytest.raises(ArticulaInputError, match="pass1_last: expected shape"):
+        resume_at(arrays, 1, 10, B + 1)
