@@ -27,6 +27,7 @@ EXACT_BEYOND = 0.003
 EXACT_WITHIN = 0.1
 EXACT_SHARE = 0.1            # ... and then the mesh's exact closest point while at most this share is that far
 JACOBIAN_REUSE_RAD = 0.08    # a vertex Jacobian serves poses this close (per bone, radians)
+BOUND_SLACK = 1e-9          # a triangle is skipped only when provably farther than needed by this much (m)
 PIECE = 1000                 # closest-point queries per thread at least
 
 
@@ -160,7 +161,7 @@ class Surface:
         face, bary, foot, dist, near, _ = self._rings(queries, NEAREST)
         far = np.flatnonzero((dist > EXACT_BEYOND) & (dist < EXACT_WITHIN))
         if len(far):
-            f2, b2, p2, d2, _, reach = self._rings(queries[far], WIDE)
+            f2, b2, p2, d2, _, reach = self._rings(queries[far], WIDE, dist[far])
             better = d2 < dist[far]
             rows = far[better]
             face[rows], bary[rows], foot[rows], dist[rows] = f2[better], b2[better], p2[better], d2[better]
@@ -204,18 +205,22 @@ class Surface:
         face[r], bary[r], dist[r] = subset[tri[first]], b[first], d[first]
         foot[r] = np.einsum("nk,nkj->nj", b[first], corners[tri[first]])
 
-    def _rings(self, queries, k: int):
+    def _rings(self, queries, k: int, within=None):
         """:meth:`_on_rings` in one piece per solver thread (rows are independent: the same answer)."""
         n = workers()
         if n < 2 or len(queries) < PIECE * n:
-            return self._on_rings(queries, k)
-        pieces = map_pieces(lambda rows: self._on_rings(queries[rows], k), np.array_split(np.arange(len(queries)), n))
+            return self._on_rings(queries, k, within)
+        pieces = map_pieces(lambda rows: self._on_rings(queries[rows], k, None if within is None else within[rows]),
+                            np.array_split(np.arange(len(queries)), n))
         return tuple(np.concatenate(part) for part in zip(*pieces))
 
-    def _on_rings(self, queries, k: int):
+    def _on_rings(self, queries, k: int, within=None):
         """Closest points on the triangles around each query's ``k`` nearest vertices: ``(face, bary,
         foot, distance, nearest vertex, distance of the k-th nearest vertex)``.  Each triangle is tried
-        once per query (the rings of neighbouring vertices share most of theirs)."""
+        once per query (the rings of neighbouring vertices share most of theirs).  ``within (Q,)``: a
+        distance each query's answer is known to be at most (m): triangles that :meth:`_beyond` proves
+        farther are not tried (the answer is the same wherever one at most that far exists; a row with
+        none gets distance inf)."""
         gap, near = self.tree.query(queries, k=k)
         near, gap = near.reshape(len(queries), -1), gap.reshape(len(queries), -1)
         tris = np.sort(self.ring[near].reshape(len(queries), -1), axis=1)   # (Q, k R), -1 padding first
@@ -223,13 +228,16 @@ class Surface:
         fresh[:, 1:] &= tris[:, 1:] != tris[:, :-1]
         row, col = np.nonzero(fresh)                                       # grouped by row, in order
         tri = tris[row, col]
+        if within is not None:
+            keep = ~self._beyond(queries[row], tri, within[row])
+            row, tri = row[keep], tri[keep]
         vw, d2 = self._on_triangles(queries[row], tri)
         lowest = np.full(len(queries), np.inf)
-        seen = np.flatnonzero(fresh.any(axis=1))                           # rows with a triangle
+        seen = np.flatnonzero(np.bincount(row, minlength=len(queries)))    # rows with a triangle
         if len(seen):
             lowest[seen] = np.minimum.reduceat(d2, np.searchsorted(row, seen))
         pick = np.flatnonzero(d2 <= lowest[row])
-        pick = pick[np.r_[True, row[pick][1:] != row[pick][:-1]]]          # the first closest of each row
+        pick = pick[np.diff(row[pick], prepend=-1) != 0]                    # the first closest of each row
         face = np.zeros(len(queries), np.int64)
         v, w = np.zeros(len(queries)), np.zeros(len(queries))
         dist = np.full(len(queries), np.inf)
@@ -238,6 +246,26 @@ class Surface:
         bary = np.stack([1.0 - v - w, v, w], axis=1)
         foot = self.corner[face] + v[:, None] * self.ab[face] + w[:, None] * self.ac[face]
         return face, bary, foot, dist, near[:, 0], gap[:, -1]
+
+    def _beyond(self, points, tri, within):
+        """True where triangle ``tri (M,)`` is provably farther than ``within (M,)`` from ``points (M, 3)``:
+        the distance to its plane or to its bounding sphere (centroid, farthest corner) exceeds it by
+        more than rounding (``BOUND_SLACK``), so no triangle at most ``within`` away is ever dropped."""
+        bounds = self._bounds[tri]                                          # (M, 8): one gather
+        plane = np.abs(_dot(points, bounds[:, :3]) - bounds[:, 3])
+        off = points - bounds[:, 4:7]
+        sphere = np.sqrt(_dot(off, off)) - bounds[:, 7]
+        return np.maximum(plane, sphere) > within + BOUND_SLACK
+
+    @functools.cached_property
+    def _bounds(self):
+        """``(F, 8)`` per triangle: unit normal n, n.a (its plane n.x = n.a), bounding sphere centre
+        (the centroid) and radius (its farthest corner)."""
+        centre = self.corner + (self.ab + self.ac) / 3.0
+        corners = np.stack([self.corner, self.corner + self.ab, self.corner + self.ac], axis=1)
+        radius = np.sqrt(np.max(np.sum((corners - centre[:, None]) ** 2, axis=2), axis=1))
+        offset = _dot(self.face_normals, self.corner)
+        return np.column_stack([self.face_normals, offset, centre, radius])
 
     def _on_triangles(self, points, tri):
         """``((v, w), squared distance)`` of the closest point ``a + v ab + w ac`` on triangles ``tri (M,)``

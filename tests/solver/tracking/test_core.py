@@ -313,3 +313,29 @@ def test_a_stage_holding_small_parts_keeps_them_at_the_start(tube):
     held, free = fit(Stage(0.006, 0.08, 1.0, 10, small_held=True)), fit(Stage(0.006, 0.08, 1.0, 10))
     assert angle(held) < 2e-3 < 0.02 < angle(free)
     assert _surface_gap(small, held, truth) < 0.02
+
+
+def test_a_ring_search_told_how_far_the_answer_is_gives_the_same_answer():
+    """Closest points on the rings of the 16 nearest vertices with each query's known bound (the nearest
+    vertex's distance, or a closer answer) are those of the unbounded search, bit for bit, on a curved
+    mesh with queries near and far; with a bound below the answer no answer is within it, and many rows
+    are left without one (their triangles all provably too far: the pruning works)."""
+    from articula.solver.tracking.body import Surface, one_ring
+    n = 30
+    u, v = np.meshgrid(np.linspace(0, np.pi, n), np.linspace(0, 2 * np.pi, n, endpoint=False), indexing="ij")
+    verts = np.stack([np.sin(u) * np.cos(v), np.sin(u) * np.sin(v), 1.5 * np.cos(u)], axis=1).reshape(-1, 3) * 0.1
+    ids = np.arange(n * n).reshape(n, n)
+    faces = np.array([f for i in range(n - 1) for j in range(n)
+                      for f in ((ids[i, j], ids[i + 1, j], ids[i + 1, (j + 1) % n]),
+                                (ids[i, j], ids[i + 1, (j + 1) % n], ids[i, (j + 1) % n]))])
+    surface = Surface(verts, faces, one_ring(faces, len(verts)))
+    rng = np.random.default_rng(5)
+    q = verts[rng.integers(0, len(verts), 500)] + rng.normal(size=(500, 3)) * rng.choice([0.001, 0.01, 0.05], (500, 1))
+    free = surface._on_rings(q, 16)
+    nearest = surface.tree.query(q)[0]
+    for bound in (nearest, free[3]):
+        bounded = surface._on_rings(q, 16, bound)
+        for a, b in zip(free, bounded):
+            np.testing.assert_array_equal(a, b)
+    below = surface._on_rings(q, 16, free[3] - 1e-3)[3]       # every answer's triangle provably too far?
+    assert np.all(below > free[3] - 1e-3) and np.isinf(below).mean() > 0.2
