@@ -143,12 +143,10 @@ class Surface:
         self.face_normals = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
 
     @functools.cached_property
-    def _by_edge(self):
-        """``(triangles longest edge first (F,), their longest edges (F,))``: only the exact pass needs them."""
+    def _longest(self):
+        """``(F,)`` each triangle's longest edge (m): only the exact pass needs them."""
         bc = self.ac - self.ab
-        edge = np.sqrt(np.max([_dot(self.ab, self.ab), _dot(bc, bc), _dot(self.ac, self.ac)], axis=0))
-        order = np.argsort(-edge, kind="stable")
-        return order, edge[order]
+        return np.sqrt(np.max([_dot(self.ab, self.ab), _dot(bc, bc), _dot(self.ac, self.ac)], axis=0))
 
     def closest(self, queries):
         """``(face (Q,), barycentric (Q, 3), foot (Q, 3), vertex (Q,))`` of each query ``(Q, 3)``: the
@@ -175,14 +173,15 @@ class Surface:
         the ball of radius ``reach``, so its longest edge is at least ``sqrt(3 (reach^2 - dist^2))`` (an
         edge subtending 120 degrees or more at p): only triangles that long are searched, and of those
         only the ones whose bounding sphere (centroid, farthest corner) comes within ``dist``."""
-        by_edge, longest = self._by_edge
+        longest = self._longest
         need = np.sqrt(3.0 * np.maximum(reach ** 2 - dist[rows] ** 2, 0.0))
-        keep = need <= longest[0]
+        keep = need <= longest.max()
         rows, need = rows[keep], need[keep]
         if not len(rows) or len(rows) > EXACT_SHARE * len(queries):
             return
-        count = np.searchsorted(-longest, -need.min(), side="right")
-        subset, edge = by_edge[:count], longest[:count]
+        subset = np.flatnonzero(longest >= need.min())
+        subset = subset[np.argsort(-longest[subset], kind="stable")]         # longest first, ties by index
+        edge = longest[subset]
         corners = self.vertices[self.faces[subset]]                                # (S, 3, 3)
         centre = corners.mean(axis=1)
         radius = np.sqrt(np.max(np.sum((corners - centre[:, None]) ** 2, axis=2), axis=1))
@@ -251,7 +250,7 @@ class Surface:
         """True where triangle ``tri (M,)`` is provably farther than ``within (M,)`` from ``points (M, 3)``:
         the distance to its plane or to its bounding sphere (centroid, farthest corner) exceeds it by
         more than rounding (``BOUND_SLACK``), so no triangle at most ``within`` away is ever dropped."""
-        bounds = self._bounds[tri]                                          # (M, 8): one gather
+        bounds = self._bounds[tri] if len(tri) >= len(self.faces) else self._bounds_of(tri)   # (M, 8)
         plane = np.abs(_dot(points, bounds[:, :3]) - bounds[:, 3])
         off = points - bounds[:, 4:7]
         sphere = np.sqrt(_dot(off, off)) - bounds[:, 7]
@@ -259,13 +258,17 @@ class Surface:
 
     @functools.cached_property
     def _bounds(self):
-        """``(F, 8)`` per triangle: unit normal n, n.a (its plane n.x = n.a), bounding sphere centre
-        (the centroid) and radius (its farthest corner)."""
-        centre = self.corner + (self.ab + self.ac) / 3.0
-        corners = np.stack([self.corner, self.corner + self.ab, self.corner + self.ac], axis=1)
+        """:meth:`_bounds_of` every triangle (worth it when a search tries more pairs than there are)."""
+        return self._bounds_of(slice(None))
+
+    def _bounds_of(self, tri):
+        """``(M, 8)`` of triangles ``tri``: unit normal n, n.a (its plane n.x = n.a), bounding sphere
+        centre (the centroid) and radius (its farthest corner)."""
+        corner, ab, ac, normal = self.corner[tri], self.ab[tri], self.ac[tri], self.face_normals[tri]
+        centre = corner + (ab + ac) / 3.0
+        corners = np.stack([corner, corner + ab, corner + ac], axis=1)
         radius = np.sqrt(np.max(np.sum((corners - centre[:, None]) ** 2, axis=2), axis=1))
-        offset = _dot(self.face_normals, self.corner)
-        return np.column_stack([self.face_normals, offset, centre, radius])
+        return np.column_stack([normal, _dot(normal, corner), centre, radius])
 
     def _on_triangles(self, points, tri):
         """``((v, w), squared distance)`` of the closest point ``a + v ab + w ac`` on triangles ``tri (M,)``
