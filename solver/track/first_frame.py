@@ -12,8 +12,10 @@ chains (toes, fingers) at rest, whole and one by one (:func:`_ends_at_rest`), an
 again while that improves it (:func:`_settled`).  When the truth-free checks
 call every such fit lost, the limbs of the best lost fits are aimed at the capture regions they leave
 unexplained (:func:`solver.tracking.aimed_starts.aimed_starts`: a forearm folded onto the belly while the
-capture's hangs by the thigh) and those starts fitted too (:func:`_aimed`).  Independent fits run on
-the solver's threads, each with its own Jacobian slot.
+capture's hangs by the thigh) and those starts fitted too (:func:`_aimed`); if all are still lost, the
+best whose trunk is beyond its limits are put right (hips turned half round under the chest with the
+legs swapped, a body facing away: :func:`_untwisted`).  Independent fits run on the solver's threads,
+each with its own Jacobian slot.
 """
 from __future__ import annotations
 
@@ -35,6 +37,7 @@ from ..roles import role_bones
 from ..tracking.start_poses import REQUIRED, subtree_masks
 from ..tracking.start_search import start_hypotheses
 from ..tracking.terms import ModelToScan, ScanToModel, charbonnier, sample
+from ..tracking.trunk_starts import turned_round_start, untwisted_starts
 
 SIZE_RATIO = (0.4, 2.5)  # a capture's extent (1st-99th percentile) over the model's height outside this is refused
 KEEP = 2                # starts fitted to the end after the coarse stage
@@ -94,15 +97,19 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
 
     coarse = sorted(map_pieces(coarse_fit, enumerate(starts)), key=lambda item: item[0])
 
-    def fine_fit(item):
-        fit = _fit(body, capture, item[1], priors, SEARCH[1:], settings, cancel, slot=("start", item[0]))
+    def fine_fit(item, stages=SEARCH[1:]):
+        fit = _fit(body, capture, item[1], priors, stages, settings, cancel, slot=("start", item[0]))
         check = None if checked is None else check_frame(body.model, fit.pose, fit.state.posed, capture, checked)
         return fit.pose, coverage_score(body, capture, fit.state), int(_lost(check)), check
 
     fits = map_pieces(fine_fit, enumerate(pose for _, pose in coarse[:KEEP]))
     fits += _while_lost(fits, fine_fit, list(enumerate((pose for _, pose in coarse[KEEP:]), KEEP)))
     start_score = lambda start: coverage_score(body, capture, State(body, start))
-    best = _ranked(_aimed(body.model, fits, fine_fit, start_score, len(starts)))[0]
+    fits = _aimed(body.model, fits, fine_fit, start_score, len(starts))
+    trunk = None if checked is None else checked.trunk
+    full_fit = lambda item: fine_fit(item, SEARCH)
+    fits += _untwisted(body.model, fits, full_fit, trunk, len(starts) + AIM_ROUNDS * AIM_KEEP)
+    best = _ranked(fits)[0]
     pose, score = _twisted(body, capture, best[0], best[1], priors, settings, cancel)
     pose, score = _settled(body, capture, pose, score, priors, settings, cancel)
     return pose, score, len(starts)
@@ -121,6 +128,23 @@ def _while_lost(fits, fine_fit, items) -> list:
             if not _ranked(fits + out)[0][2]:
                 break
     return out
+
+
+def _untwisted(model, fits, full_fit, trunk, slot) -> list:
+    """While the best of ``fits`` is lost: the fits (``full_fit((slot, start))``, every search stage) of
+    the starts made from the best ``AIM_FITS`` fits whose checks found the trunk beyond its limits: hips
+    twisted from the chest turned back under it (:func:`solver.tracking.trunk_starts.untwisted_starts`),
+    a chest bent backwards turned round (:func:`solver.tracking.trunk_starts.turned_round_start`)."""
+    if trunk is None or not _ranked(fits)[0][2]:
+        return []
+    starts = []
+    for fit in _ranked(fits)[:AIM_FITS]:
+        found = {f.numbers.get("joint") for f in (fit[3].findings if fit[3] is not None else ())}
+        if "trunk twist" in found:
+            starts += untwisted_starts(model, fit[0], trunk)
+        if "trunk back" in found:
+            starts.append(turned_round_start(model, fit[0], trunk))
+    return map_pieces(full_fit, enumerate(starts, slot))
 
 
 def _aimed(model, fits, fine_fit, start_score, slot) -> list:

@@ -16,7 +16,10 @@ forearm, hand, thigh, lower leg, foot; docs/track.md):
   normal) or on the surface of a non-adjacent region.  A limb fitted onto another part's capture sinks
   into that part; real contact only touches (skinning and soft tissue: ``inside_mm``).
 * joint limits: knee and elbow flexion about a hinge axis fixed to the upper segment (hyperextension,
-  sideways bend) and the head's rotation from the chest.
+  sideways bend), the head's rotation from the chest, and the trunk: the hips' twist from the chest about
+  the spine (a trunk twists 40-60 deg at most; hips turned round with the legs swapped explain a
+  near-symmetric capture well) and the chest bent backwards from the hips (a body fitted facing away
+  bends back as far as the true one bends forward).
 
 The verdict is the worst level of the findings ("good" when none).  Metres inside; the reason texts
 use mm, cm, cm² and degrees.
@@ -35,6 +38,7 @@ from scipy.spatial import cKDTree
 from ..depth import camera as cam
 from ..errors import ArticulaInputError
 from ..geometry.mesh_graph import adjacency, edges_of
+from ..geometry.rotations import matrix_to_quat
 from ..geometry.normals import vertex_areas
 from ..learn.role_names import recognise as recognise_geometry
 from ..rig.kinematics import forward_kinematics
@@ -74,8 +78,9 @@ class CheckOptions:
     fitted onto the trunk's capture sinks in); intersect / intersect_lost / intersect_mm: fraction of a
     part inside another and the 95th percentile of that depth.  knee_back / elbow_back: hyperextension
     (deg) allowed, then doubtful, and lost past the second value; side_bend: sideways bend of a hinge;
-    head_turn: the head's rotation from the chest (deg); facing_cos: vertices facing a camera at least
-    this much."""
+    head_turn: the head's rotation from the chest (deg); trunk_twist: the hips' rotation from the chest
+    about the spine's rest direction (deg); trunk_back: the chest bent backwards from the hips (deg);
+    facing_cos: vertices facing a camera at least this much."""
     explain_mm: float = 35.0
     region_doubtful: float = 0.005
     region_lost: float = 0.015
@@ -89,6 +94,8 @@ class CheckOptions:
     elbow_back: tuple = (15.0, 30.0)
     side_bend: tuple = (30.0, 50.0)
     head_turn: tuple = (100.0, 130.0)
+    trunk_twist: tuple = (80.0, 110.0)
+    trunk_back: tuple = (45.0, 60.0)
     facing_cos: float = 0.3
 
 
@@ -140,7 +147,9 @@ class Body:
     (-1 at the root) and ``joint_bone`` (the bone whose head joins the region to its parent; -1) (R,),
     vertex areas (V,) and region areas (R,) m², the body area ``area`` m², ``edge`` (95th percentile edge
     length, m), ``faces`` (F, 3), ``corners`` (V, F) CSR (1 where a vertex is a face's corner), the mesh
-    ``graph`` (V, V) CSR, ``hinges``, ``head_chest`` bones or None, ``notes`` on checks left out,
+    ``graph`` (V, V) CSR, ``hinges``, ``head_chest`` bones or None, ``trunk`` (hips bone, chest bone,
+    unit rest direction from the hips' joint to the chest's (3,), unit rest forward normal to it (3,) or
+    None) or None, ``notes`` on checks left out,
     ``members`` (each region's vertex indices) and ``near_region`` (V, R) bool (within :data:`RIM_RINGS`
     edges of the region)."""
     regions: list
@@ -158,6 +167,7 @@ class Body:
     graph: sp.csr_matrix
     hinges: list
     head_chest: tuple
+    trunk: tuple
     notes: list
     members: list
     near_region: np.ndarray
@@ -218,10 +228,14 @@ def prepare(model) -> Body:
     e = edges_of(model.faces)
     edge = float(np.percentile(np.linalg.norm(model.rest_vertices[e[:, 0]] - model.rest_vertices[e[:, 1]], axis=1),
                                95)) if len(e) else 0.0
-    hinges, notes = _hinges(sk, roles, _toes(model, roles, vertex_region, regions))
+    toes = _toes(model, roles, vertex_region, regions)
+    hinges, notes = _hinges(sk, roles, toes)
     head_chest = (roles["head"], roles["chest"]) if "head" in roles and "chest" in roles else None
     if head_chest is None:
         notes.append("head rotation: the rig has no head or chest role")
+    trunk = _trunk(sk, roles, toes)
+    if trunk is None:
+        notes.append("trunk twist: the rig has no separate hips and chest roles")
     faces = np.asarray(model.faces, dtype=np.int64)
     corners = sp.csr_matrix((np.ones(faces.size), (faces.ravel(), np.repeat(np.arange(len(faces)), 3))),
                             shape=(model.num_vertices, len(faces)))
@@ -232,7 +246,25 @@ def prepare(model) -> Body:
     members = [np.flatnonzero(vertex_region == r) for r in range(R)]
     return Body(regions, vertex_region, adjacent, depth, parent_region, joint_bone, areas,
                 np.bincount(vertex_region, areas, R), float(areas.sum()), edge, faces, corners, graph,
-                hinges, head_chest, notes, members, near > 0)
+                hinges, head_chest, trunk, notes, members, near > 0)
+
+
+def _trunk(sk, roles, toes):
+    """``(hips bone, chest bone, spine (3,), forward (3,) or None)``: the bones whose relative twist and
+    bend are checked, the spine's unit rest direction between their joints and the body's rest forward
+    (where the feet point, ``toes``: :func:`_toes`, normal to the spine); None without both roles on
+    different bones apart."""
+    if "hips" not in roles or "chest" not in roles or roles["hips"] == roles["chest"]:
+        return None
+    axis = sk.heads[roles["chest"]] - sk.heads[roles["hips"]]
+    length = float(np.linalg.norm(axis))
+    if length < 1e-6:
+        return None
+    axis = axis / length
+    forward = sum(toes.values(), np.zeros(3))
+    forward = forward - (forward @ axis) * axis
+    size = float(np.linalg.norm(forward))
+    return roles["hips"], roles["chest"], axis, (forward / size if size > 0.3 else None)
 
 
 def _joint(sk, roles, role, fallback_tail_of=None):
@@ -670,4 +702,34 @@ def _joint_limits(body, Rm, tm, options):
             findings.append(Finding("joint_limit", "lost" if turn > lost else "doubtful", "head",
                                     f"head turned {turn:.0f} deg from the chest, beyond its limit ({doubt:.0f} deg)",
                                     {"joint": "head", "angle_deg": turn, "limit_deg": doubt}))
+    if body.trunk is not None:
+        twist, back = trunk_twist(body.trunk, Rm), trunk_back(body.trunk, Rm)
+        numbers["trunk_twist_deg"], numbers["trunk_back_deg"] = twist, back
+        limits = (("trunk twist", twist, options.trunk_twist, "hips twisted {:.0f} deg from the chest about the spine"),
+                  ("trunk back", back, options.trunk_back, "chest bent backwards {:.0f} deg from the hips"))
+        for joint, angle, (doubt, lost), text in limits:
+            if angle is not None and angle > doubt:
+                findings.append(Finding("joint_limit", "lost" if angle > lost else "doubtful", "trunk",
+                                        f"{text.format(angle)}, beyond its limit ({doubt:.0f} deg)",
+                                        {"joint": joint, "angle_deg": angle, "limit_deg": doubt}))
     return findings, numbers
+
+
+def trunk_twist(trunk, Rm) -> float:
+    """Degrees the hips bone is turned from the chest bone about the spine's rest direction (the twist of
+    their relative rotation's swing-twist split), from the part maps ``Rm (B, 3, 3)`` (scale removed)."""
+    hips, chest, axis, _ = trunk
+    rel = Rm[chest].T @ Rm[hips]
+    rel = rel / np.cbrt(np.linalg.det(rel))
+    q = matrix_to_quat(rel)
+    return float(np.degrees(2.0 * np.arctan2(abs(q[1:] @ axis), abs(q[0]))))
+
+
+def trunk_back(trunk, Rm):
+    """Degrees the chest is bent backwards from the hips (negative: forwards), in the plane of the spine's
+    rest direction and the rest forward, from the part maps ``Rm (B, 3, 3)``; None without a forward."""
+    hips, chest, axis, forward = trunk
+    if forward is None:
+        return None
+    spine = np.linalg.solve(Rm[hips], Rm[chest] @ axis)         # the posed spine as the hips see it
+    return float(np.degrees(np.arctan2(-(spine @ forward), spine @ axis)))

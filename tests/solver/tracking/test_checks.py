@@ -420,3 +420,43 @@ def test_a_region_is_named_when_the_votes_spread_over_many_regions(subject):
     part = checks._region_part(body, joints, near, np.ones(5, bool), np.arange(5)[None, :], posed[near],
                                cKDTree(posed))
     assert part in regions or body.parent_region[part] in regions
+
+
+def _about_joint(model, pose, bone, axis, deg):
+    """``pose`` with ``bone`` (and its children) turned by ``deg`` about the world ``axis`` in rest
+    coordinates as its parent sees them (the relative rotation of the bone to its parent gains it)."""
+    sk = model.skeleton
+    F = sk.frames[bone]
+    out = pose.take(0)
+    out.rotations[0, bone] = matrix_to_quat(F.T @ rotvec_to_matrix(np.radians(deg) * np.asarray(axis)) @ F
+                                            @ quat_to_matrix(out.rotations[0, bone]))
+    return out
+
+
+@pytest.mark.parametrize("deg, level", [(60, "good"), (95, "doubtful"), (140, "lost")])
+def test_hips_twisted_from_the_chest(subject, deg, level):
+    """The chest turned about the spine's rest direction from the rest pose: the trunk twist is the turn
+    (closed form), doubtful past 80 deg and lost past 110 (legs swapped under hips turned round)."""
+    model, _, body = subject
+    hips, chest, axis, forward = body.trunk
+    pose = _about_joint(model, rest(model), chest, axis, deg)
+    Rm, tm = forward_kinematics(model.skeleton, pose)
+    assert checks.trunk_twist(body.trunk, Rm[0]) == pytest.approx(deg, abs=1e-6)
+    assert checks.trunk_back(body.trunk, Rm[0]) == pytest.approx(0.0, abs=1e-6)
+    findings = checks._joint_limits(body, Rm[0], tm[0], checks.CheckOptions())[0]
+    assert [f.level for f in findings if f.part == "trunk"] == ([] if level == "good" else [level])
+
+
+@pytest.mark.parametrize("deg, level", [(-70, "good"), (30, "good"), (50, "doubtful"), (80, "lost")])
+def test_chest_bent_backwards(subject, deg, level):
+    """The chest bent about the axis normal to the spine and the feet's forward: the backward bend is the
+    angle (negative: forwards, which a body does to 70+ deg), doubtful past 45, lost past 60."""
+    model, _, body = subject
+    hips, chest, axis, forward = body.trunk
+    assert forward is not None and abs(forward @ -Y) > 0.95          # the subject faces -Y
+    pose = _about_joint(model, rest(model), chest, np.cross(forward, axis), deg)
+    Rm, tm = forward_kinematics(model.skeleton, pose)
+    assert checks.trunk_back(body.trunk, Rm[0]) == pytest.approx(deg, abs=1e-6)
+    assert checks.trunk_twist(body.trunk, Rm[0]) == pytest.approx(0.0, abs=1e-6)
+    findings = checks._joint_limits(body, Rm[0], tm[0], checks.CheckOptions())[0]
+    assert [f.level for f in findings if f.part == "trunk"] == ([] if level == "good" else [level])
