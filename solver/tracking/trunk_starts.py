@@ -8,7 +8,8 @@ the spine so that the twist is gone, the chest and everything above it staying w
 legs as they were (they come round with the hips) and once with each leg pointing as the other leg of the
 fit points (the fit's legs lie in the capture's, swapped).  A whole body fitted facing away bends its
 trunk backwards where the true one bends forwards (:func:`solver.tracking.checks.trunk_back`); it is
-turned round: each trunk bone half a turn about itself, the limbs aimed along the other side's.  The
+turned round: each trunk bone half a turn about itself, the limbs aimed along the other side's, hands
+and feet at rest on them.  The
 caller fits these starts from the coarse stage on.
 
 Conventions as :mod:`solver.tracking.aimed_starts`: a world rotation ``omega`` about bone b's joint is
@@ -27,7 +28,8 @@ from .aimed_starts import turn_between
 from .start_poses import subtree_masks
 
 LEG_SEGMENTS = ("thigh", "shin", "foot")
-LIMB_SEGMENTS = ("upper_arm", "forearm", "hand") + LEG_SEGMENTS
+LIMB_SEGMENTS = ("upper_arm", "forearm", "thigh", "shin")
+END_SEGMENTS = ("hand", "foot")
 
 
 def untwisted_starts(model, pose: Poses, trunk) -> list:
@@ -91,9 +93,11 @@ def _child_towards(parents, top, bone) -> int:
 def turned_round_start(model, pose: Poses, trunk) -> Poses:
     """``pose`` facing the other way with the same trunk line: every bone from the hips to the head (by
     role, and the bones between them) turned half round about its own posed direction, each limb segment
-    (:data:`LIMB_SEGMENTS`) then pointing as the other side's did; other bones keep their local rotations.
-    A fit facing away from the capture bends back where the body bends forward (the checks' trunk bend)
-    with its limbs in the other side's capture."""
+    (:data:`LIMB_SEGMENTS`) then pointing as the other side's did, hands and feet (:data:`END_SEGMENTS`) at
+    rest on their limbs (front and back differ there, so how they were turned facing away says nothing:
+    the Kinect-like reach's first frame 70 mm off with them aimed too, 38 mm at rest); other bones keep
+    their local rotations.  A fit facing away from the capture bends back where the body bends forward (the
+    checks' trunk bend) with its limbs in the other side's capture."""
     sk = model.skeleton
     roles = role_bones(sk.names)
     Rm, _ = forward_kinematics(sk, pose)
@@ -105,12 +109,15 @@ def turned_round_start(model, pose: Poses, trunk) -> Poses:
         spinal |= set(_between(sk.parents, trunk[1], roles["head"]))
     partner = {roles[f"{seg}.{s}"]: roles[f"{seg}.{o}"] for seg in LIMB_SEGMENTS for s, o in (("L", "R"), ("R", "L"))
                if f"{seg}.{s}" in roles and f"{seg}.{o}" in roles}
+    ends = {roles[f"{seg}.{x}"] for seg in END_SEGMENTS for x in "LR" if f"{seg}.{x}" in roles}
     local = np.einsum("bji,bjk->bik", W[sk.parents[1:]], W[1:])            # world-axes joint rotations
     new = np.empty_like(W)
     for b in range(sk.num_bones):
         new[b] = W[b] if b == 0 else new[sk.parents[b]] @ local[b - 1]
         if b in spinal:
             new[b] = rotvec_to_matrix(np.pi * direction[b]) @ W[b]
+        elif b in ends:
+            new[b] = new[sk.parents[b]]
         elif b in partner:
             aim = turn_between(new[b] @ (sk.tails[b] - sk.heads[b]), direction[partner[b]])
             new[b] = rotvec_to_matrix(aim) @ new[b]

@@ -13,8 +13,8 @@ from articula.solver.rig.kinematics import forward_kinematics
 from articula.solver.rig.model import Poses
 from articula.solver.roles import role_bones
 from articula.solver.tracking import checks
-from articula.solver.tracking.trunk_starts import (LIMB_SEGMENTS, _child_towards, signed_twist,
-                                                       turned_round_start, untwisted_starts)
+from articula.solver.tracking.trunk_starts import (END_SEGMENTS, LIMB_SEGMENTS, _child_towards, signed_twist,
+                                                   turned_round_start, untwisted_starts)
 
 from .test_start_search import _model
 
@@ -84,7 +84,8 @@ def test_hips_turned_back_under_the_chest(subject, deg):
 
 def test_a_fit_facing_away_is_turned_round(subject):
     """The true pose turned round (half a turn of every trunk bone about itself, limbs aimed at the other
-    side's): turned round again, the trunk is the truth's and the limbs point as the truth's."""
+    side's, hands and feet at rest): turned round again, the trunk is the truth's and the upper and lower
+arms and legs point as the truth's."""
     model, truth = subject
     trunk = checks.prepare(model).trunk
     roles = role_bones(model.skeleton.names)
@@ -97,13 +98,13 @@ def test_a_fit_facing_away_is_turned_round(subject):
         np.testing.assert_allclose(W1[b], rotvec_to_matrix(np.pi * d) @ W0[b], atol=1e-9)
     for seg in LIMB_SEGMENTS:
         for side, other in (("L", "R"), ("R", "L")):
-            if f"{seg}.{side}" in roles:
-                np.testing.assert_allclose(_direction(model, W1, roles[f"{seg}.{side}"]),
-                                           _direction(model, W0, roles[f"{seg}.{other}"]), atol=1e-9)
+            np.testing.assert_allclose(_direction(model, W1, roles[f"{seg}.{side}"]),
+                                       _direction(model, W0, roles[f"{seg}.{other}"]), atol=1e-9)
+    for end in (roles[f"{seg}.{side}"] for seg in END_SEGMENTS for side in "LR"):
+        np.testing.assert_allclose(np.abs(away.rotations[0, end]), [1, 0, 0, 0], atol=1e-9)    # at rest
     back = turned_round_start(model, away, trunk)
     Wb, _ = _maps(model, back)
-    for b in range(model.skeleton.num_bones):
-        if model.skeleton.names[b] in {model.skeleton.names[roles[f"{s}.{x}"]] for s in LIMB_SEGMENTS for x in "LR"}:
-            np.testing.assert_allclose(_direction(model, Wb, b), _direction(model, W0, b), atol=1e-9)
+    for b in (roles[f"{seg}.{side}"] for seg in LIMB_SEGMENTS for side in "LR"):
+        np.testing.assert_allclose(_direction(model, Wb, b), _direction(model, W0, b), atol=1e-9)
     np.testing.assert_allclose(Wb[trunk[1]], W0[trunk[1]], atol=1e-9)
     assert np.abs(_joints(model, back) - _joints(model, truth))[[trunk[0], trunk[1]]].max() < 1e-6
