@@ -247,6 +247,26 @@ def test_a_forearm_turned_about_its_axis_is_turned_back(body):
     assert back_score < 0.01 * score
 
 
+def test_a_foot_upside_down_is_turned_back(body):
+    """``first_frame._twisted``: a foot turned half a turn about its ankle-to-toe line stays there through
+    the finer search stages; the turned fits put it back with a far lower coverage score."""
+    from articula.solver.track import first_frame as ff
+    from articula.solver.track.frame_fit import Capture
+    from articula.solver.tracking.body import Body
+    from articula.solver.tracking.frame import SEARCH, FrameSettings
+    names = body.skeleton.names
+    pose = _motion(body, 3).take(1)
+    capture = Capture.from_mesh(hybrid_skin(body, pose)[0], body.faces)
+    tracker = Body(body)
+    once = ff._fit(tracker, capture, ff._turned(pose, names.index("foot.R"), np.pi), (), SEARCH[1:],
+                   FrameSettings(), None)
+    score = ff.coverage_score(tracker, capture, once.state)
+    back, back_score = ff._twisted(tracker, capture, once.pose, score, (), FrameSettings(), None)
+    error = lambda p: np.linalg.norm(hybrid_skin(body, p)[0] - hybrid_skin(body, pose)[0], axis=1).mean()
+    assert error(once.pose) > 0.003 and error(back) < 2e-4, (error(once.pose), error(back))
+    assert back_score < 0.1 * score
+
+
 def test_an_end_chain_is_judged_by_the_capture_around_it(body):
     """``first_frame.chain_errors``: of two fits differing in one foot, the one with the foot where the
     capture is explains the foot's chain better, and the chain of the other foot, the same in both, the
