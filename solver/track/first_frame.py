@@ -53,9 +53,8 @@ AIM_REGIONS = 2         # ... at their largest this many regions,
 AIM_KEEP = 4            # ... the aimed starts with the best unfitted coverage score fitted
 CHAIN_REACH = 0.02      # capture points this near an end chain (m) judge how it is turned
 CHAIN_SLACK = 0.05      # the chains' own judgement stands unless the whole-body score rises by this share
-ARM_TWISTS = (-0.5 * np.pi, 0.5 * np.pi, np.pi)
-TWISTED = {"forearm.L": ARM_TWISTS, "forearm.R": ARM_TWISTS,   # the winner's segments tried turned about
-           "foot.L": (np.pi,), "foot.R": (np.pi,)}              # their own axis by these angles (rad)
+TWISTED = ("forearm.L", "forearm.R", "foot.L", "foot.R")      # the winner's segments tried turned about
+TWISTS = (-0.5 * np.pi, 0.5 * np.pi, np.pi)                      # their own axis by these angles (rad)
 
 
 def check_units(model, points) -> None:
@@ -181,15 +180,14 @@ def _penalised(fit) -> float:
 
 def _twisted(body, capture, pose, score, priors, settings, cancel):
     """``(pose, score)``: ``pose``, or its fit through the finer search stages with a forearm or a foot (by
-    role, :data:`TWISTED`) turned about its own axis by one of its angles when that explains the capture
+    role, :data:`TWISTED`) turned about its own axis by one of :data:`TWISTS` when that explains the capture
     better (the segments turned as their best fits, fitted once more, when several are).  A forearm with
     its hand is near a cylinder: a learned rig's two forearms ended turned 90-180 deg with the hands 50-77
     mm off, while the turned fits scored 24-28 % lower: the score knew, the search had not tried.  A foot
     turned upside down about its ankle-to-toe line leaves little of a clean capture unexplained (the
     reach's right foot, 78 mm off after the legs were swapped back; turned, the frame 5.4 -> 1.0 mm)."""
     roles = role_bones(body.model.skeleton.names)
-    starts = [(roles[r], _turned(pose, roles[r], angle)) for r, angles in TWISTED.items() if r in roles
-              for angle in angles]
+    starts = [(roles[r], _turned(pose, roles[r], angle)) for r in TWISTED if r in roles for angle in TWISTS]
 
     def fitted(item):
         k, (bone, start) = item
