@@ -3,11 +3,11 @@
 A body's capture is nearly symmetric about the trunk's long axis below the waist, so a search can end with
 the hips turned half round and the legs swapped (the left leg in the right leg's capture), explaining the
 capture to a millimetre or two; the truth-free checks find the hips twisted from the chest beyond what a
-trunk does (:func:`solver.tracking.checks.trunk_twist`).  From such a fit the hips are turned back about
+trunk does (:func:`solver.tracking.joint_limits.trunk_twist`).  From such a fit the hips are turned back about
 the spine so that the twist is gone, the chest and everything above it staying where it is, once with the
 legs as they were (they come round with the hips) and once with each leg pointing as the other leg of the
 fit points (the fit's legs lie in the capture's, swapped).  A whole body fitted facing away bends its
-trunk backwards where the true one bends forwards (:func:`solver.tracking.checks.trunk_back`); it is
+trunk backwards where the true one bends forwards (:func:`solver.tracking.joint_limits.trunk_back`); it is
 turned round: each trunk bone half a turn about itself, the limbs aimed along the other side's, hands
 and feet at rest on them.  The
 caller fits these starts from the coarse stage on.
