@@ -132,9 +132,14 @@ def trunk_twist(trunk, Rm) -> float:
     their relative rotation's swing-twist split), from the part maps ``Rm (B, 3, 3)`` (scale removed)."""
     hips, chest, axis, _ = trunk
     rel = Rm[chest].T @ Rm[hips]
-    rel = rel / np.cbrt(np.linalg.det(rel))
+    return float(np.degrees(abs(signed_twist(rel / np.cbrt(np.linalg.det(rel)), axis))))
+
+
+def signed_twist(rel, axis) -> float:
+    """Radians of the twist about unit ``axis`` in the swing-twist split ``rel = swing @ twist`` of the
+    rotation matrix ``rel`` (3, 3), in (-pi, pi]."""
     q = matrix_to_quat(rel)
-    return float(np.degrees(2.0 * np.arctan2(abs(q[1:] @ axis), abs(q[0]))))
+    return float(2.0 * np.arctan2(q[1:] @ axis, q[0]))
 
 
 def trunk_back(trunk, Rm):

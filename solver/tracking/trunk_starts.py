@@ -25,6 +25,7 @@ from ..rig.kinematics import forward_kinematics
 from ..rig.model import Poses
 from ..roles import role_bones
 from .aimed_starts import turn_between
+from .joint_limits import signed_twist
 from .start_poses import subtree_masks
 
 LEG_SEGMENTS = ("thigh", "shin", "foot")
@@ -74,13 +75,6 @@ def _swapped_legs(model, start: Poses, fit: Poses) -> Poses:
             delta[0, 4 + 3 * b:7 + 3 * b] = sk.frames[b].T @ (Rm[0, b] / scale).T @ omega
             pose = apply_pose_increment(pose, delta)
     return pose
-
-
-def signed_twist(rel, axis) -> float:
-    """Radians of the twist about unit ``axis`` in the swing-twist split ``rel = swing @ twist`` of the
-    rotation matrix ``rel`` (3, 3), in (-pi, pi]."""
-    q = matrix_to_quat(rel)
-    return float(2.0 * np.arctan2(q[1:] @ axis, q[0]))
 
 
 def _child_towards(parents, top, bone) -> int:

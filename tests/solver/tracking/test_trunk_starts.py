@@ -13,8 +13,9 @@ from articula.solver.rig.kinematics import forward_kinematics
 from articula.solver.rig.model import Poses
 from articula.solver.roles import role_bones
 from articula.solver.tracking import checks
-from articula.solver.tracking.trunk_starts import (END_SEGMENTS, LIMB_SEGMENTS, _child_towards, signed_twist,
-                                                   turned_round_start, untwisted_starts)
+from articula.solver.tracking.joint_limits import signed_twist
+from articula.solver.tracking.trunk_starts import (END_SEGMENTS, LIMB_SEGMENTS, _child_towards, turned_round_start,
+                                                   untwisted_starts)
 
 from .test_start_search import _model
 
