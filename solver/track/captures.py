@@ -4,9 +4,9 @@ A :class:`CaptureSource` is a lazy, indexable sequence of :class:`.frame_fit.Cap
 frame, input order): files are read when a frame is asked for, so a long recording is never held in
 memory as a whole.  Every frame is cleaned the same way: rows with NaN or infinite coordinates are
 dropped (with the triangles that use them), unused vertices are removed, and a mesh with more than
-``max_points`` vertices is thinned by vertex clustering (:func:`thin_mesh`): the correspondence search
-and the trimming cost grow with the capture, the fit's accuracy does not once the capture is several
-times denser than the model (docs/track.md "Pipeline").  Coordinates are used as the files hold them
+``max_points`` vertices is thinned by vertex clustering (:func:`thin_mesh`, captured vertices kept): the
+correspondence search and the trimming cost grow with the capture, the fit's accuracy does not once the
+capture is several times denser than the model (docs/track.md "Pipeline").  Coordinates are used as the files hold them
 (no axis conversion), metres.
 """
 from __future__ import annotations
@@ -56,10 +56,12 @@ def clean(points, triangles=None):
 
 
 def thin_mesh(points, triangles, max_points: int):
-    """Vertex clustering of a triangle mesh to at most about ``max_points`` vertices: vertices in one
+    """Vertex clustering of a triangle mesh to at most about ``max_points`` vertices: the vertices in one
     cubic cell (:func:`..depth.frames.voxel_groups`, cells anchored at the mesh's lowest corner) become
-    their mean, triangles are remapped, collapsed and repeated ones removed.  The cell size is found by
-    bisection on the occupied-cell count (metres; 12 halvings)."""
+    the one of them nearest their mean, triangles are remapped, collapsed and repeated ones removed.  The
+    cell size is found by bisection on the occupied-cell count (metres; 12 halvings).  A captured vertex,
+    not the cell's mean: on a curved part the mean lies inside the surface (a 1 cm cell on a finger:
+    up to ~1 mm), which biased the fit of noise-free captures (docs/track.md "7 Dec, day")."""
     if len(points) <= max_points:
         return points, triangles
     shifted = points - points.min(axis=0)
@@ -72,9 +74,13 @@ def thin_mesh(points, triangles, max_points: int):
             hi = size
     group, m = voxel_groups(shifted, hi)
     counts = np.bincount(group, None, m)
-    merged = np.stack([np.bincount(group, points[:, k], m) for k in range(3)], axis=1) / counts[:, None]
+    mean = np.stack([np.bincount(group, points[:, k], m) for k in range(3)], axis=1) / counts[:, None]
+    off = np.linalg.norm(points - mean[group], axis=1)
+    order = np.lexsort((off, group))                     # by cell, the nearest to the mean first
+    first = np.ones(len(order), bool)
+    first[1:] = group[order][1:] != group[order][:-1]
     tris = group[triangles]
-    return merged, tris[np.sort(_keep_first(tris))]
+    return points[order[first]], tris[np.sort(_keep_first(tris))]
 
 
 def _nondegenerate(tris):

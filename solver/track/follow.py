@@ -2,7 +2,8 @@
 
 Frame n starts at the pose predicted from the last two good frames (``q_n = q_{n-1} (q_{n-2}^-1
 q_{n-1})`` per bone, the root moving on as it moved) and is held along the directions its data barely
-constrain (:func:`solver.tracking.priors.weak_directions`) to a prediction carrying on half that velocity
+constrain (:func:`solver.tracking.priors.weak_directions`; in the converging stage as firmly as the
+captures are noisy: :func:`capture_noise`) to a prediction carrying on half that velocity
 (``HOLD_CARRY``): held to the full prediction, a direction no data see (a finger with no capture
 points) keeps any velocity it once had for ever; held to this one, its velocity halves every frame.  The
 target's rotations are also turned a fifth of the way back to rest (``HOLD_RELAX``), so where the data
@@ -24,7 +25,7 @@ import numpy as np
 
 from ..geometry.rotations import quat_conj, quat_mul, quat_normalize, quat_to_rotvec, rotvec_to_quat
 from ..rig.model import Poses
-from ..tracking.frame import SEARCH, SEARCH_HOLD, TRACKING, FrameSettings, fit_frame
+from ..tracking.frame import SEARCH, SEARCH_HOLD, TRACKING, FrameSettings, capture_noise, fit_frame
 from ..tracking.checks import check_frame
 from ..tracking.lm import State
 from .first_frame import capture_score, find_pose
@@ -94,7 +95,8 @@ def follow(body, rec, first: int, pose: Poses, options, settings: FrameSettings,
             continue
         guess = predict(history)
         fit = fit_frame(body, capture.points, capture.normals, guess, target=relaxed(predict(history, HOLD_CARRY)),
-                        settings=settings, stages=TRACKING, cancel=cancel, seed=rec.range[i])
+                        settings=settings, stages=TRACKING, cancel=cancel, seed=rec.range[i],
+                        noise=capture_noise(medians[-RUNNING:]))
         med = median_mm(fit.state, _sample(capture.points))
         limit = max(options.lost_factor * float(np.median(medians[-RUNNING:])) if medians else 0.0,
                     options.lost_mm)

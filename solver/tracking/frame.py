@@ -30,7 +30,9 @@ class Stage:
     rel_energy: the stage ends when a step lowers the energy by less than this share (a coarse stage
     only brings the pose near, the next one converges); small_held: the bones of small parts (fingers,
     toes: :func:`small_bones`) stay at the start (while the body is centimetres off, their few points
-    pull them onto surfaces they cannot leave later)."""
+    pull them onto surfaces they cannot leave later); quiet: the weak directions' hold follows the
+    capture's noise (:func:`noise_share`; a converging stage: a coarse one keeps the full hold, which
+    keeps weak parts off wrong surfaces while the body is still off)."""
     eps: float
     reach: float
     coverage: float
@@ -38,9 +40,12 @@ class Stage:
     guided: bool = True
     rel_energy: float = 1e-4
     small_held: bool = False
+    quiet: bool = False
 
 
-TRACKING = (Stage(0.01, 0.1, 0.0, 8, rel_energy=1e-3), Stage(0.002, 0.05, 0.0, 12))
+TRACKING = (Stage(0.01, 0.1, 0.0, 8, rel_energy=1e-3), Stage(0.002, 0.05, 0.0, 12, quiet=True))
+NOISE_REF = 1e-3        # capture noise (m) at which a quiet stage holds its weak directions fully ...
+QUIET_FLOOR = 1e-2      # ... and the least share of that hold it keeps on noise-free captures
 SEARCH_HOLD = 1e-6      # weak-direction ratio of a searched frame: only what the data cannot see is held
 SEARCH = (Stage(0.02, 0.25, 1.0, 12, small_held=True), Stage(0.006, 0.08, 1.0, 10, small_held=True),
           Stage(0.002, 0.04, 0.0, 12, guided=False, small_held=True))
@@ -73,26 +78,31 @@ class FrameFit:
 
 def fit_frame(body, points, normals, start, target=None, priors=(), stages=TRACKING,
               settings: FrameSettings = FrameSettings(), cancel=None, seed: int = 0, weak_ratio=None,
-              slot=0) -> FrameFit:
+              slot=0, noise=None) -> FrameFit:
     """Fit one frame of capture ``points``/``normals`` ``(N, 3)`` from ``start`` (Poses, one frame);
     ``target``: the pose the weak directions are held to (default ``start``); ``priors``: extra terms;
     ``weak_ratio``: of the hold (default ``settings.weak_ratio``; a start that is only a guess, as a
     searched frame's, should hold little: :data:`SEARCH_HOLD`); ``slot``: where the body keeps the fit's
-    Jacobian (:meth:`.body.Body.jacobian_near`; fits running side by side need their own)."""
+    Jacobian (:meth:`.body.Body.jacobian_near`; fits running side by side need their own); ``noise``:
+    the capture's noise (m, along the normal; None: unknown), which scales the hold of quiet stages."""
     target = start if target is None else target
+    ratio = settings.weak_ratio if weak_ratio is None else weak_ratio
     spread = sample(body.model.num_vertices, settings.coverage_vertices, seed + 1)
     shared = Sample(points, normals, settings.samples, seed)           # closest points found once per state
-    at, used, hold, largest = State(body, start, slot), 0, None, 0.0
+    at, used, H, hold, largest = State(body, start, slot), 0, None, None, 0.0
     for stage in stages:
         data = [ScanToModel(points, normals, eps=stage.eps, reach=stage.reach, shared=shared)]
         if stage.coverage:
             data.append(ModelToScan(points, normals, spread, stage.eps, stage.reach, weight=stage.coverage))
-        if hold is None:            # from the finest stage's pairs at the start (see docs/track.md "Design")
+        if H is None:               # from the finest stage's pairs at the start (see docs/track.md "Design")
             last = stages[-1]
-            hold, largest = _hold(body, at, [ScanToModel(points, normals, eps=last.eps, reach=last.reach,
-                                                         shared=shared)], target, settings, weak_ratio)
+            H, largest = _curvature(body, at, [ScanToModel(points, normals, eps=last.eps, reach=last.reach,
+                                                           shared=shared)])
+            hold = TowardPose(target, _weight(H, ratio, largest, settings))
         elif priors and not stage.guided:     # what the priors decided where the data are weak is kept
             hold = TowardPose(at.pose, hold.W)
+        if stage.quiet and noise is not None:
+            hold = TowardPose(hold.target, _weight(H, ratio * noise_share(noise), largest, settings))
         held = [_small_held(body, start, largest)] if stage.small_held else []
         fit = minimise(body, at, data + [hold] + held + (list(priors) if stage.guided else []),
                        Stopping(stage.iterations, settings.step_rad, settings.step_m, stage.rel_energy), cancel)
@@ -148,12 +158,35 @@ def _small_held(body, start, largest):
     return TowardPose(start, W)
 
 
-def _hold(body, state, data, target, settings, weak_ratio=None):
-    """``(pull, largest)``: the pull towards ``target`` along the data's weak directions at ``state`` (fixed
-    for the frame) and the data's largest curvature (the scale of other pulls)."""
-    lin = state.linearise(body, data)
-    W = weak_directions(lin.H, settings.weak_ratio if weak_ratio is None else weak_ratio)
-    largest = float(np.linalg.eigvalsh(lin.H)[-1])
+def noise_share(noise: float) -> float:
+    """The share of the weak directions' hold a quiet stage keeps on captures of ``noise`` (m):
+    ``(noise / NOISE_REF)^2`` within ``[QUIET_FLOOR, 1]``.  The data term sums squared distances
+    unweighted, so a prior's weight against it grows with the noise variance; on noise-free captures
+    the full hold pulled the exact model's fingers 3-4 mm towards the lagging hold target
+    (docs/track.md "7 Dec, day"); none at all lets a fingertip turn about its own axis unseen."""
+    return float(np.clip((noise / NOISE_REF) ** 2, QUIET_FLOOR, 1.0))
+
+
+def capture_noise(medians):
+    """The captures' noise (m, a standard deviation along the surface normal) from fitted frames' median
+    capture-to-model distances ``medians`` (mm; None entries skipped): the median of a normal's absolute
+    value is 0.6745 of its standard deviation (a model that is not the subject's reads as noisier); None
+    without any."""
+    known = [m for m in medians if m is not None]
+    return float(np.median(known)) * 1e-3 / 0.6745 if known else None
+
+
+def _curvature(body, state, data):
+    """``(H (P, P), largest)``: the data's normal matrix at ``state`` and its largest eigenvalue (the
+    scale of the pulls)."""
+    H = state.linearise(body, data).H
+    return H, float(np.linalg.eigvalsh(H)[-1])
+
+
+def _weight(H, ratio, largest, settings):
+    """The hold's weight: the weak directions of ``H`` below ``ratio`` of its largest curvature
+    (:func:`.priors.weak_directions`), plus ``settings.hold`` of it on every parameter."""
+    W = weak_directions(H, ratio)
     if settings.hold:
         W = W + settings.hold * largest * np.eye(len(W))
-    return TowardPose(target, W), largest
+    return W

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..geometry.rotations import quat_conj, quat_mul, quat_to_rotvec
 from ..parallel import map_pieces
+from .frame import capture_noise, noise_share
 from .lm import State, Stopping, damped_step, small_step
 from .priors import TowardPose, weak_directions
 from .terms import ScanToModel
@@ -78,8 +79,9 @@ def fit_windows(body, rec, poses: dict, frames, options, settings, say=None) -> 
             continue
         idx = [frames[k] for k in win]
         body.forget(keep={("frame", i) for i in idx if body.holds_at(("frame", i), poses[i])})
+        noise = capture_noise([rec.entries[i].get("median_mm") for i in idx])
         fitted = fit_window(body, [rec.capture(i) for i in idx], [poses[i] for i in idx], options.w_temp,
-                            settings, slots=[("frame", i) for i in idx])
+                            settings, slots=[("frame", i) for i in idx], noise=noise)
         for k in mine:
             out[frames[k]] = fitted[win.index(k)]
             rec.entries[frames[k]]["window"] = [int(numbers[win[0]]), int(numbers[win[-1]])]
@@ -89,11 +91,13 @@ def fit_windows(body, rec, poses: dict, frames, options, settings, say=None) -> 
     return out
 
 
-def fit_window(body, captures, starts, w_temp: float, settings, iterations: int = 4, slots=None) -> list:
+def fit_window(body, captures, starts, w_temp: float, settings, iterations: int = 4, slots=None,
+               noise=None) -> list:
     """One window: the frames' poses (list of one-frame Poses) fitted together from ``starts``;
     ``slots``: the frames' keys for held Jacobians (:meth:`.body.Body.jacobian_near`).  Each frame is
     held to its start along its data's weak directions, as in the frame fit (the temporal term sees
-    second differences only: an offset shared by the window's frames is free without it)."""
+    second differences only: an offset shared by the window's frames is free without it).  Both priors
+    weigh :func:`.frame.noise_share` of themselves for captures of ``noise`` (m; None: unknown, all)."""
     data = [ScanToModel(c.points, c.normals, settings.samples, FINAL_EPS, FINAL_REACH, seed=k)
             for k, c in enumerate(captures)]
     slots = slots or [("window", k) for k in range(len(starts))]
@@ -104,8 +108,9 @@ def fit_window(body, captures, starts, w_temp: float, settings, iterations: int 
         return state, data[k].linearise(body, state)
 
     states, lins = map(list, zip(*map_pieces(started, range(n))))
-    weight = w_temp * float(np.mean([np.linalg.eigvalsh(l.H)[-1] for l in lins]))
-    terms = [[t, TowardPose(s.pose, weak_directions(l.H, WINDOW_HOLD * settings.weak_ratio))]
+    share = 1.0 if noise is None else noise_share(noise)
+    weight = share * w_temp * float(np.mean([np.linalg.eigvalsh(l.H)[-1] for l in lins]))
+    terms = [[t, TowardPose(s.pose, weak_directions(l.H, share * WINDOW_HOLD * settings.weak_ratio))]
              for t, s, l in zip(data, states, lins)]
     lins = [l + hold.linearise(body, s) for l, (_, hold), s in zip(lins, terms, states)]
     energy = sum(l.energy for l in lins) + temporal_energy(states, weight)
