@@ -14,9 +14,9 @@ whole and one by one (:func:`_ends_at_rest`), and its last stage is run again wh
 call every such fit lost, the limbs of the best lost fits are aimed at the capture regions they leave
 unexplained (:func:`solver.tracking.aimed_starts.aimed_starts`: a forearm folded onto the belly while the
 capture's hangs by the thigh) and those starts fitted too (:func:`_aimed`); if all are still lost, the
-best whose trunk is beyond its limits are put right (hips turned half round under the chest with the
-legs swapped, a body facing away: :func:`_untwisted`).  Independent fits run on the solver's threads,
-each with its own Jacobian slot.
+best whose trunk or hinges are beyond their limits are put right (hips turned half round under the chest
+with the legs swapped, a body facing away, an elbow bent backwards under an upper arm turned half round:
+:func:`_put_right`).  Independent fits run on the solver's threads, each with its own Jacobian slot.
 """
 from __future__ import annotations
 
@@ -31,6 +31,7 @@ from ..rig.model import Poses
 from ..tracking.aimed_starts import aimed_starts
 from ..tracking.checks import check_frame
 from ..tracking.geodesic_starts import geodesic_starts
+from ..tracking.hinge_starts import flipped_hinge_start
 from ..tracking.joint_limits import signed_twist
 from ..tracking.lm import State
 from ..tracking.frame import SEARCH, SEARCH_HOLD, FrameSettings, end_chains, fit_frame
@@ -109,14 +110,25 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
     fits += _while_lost(fits, fine_fit, list(enumerate((pose for _, pose in coarse[KEEP:]), KEEP)))
     start_score = lambda start: coverage_score(body, capture, State(body, start))
     fits = _aimed(body.model, fits, fine_fit, start_score, len(starts))
-    trunk = None if checked is None else checked.trunk
     full_fit = lambda item: fine_fit(item, SEARCH)
-    fits += _untwisted(body.model, fits, full_fit, trunk, len(starts) + AIM_ROUNDS * AIM_KEEP)
-    best = _ranked(fits)[0]
-    pose, score = _twisted(body, capture, best[0], best[1], priors, settings, cancel)
-    pose, score = _hands_untwisted(body, capture, pose, score, priors, settings, cancel)
-    pose, score = _settled(body, capture, pose, score, priors, settings, cancel)
+    slot = len(starts) + AIM_ROUNDS * AIM_KEEP
+    fits += _put_right(body.model, fits, full_fit, checked, slot)
+    pose, score = _finished(body, capture, _ranked(fits)[0], priors, settings, cancel)
+    if checked is not None:              # the finishing turns can bend a joint beyond its limits again
+        check = check_frame(body.model, pose, State(body, pose).posed, capture, checked)
+        final = (pose, score, int(_lost(check)), check)
+        more = _put_right(body.model, [final], full_fit, checked, slot)
+        if more and _penalised(_ranked(more)[0]) < _penalised(final):
+            pose, score = _finished(body, capture, _ranked(more)[0], priors, settings, cancel)
     return pose, score, len(starts)
+
+
+def _finished(body, capture, fit, priors, settings, cancel):
+    """``(pose, score)`` of a ranked fit ``(pose, score, lost, check)`` after the finishing turns: forearms
+    and feet about their axes, hands untwisted, end chains at rest, the last stage settled."""
+    pose, score = _twisted(body, capture, fit[0], fit[1], priors, settings, cancel)
+    pose, score = _hands_untwisted(body, capture, pose, score, priors, settings, cancel)
+    return _settled(body, capture, pose, score, priors, settings, cancel)
 
 
 def _while_lost(fits, fine_fit, items) -> list:
@@ -134,20 +146,27 @@ def _while_lost(fits, fine_fit, items) -> list:
     return out
 
 
-def _untwisted(model, fits, full_fit, trunk, slot) -> list:
+def _put_right(model, fits, full_fit, checked, slot) -> list:
     """While the best of ``fits`` is lost: the fits (``full_fit((slot, start))``, every search stage) of
-    the starts made from the best ``AIM_FITS`` fits whose checks found the trunk beyond its limits: hips
+    the starts made from the best ``AIM_FITS`` fits whose checks found a joint beyond its limits: hips
     twisted from the chest turned back under it (:func:`solver.tracking.trunk_starts.untwisted_starts`),
-    a chest bent backwards turned round (:func:`solver.tracking.trunk_starts.turned_round_start`)."""
-    if trunk is None or not _ranked(fits)[0][2]:
+    a chest bent backwards turned round (:func:`solver.tracking.trunk_starts.turned_round_start`), a knee
+    or elbow bent backwards bent the other way (:func:`solver.tracking.hinge_starts.flipped_hinge_start`:
+    a tilted capture's reach fitted with the upper arm half round and the elbow 65 deg backwards, 14 mm
+    off; from the flipped start 1.7 mm)."""
+    if checked is None or not _ranked(fits)[0][2]:
         return []
+    hinges = {h.name: h for h in checked.hinges}
     starts = []
     for fit in _ranked(fits)[:AIM_FITS]:
-        found = {f.numbers.get("joint") for f in (fit[3].findings if fit[3] is not None else ())}
-        if "trunk twist" in found:
-            starts += untwisted_starts(model, fit[0], trunk)
-        if "trunk back" in found:
-            starts.append(turned_round_start(model, fit[0], trunk))
+        numbers = [f.numbers for f in (fit[3].findings if fit[3] is not None else ())]
+        found = {n.get("joint") for n in numbers}
+        if "trunk twist" in found and checked.trunk is not None:
+            starts += untwisted_starts(model, fit[0], checked.trunk)
+        if "trunk back" in found and checked.trunk is not None:
+            starts.append(turned_round_start(model, fit[0], checked.trunk))
+        starts += [flipped_hinge_start(model, fit[0], hinges[n["joint"]]) for n in numbers
+                   if n.get("bend") == "backwards" and n.get("joint") in hinges]
     return map_pieces(full_fit, enumerate(starts, slot))
 
 

@@ -48,10 +48,21 @@ def aimed_starts(model, pose: Poses, centres) -> list:
             if not NEAREST <= np.linalg.norm(to) <= REACH_SLACK * scale * reach[b]:
                 continue
             omega = turn_between(Rm[0, b] @ (sk.tails[b] - sk.heads[b]), to)
-            delta = np.zeros((1, 4 + 3 * sk.num_bones))
-            delta[0, 4 + 3 * b:7 + 3 * b] = sk.frames[b].T @ (Rm[0, b] / scale).T @ omega
-            out.append(apply_pose_increment(pose, delta))
+            out.append(turned_about_joint(model, pose, b, omega, Rm[0, b] / scale))
     return out
+
+
+def turned_about_joint(model, pose: Poses, bone: int, omega, R=None) -> Poses:
+    """``pose`` with ``bone`` (its subtree with it) turned by the world rotation vector ``omega (3,)``
+    about its posed joint (module docstring's convention); ``R (3, 3)``: the posed part's rotation without
+    its scale, when the caller has it."""
+    sk = model.skeleton
+    if R is None:
+        Rm, _ = forward_kinematics(sk, pose)
+        R = Rm[0, bone] / np.cbrt(np.linalg.det(Rm[0, bone]))
+    delta = np.zeros((1, 4 + 3 * sk.num_bones))
+    delta[0, 4 + 3 * bone:7 + 3 * bone] = sk.frames[bone].T @ R.T @ omega
+    return apply_pose_increment(pose, delta)
 
 
 def limb_reach(model) -> np.ndarray:

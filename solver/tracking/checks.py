@@ -580,7 +580,7 @@ def _joint_limits(body, Rm, tm, options):
             if angle > doubt:
                 findings.append(Finding("joint_limit", "lost" if angle > lost else "doubtful", h.name,
                                         f"{h.name} bent {how} beyond its limit ({angle:.0f} deg)",
-                                        {"joint": h.name, "angle_deg": angle, "limit_deg": doubt}))
+                                        {"joint": h.name, "bend": how, "angle_deg": angle, "limit_deg": doubt}))
     if body.head_chest is not None:
         head, chest = body.head_chest
         rel = Rm[chest].T @ Rm[head] / np.linalg.det(Rm[chest]) ** (2.0 / 3.0)

@@ -114,11 +114,17 @@ def _unit(v):
     return v / max(np.linalg.norm(v), 1e-12)
 
 
+def hinge_points(hinge: Hinge, Rm, tm) -> list:
+    """The hinge's three posed joints ``[(3,)] * 3`` (upper, middle, end) by the part maps ``Rm (B, 3, 3)``,
+    ``tm (B, 3)``."""
+    return [Rm[b] @ x + tm[b] for b, x in hinge.points]
+
+
 def hinge_angles(hinge: Hinge, Rm, tm):
     """``(flexion, sideways)`` degrees of a hinge posed by the part maps ``Rm (B, 3, 3)``, ``tm (B, 3)``:
     flexion = angle from the upper to the lower segment about the posed axis (negative: bent backwards),
     sideways = the lower segment's angle out of the hinge plane."""
-    p = [Rm[b] @ x + tm[b] for b, x in hinge.points]
+    p = hinge_points(hinge, Rm, tm)
     upper, lower = _unit(p[1] - p[0]), _unit(p[2] - p[1])
     k = _unit(Rm[hinge.axis_bone] @ hinge.axis)
     side = np.degrees(np.arcsin(np.clip(lower @ k, -1.0, 1.0)))

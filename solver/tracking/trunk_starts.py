@@ -24,7 +24,7 @@ from ..rig.jacobians import apply_pose_increment
 from ..rig.kinematics import forward_kinematics
 from ..rig.model import Poses
 from ..roles import role_bones
-from .aimed_starts import turn_between
+from .aimed_starts import turn_between, turned_about_joint
 from .joint_limits import signed_twist
 from .start_poses import subtree_masks
 
@@ -68,12 +68,9 @@ def _swapped_legs(model, start: Poses, fit: Poses) -> Poses:
             if b is None or partner is None:
                 continue
             Rm, _ = forward_kinematics(sk, pose)
-            scale = np.cbrt(np.linalg.det(Rm[0, b]))
             omega = turn_between(Rm[0, b] @ (sk.tails[b] - sk.heads[b]), Rf[0, partner] @ (sk.tails[partner] -
                                                                                           sk.heads[partner]))
-            delta = np.zeros((1, 4 + 3 * sk.num_bones))
-            delta[0, 4 + 3 * b:7 + 3 * b] = sk.frames[b].T @ (Rm[0, b] / scale).T @ omega
-            pose = apply_pose_increment(pose, delta)
+            pose = turned_about_joint(model, pose, b, omega, Rm[0, b] / np.cbrt(np.linalg.det(Rm[0, b])))
     return pose
 
 
