@@ -58,7 +58,7 @@ CHAIN_REACH = 0.02      # capture points this near an end chain (m) judge how it
 CHAIN_SLACK = 0.05      # the chains' own judgement stands unless the whole-body score rises by this share
 TWISTED = ("forearm.L", "forearm.R", "foot.L", "foot.R")      # the winner's segments tried turned about
 TWISTS = (-0.5 * np.pi, 0.5 * np.pi, np.pi)                      # their own axis by these angles (rad)
-HAND_TWIST = 0.5 * np.pi    # a winner's hand turned further than this about its forearm is tried untwisted (rad)
+HAND_TWIST = np.pi / 6      # a winner's hand turned further than this about its forearm is tried untwisted (rad)
 
 
 def check_units(model, points) -> None:
@@ -236,26 +236,29 @@ def _twisted(body, capture, pose, score, priors, settings, cancel):
 
 
 def _hands_untwisted(body, capture, pose, score, priors, settings, cancel):
-    """``(pose, score)``: ``pose``, or its fit through the finer search stages with every hand that is
-    turned further than :data:`HAND_TWIST` about its forearm's rest direction untwisted (that twist taken
-    out of its local rotation), when that explains the capture better.  A wrist does not turn about the
-    forearm, but a fit can: a walk's forearm turned by :func:`_twisted` brought its hand 179 deg round
-    (palm out, the thumb 148 mm off), scoring 22 % worse than the true pose; untwisted, 0.5 mm."""
-    sk, roles, rot = body.model.skeleton, role_bones(body.model.skeleton.names), pose.rotations.copy()
+    """``(pose, score)``: ``pose``, with each hand in turn that is turned further than :data:`HAND_TWIST`
+    about its forearm's rest direction tried untwisted (that twist taken out of its local rotation) and
+    fitted through the finer search stages, kept when that explains the capture better.  A wrist does not
+    turn about the forearm, but a fit can: a walk's forearm turned by :func:`_twisted` brought its hand
+    179 deg round (palm out, the thumb 148 mm off), scoring 22 % worse than the true pose; untwisted,
+    0.5 mm; another walk's first frame ended with its hands 80 and 52 deg round, 16 mm off."""
+    sk, roles = body.model.skeleton, role_bones(body.model.skeleton.names)
     for s in "LR":
         hand, forearm = roles.get(f"hand.{s}"), roles.get(f"forearm.{s}")
         along = None if hand is None or forearm is None else sk.heads[hand] - sk.heads[forearm]
         if along is None or np.linalg.norm(along) < 1e-6:
             continue
         axis = sk.frames[hand].T @ (along / np.linalg.norm(along))        # in the hand's rest frame
-        twist = signed_twist(quat_to_matrix(rot[0, hand]), axis)
-        if abs(twist) > HAND_TWIST:
-            rot[:, hand] = quat_mul(rot[:, hand], rotvec_to_quat(-twist * axis))
-    if np.array_equal(rot, pose.rotations):
-        return pose, score
-    fit = _fit(body, capture, Poses(rot, pose.translations, pose.scales), priors, SEARCH[1:], settings, cancel)
-    again = coverage_score(body, capture, fit.state)
-    return (fit.pose, again) if again < score else (pose, score)
+        twist = signed_twist(quat_to_matrix(pose.rotations[0, hand]), axis)
+        if abs(twist) <= HAND_TWIST:
+            continue
+        rot = pose.rotations.copy()
+        rot[:, hand] = quat_mul(rot[:, hand], rotvec_to_quat(-twist * axis))
+        fit = _fit(body, capture, Poses(rot, pose.translations, pose.scales), priors, SEARCH[1:], settings, cancel)
+        again = coverage_score(body, capture, fit.state)
+        if again < score:
+            pose, score = fit.pose, again
+    return pose, score
 
 
 def _turned(pose, bone, angle) -> Poses:
