@@ -8,9 +8,9 @@ start pose, the last good pose), each fitted with the coarse stage of the core's
 (:data:`solver.tracking.frame.SEARCH`), the best ``KEEP`` by :func:`coverage_score` through the finer
 stages, the pose prior guiding the limbs; the fit that leaves the least of the capture and of the
 model unexplained wins; its forearms and feet are tried turned about their own axis (:func:`_twisted`), a
-hand turned over its forearm untwisted (:func:`_hands_untwisted`), its end chains (toes, fingers) at rest,
-whole and one by one (:func:`_ends_at_rest`), and its last stage is run again while that improves it
-(:func:`_settled`).  When the truth-free checks
+hand turned over its forearm untwisted and a foot bent far at rest (:func:`_ends_put_back`), its end chains
+(toes, fingers) at rest, whole and one by one (:func:`_ends_at_rest`), and its last stage is run again
+while that improves it (:func:`_settled`).  When the truth-free checks
 call every such fit lost, the limbs of the best lost fits are aimed at the capture regions they leave
 unexplained (:func:`solver.tracking.aimed_starts.aimed_starts`: a forearm folded onto the belly while the
 capture's hangs by the thigh) and those starts fitted too (:func:`_aimed`); if all are still lost, the
@@ -59,6 +59,7 @@ CHAIN_SLACK = 0.05      # the chains' own judgement stands unless the whole-body
 TWISTED = ("forearm.L", "forearm.R", "foot.L", "foot.R")      # the winner's segments tried turned about
 TWISTS = (-0.5 * np.pi, 0.5 * np.pi, np.pi)                      # their own axis by these angles (rad)
 HAND_TWIST = np.pi / 6      # a winner's hand turned further than this about its forearm is tried untwisted (rad)
+FOOT_TURN = np.pi / 3       # ... and a foot turned further than this from its rest on the lower leg at rest
 
 
 def check_units(model, points) -> None:
@@ -125,9 +126,9 @@ def find_pose(body, capture, priors=(), extra=(), count: int = 4, settings: Fram
 
 def _finished(body, capture, fit, priors, settings, cancel):
     """``(pose, score)`` of a ranked fit ``(pose, score, lost, check)`` after the finishing turns: forearms
-    and feet about their axes, hands untwisted, end chains at rest, the last stage settled."""
+    and feet about their axes, hands untwisted and feet put back, end chains at rest, the last stage settled."""
     pose, score = _twisted(body, capture, fit[0], fit[1], priors, settings, cancel)
-    pose, score = _hands_untwisted(body, capture, pose, score, priors, settings, cancel)
+    pose, score = _ends_put_back(body, capture, pose, score, priors, settings, cancel)
     return _settled(body, capture, pose, score, priors, settings, cancel)
 
 
@@ -235,30 +236,52 @@ def _twisted(body, capture, pose, score, priors, settings, cancel):
     return min(winner, (fit.pose, coverage_score(body, capture, fit.state)), key=lambda c: c[1])
 
 
-def _hands_untwisted(body, capture, pose, score, priors, settings, cancel):
+def _ends_put_back(body, capture, pose, score, priors, settings, cancel):
     """``(pose, score)``: ``pose``, with each hand in turn that is turned further than :data:`HAND_TWIST`
-    about its forearm's rest direction tried untwisted (that twist taken out of its local rotation) and
-    fitted through the finer search stages, kept when that explains the capture better.  A wrist does not
-    turn about the forearm, but a fit can: a walk's forearm turned by :func:`_twisted` brought its hand
-    179 deg round (palm out, the thumb 148 mm off), scoring 22 % worse than the true pose; untwisted,
-    0.5 mm; another walk's first frame ended with its hands 80 and 52 deg round, 16 mm off."""
+    about its forearm's rest direction tried untwisted (that twist taken out of its local rotation), and
+    each foot turned further than :data:`FOOT_TURN` from its rest on the lower leg tried at rest, each
+    fitted through the finer search stages and kept when that explains the capture better.  A wrist does
+    not turn about the forearm, but a fit can: a walk's forearm turned by :func:`_twisted` brought its hand
+    179 deg round (palm out, the thumb 148 mm off), scoring 22 % worse than the true pose; untwisted, 0.5
+    mm; another walk's first frame ended with its hands 80 and 52 deg round, 16 mm off.  An ankle does not
+    bend 125 deg, as a thin body's model fitted to a heavy subject's capture had its left foot."""
     sk, roles = body.model.skeleton, role_bones(body.model.skeleton.names)
     for s in "LR":
-        hand, forearm = roles.get(f"hand.{s}"), roles.get(f"forearm.{s}")
-        along = None if hand is None or forearm is None else sk.heads[hand] - sk.heads[forearm]
-        if along is None or np.linalg.norm(along) < 1e-6:
-            continue
-        axis = sk.frames[hand].T @ (along / np.linalg.norm(along))        # in the hand's rest frame
-        twist = signed_twist(quat_to_matrix(pose.rotations[0, hand]), axis)
-        if abs(twist) <= HAND_TWIST:
-            continue
-        rot = pose.rotations.copy()
-        rot[:, hand] = quat_mul(rot[:, hand], rotvec_to_quat(-twist * axis))
-        fit = _fit(body, capture, Poses(rot, pose.translations, pose.scales), priors, SEARCH[1:], settings, cancel)
-        again = coverage_score(body, capture, fit.state)
-        if again < score:
-            pose, score = fit.pose, again
+        for start in (_untwisted_hand(sk, roles, pose, s), _foot_at_rest(roles, pose, s)):
+            if start is None:
+                continue
+            fit = _fit(body, capture, start, priors, SEARCH[1:], settings, cancel)
+            again = coverage_score(body, capture, fit.state)
+            if again < score:
+                pose, score = fit.pose, again
     return pose, score
+
+
+def _untwisted_hand(sk, roles, pose, side):
+    """``pose`` with the ``side`` hand's twist about its forearm's rest direction taken out when it exceeds
+    :data:`HAND_TWIST`, else None."""
+    hand, forearm = roles.get(f"hand.{side}"), roles.get(f"forearm.{side}")
+    along = None if hand is None or forearm is None else sk.heads[hand] - sk.heads[forearm]
+    if along is None or np.linalg.norm(along) < 1e-6:
+        return None
+    axis = sk.frames[hand].T @ (along / np.linalg.norm(along))        # in the hand's rest frame
+    twist = signed_twist(quat_to_matrix(pose.rotations[0, hand]), axis)
+    if abs(twist) <= HAND_TWIST:
+        return None
+    rot = pose.rotations.copy()
+    rot[:, hand] = quat_mul(rot[:, hand], rotvec_to_quat(-twist * axis))
+    return Poses(rot, pose.translations, pose.scales)
+
+
+def _foot_at_rest(roles, pose, side):
+    """``pose`` with the ``side`` foot at rest on its lower leg when it is turned further than
+    :data:`FOOT_TURN` from there, else None."""
+    foot = roles.get(f"foot.{side}")
+    if foot is None or 2.0 * np.arccos(min(abs(float(pose.rotations[0, foot, 0])), 1.0)) <= FOOT_TURN:
+        return None
+    rot = pose.rotations.copy()
+    rot[:, foot] = (1.0, 0.0, 0.0, 0.0)
+    return Poses(rot, pose.translations, pose.scales)
 
 
 def _turned(pose, bone, angle) -> Poses:

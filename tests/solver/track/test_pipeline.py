@@ -264,7 +264,7 @@ def test_a_foot_upside_down_is_turned_back(body):
 
 
 def test_a_hand_turned_over_its_forearm_is_untwisted(body):
-    """``first_frame._hands_untwisted``: a hand, bent at the wrist, turned 170 deg about its forearm stays
+    """``first_frame._ends_put_back``: a hand, bent at the wrist, turned 170 deg about its forearm stays
     there through the finer search stages; untwisted and fitted again it is back, with a lower coverage
     score; a pose whose hands are not turned over comes back as it is."""
     from articula.solver.track import first_frame as ff
@@ -284,11 +284,33 @@ def test_a_hand_turned_over_its_forearm_is_untwisted(body):
     tracker = Body(body)
     once = ff._fit(tracker, capture, turned, (), SEARCH[1:], FrameSettings(), None)
     score = ff.coverage_score(tracker, capture, once.state)
-    back, back_score = ff._hands_untwisted(tracker, capture, once.pose, score, (), FrameSettings(), None)
+    back, back_score = ff._ends_put_back(tracker, capture, once.pose, score, (), FrameSettings(), None)
     error = lambda p: np.linalg.norm(hybrid_skin(body, p)[0] - hybrid_skin(body, pose)[0], axis=1).mean()
     assert error(once.pose) > 0.002 and error(back) < 2e-4, (error(once.pose), error(back))
     assert back_score < 0.5 * score
-    assert ff._hands_untwisted(tracker, capture, pose, 1.0, (), FrameSettings(), None) == (pose, 1.0)
+    assert ff._ends_put_back(tracker, capture, pose, 1.0, (), FrameSettings(), None) == (pose, 1.0)
+
+
+def test_a_foot_bent_far_from_its_lower_leg_is_put_back(body):
+    """``first_frame._ends_put_back``: a foot bent 110 deg up from its rest on the lower leg, fitted through
+    the finer search stages, is off; tried at rest and fitted again it is back, with a lower coverage
+    score."""
+    from articula.solver.track import first_frame as ff
+    from articula.solver.track.frame_fit import Capture
+    from articula.solver.tracking.body import Body
+    from articula.solver.tracking.frame import SEARCH, FrameSettings
+    names = body.skeleton.names
+    pose = _motion(body, 3).take(1)
+    bent = Poses(pose.rotations.copy(), pose.translations, pose.scales)
+    bent.rotations[0, names.index("foot.L")] = rotvec_to_quat(np.array([np.radians(110.0), 0.0, 0.0]))
+    capture = Capture.from_mesh(hybrid_skin(body, pose)[0], body.faces)
+    tracker = Body(body)
+    once = ff._fit(tracker, capture, bent, (), SEARCH[1:], FrameSettings(), None)
+    score = ff.coverage_score(tracker, capture, once.state)
+    back, back_score = ff._ends_put_back(tracker, capture, once.pose, score, (), FrameSettings(), None)
+    error = lambda p: np.linalg.norm(hybrid_skin(body, p)[0] - hybrid_skin(body, pose)[0], axis=1).mean()
+    assert error(once.pose) > 0.002 and error(back) < 2e-4, (error(once.pose), error(back))
+    assert back_score < 0.5 * score
 
 
 def test_an_end_chain_is_judged_by_the_capture_around_it(body):
