@@ -35,7 +35,8 @@ from ..tracking.hinge_starts import flipped_hinge_start
 from ..tracking.joint_limits import signed_twist
 from ..tracking.lm import State
 from ..tracking.frame import SEARCH, SEARCH_HOLD, FrameSettings, end_chains, fit_frame
-from ..geometry.rotations import matrix_to_quat, quat_mul, quat_to_matrix, rotvec_to_matrix, rotvec_to_quat
+from ..geometry.rotations import (matrix_to_quat, quat_mul, quat_to_matrix, quat_to_rotvec, rotvec_to_matrix,
+                                  rotvec_to_quat)
 from ..roles import role_bones
 from ..tracking.start_poses import REQUIRED, subtree_masks
 from ..tracking.start_search import start_hypotheses
@@ -251,8 +252,8 @@ def _ends_put_back(body, capture, pose, score, priors, settings, cancel):
     sk, roles = body.model.skeleton, role_bones(body.model.skeleton.names)
     judged = capture_score(body, capture, State(body, pose))
     for s in "LR":
-        for start in (_untwisted_hand(sk, roles, pose, s), _hand_at_rest(roles, pose, s),
-                      _foot_at_rest(roles, pose, s)):
+        for start in (_untwisted_hand(sk, roles, pose, s), _at_rest(roles, pose, f"hand.{s}", HAND_TWIST),
+                      _at_rest(roles, pose, f"foot.{s}", FOOT_TURN)):
             if start is None:
                 continue
             fit = _fit(body, capture, start, priors, SEARCH[1:], settings, cancel)
@@ -260,17 +261,6 @@ def _ends_put_back(body, capture, pose, score, priors, settings, cancel):
             if again < judged:
                 pose, judged, score = fit.pose, again, coverage_score(body, capture, fit.state)
     return pose, score
-
-
-def _hand_at_rest(roles, pose, side):
-    """``pose`` with the ``side`` hand at rest on its forearm when it is turned further than
-    :data:`HAND_TWIST` from there, else None."""
-    hand = roles.get(f"hand.{side}")
-    if hand is None or 2.0 * np.arccos(min(abs(float(pose.rotations[0, hand, 0])), 1.0)) <= HAND_TWIST:
-        return None
-    rot = pose.rotations.copy()
-    rot[:, hand] = (1.0, 0.0, 0.0, 0.0)
-    return Poses(rot, pose.translations, pose.scales)
 
 
 def _untwisted_hand(sk, roles, pose, side):
@@ -289,14 +279,14 @@ def _untwisted_hand(sk, roles, pose, side):
     return Poses(rot, pose.translations, pose.scales)
 
 
-def _foot_at_rest(roles, pose, side):
-    """``pose`` with the ``side`` foot at rest on its lower leg when it is turned further than
-    :data:`FOOT_TURN` from there, else None."""
-    foot = roles.get(f"foot.{side}")
-    if foot is None or 2.0 * np.arccos(min(abs(float(pose.rotations[0, foot, 0])), 1.0)) <= FOOT_TURN:
+def _at_rest(roles, pose, role, limit):
+    """``pose`` with the ``role``'s bone at rest on its parent when it is turned further than ``limit``
+    (rad) from there, else None."""
+    bone = roles.get(role)
+    if bone is None or np.linalg.norm(quat_to_rotvec(pose.rotations[0, bone])) <= limit:
         return None
     rot = pose.rotations.copy()
-    rot[:, foot] = (1.0, 0.0, 0.0, 0.0)
+    rot[:, bone] = (1.0, 0.0, 0.0, 0.0)
     return Poses(rot, pose.translations, pose.scales)
 
 
