@@ -24,7 +24,9 @@ Scenarios (``--only`` picks some; default frames in brackets, ``--frames`` overr
   (``solver.track_depth.template``: MakeHuman default macros, cmu_mb without fingers) tracking cmu_mb
   male,heavy (seed 5); walks on 1 mm captures.  Mean distance from the subject's true posed surface to
   the adapted, posed model: target <= 4 mm and off/on >= 2; then the subject's own exact model (game_engine
-  female,heavy) with and without adaptation: target on/off 0.95-1.05 (adaptation changes nothing).
+  female,heavy) with and without adaptation: target on/off 0.95-1.05 (adaptation changes nothing); for
+  each, what the default ``adapt="auto"`` decides from the run without adaptation (another body's model
+  adapted, the subject's own kept).
 * ``speed`` [40]: exact model, game_engine female (seed 31) walk on 1 mm captures (thinned to 20,000
   points): seconds per frame tracking (target 1 s) and wall including start-up (target 2 s).
 
@@ -100,12 +102,30 @@ def _adapted_pair(label, model, training, rec, options, own=False):
         run = cases.track(model, rec, dataclasses.replace(options, adapt=adapt), training)
         runs[adapt] = cases.report_run(f"adapt: {label}, adapt {adapt}", run, rec, 3.0 if own else 4.0,
                                        surface=True)["all"]
+    _auto_decision(label, model, rec, run.result, options, own)
     if own:
         _common.report(f"adapt: {label}, with / without adaptation", runs["on"] / runs["off"], "",
                        f"target 0.95-1.05: changes nothing; {runs['on']:.2f} mm / {runs['off']:.2f} mm")
         return
     _common.report(f"adapt: {label}, without / with adaptation", runs["off"] / runs["on"], "",
                    f"target >= 2; {runs['off']:.2f} mm / {runs['on']:.2f} mm")
+
+
+def _auto_decision(label, model, rec, result, options, own):
+    """What adapt "auto" decides for ``model`` on ``rec`` from the poses of the run without adaptation."""
+    from articula.solver.track.adaptation import SHAPE_OFF, model_offset
+    from articula.solver.track.recording import Recording
+    from articula.solver.tracking.body import Body
+    recording = Recording(rec.source, options)
+    for i in range(len(recording)):
+        recording.capture(i)
+    poses = {i: result.poses.take([i]) for i in range(len(recording))}
+    offset = model_offset(Body(model), recording, poses, options.adapt_every)
+    adapts = offset > SHAPE_OFF
+    _common.report(f"adapt: {label}, model off the captures (auto's measure)", offset * 1e3, "mm",
+                   f"auto adapts above {SHAPE_OFF * 1e3:g} mm on >= 10 frames: "
+                   f"{'adapts' if adapts else 'keeps the model'}; target: "
+                   f"{'keeps the model' if own else 'adapts'}: {'met' if adapts != own else 'MISSED'}")
 
 
 def adapt(frames, options, start):

@@ -34,7 +34,8 @@ _DEPTH_DEFAULT = DepthTrackOptions()
 TRACKER_ITEMS = tuple((t.upper(), t.upper(), {"icp": "Iterative closest points with silhouette edges (ch. 5)",
                                                "gmm": "Gaussian mixture of the body's surface (ch. 6)"}.get(t, t))
                       for t in TRACKERS)
-ADAPT_ITEMS = (('AUTO', "Auto", "Adapt the rest mesh and joints when the tracked range is long enough"),
+ADAPT_ITEMS = (('AUTO', "Auto", "Adapt the rest mesh and joints when the model is not the person's (its surface "
+                                 "lies off the captures beyond their noise) and the range is long enough"),
                ('ON', "On", "Always adapt the model to the recording"),
                ('OFF', "Off", "Keep the model as it is"))
 PRIOR_ITEMS = (('AUTO', "Auto", "The model's own training poses when it has some, else the generic human prior"),

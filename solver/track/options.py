@@ -8,14 +8,15 @@ from ..errors import ArticulaInputError
 
 ADAPT_CHOICES = ("auto", "on", "off")
 PRIOR_CHOICES = ("auto", "model", "generic", "none")
-ADAPT_MIN_FRAMES = 10        # "auto" adapts the model when the tracked range has at least this many frames
+ADAPT_MIN_FRAMES = 10        # "auto" adapts a model off the captures when the range has at least this many frames
 MODEL_PRIOR_MIN_POSES = 3    # "auto" learns the prior from the model's own poses when it has this many
 
 
 @dataclasses.dataclass(frozen=True)
 class TrackOptions:
-    """adapt: refine the rest mesh and joints from the recording ("auto": when the range has at least
-    ``ADAPT_MIN_FRAMES`` frames); adapt_every: the model is refined on every this many-th tracked frame
+    """adapt: refine the rest mesh and joints from the recording ("auto": when the model's surface lies off
+    the captures beyond their noise, :func:`.adaptation.shape_offset`, and the range has at least
+    ``ADAPT_MIN_FRAMES`` frames: another body's model, not the subject's own); adapt_every: the model is refined on every this many-th tracked frame
     (dissertation §4.2: every 25th); temporal: the sliding-window pass (``window`` frames, ``step``,
     temporal weight ``w_temp`` per frame and rad^2, relative to the data's normal matrix); prior: which
     pose prior ("auto": the model's own poses when it has ``MODEL_PRIOR_MIN_POSES``, else the generic
@@ -31,7 +32,7 @@ class TrackOptions:
     reported as a poor fit; checks: the truth-free checks of every frame (:mod:`solver.tracking.checks`);
     workers: threads for the fits that do not depend on each other (the first frame's start hypotheses, a
     window's frames, the report's frames; 0: one per CPU core); the result does not depend on it."""
-    adapt: str = "off"
+    adapt: str = "auto"
     adapt_every: int = 25
     temporal: bool = True
     window: int = 9

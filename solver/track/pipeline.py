@@ -36,14 +36,14 @@ from ..tracking.lm import State
 from ..tracking.pose_prior import PosePrior, generic_prior, widened
 from ..tracking.priors import PairPrior
 from ..tracking.window import fit_windows
-from .adaptation import adapt_on_keys
+from .adaptation import SHAPE_OFF, adapt_on_keys, model_offset
 from .first_frame import as_start, check_units, find_pose
 from .follow import follow, median_mm
 from .gaps import interpolate_gaps, stacked
 from .options import ADAPT_MIN_FRAMES, MODEL_PRIOR_MIN_POSES, TrackOptions
 from .recording import Recording
 from .trail import Resume, Trail
-from .report import assess, notes
+from .report import adapt_note, assess, notes
 
 BOX_PAD = 0.1           # rad added to each side of the prior's box limits
 PRIOR_WEIGHT = 1e-5     # weight of the pairwise pose prior in searched frames (m^2 per unit of Eq. 4.8)
@@ -107,7 +107,7 @@ def track_sequence(model, source, options: TrackOptions = TrackOptions(), traini
         tracked(first, rec.entries[first]["median_mm"])
         poses = clock.run("pass 1", follow, body, rec, first, pose, options, settings, priors, tracked,
                           None, checked, resumed, trail)
-        adapted = adapting(options, rec)
+        adapted, offset = adapting(options, rec, body, poses)
         if adapted:
             body, poses = clock.run("adaptation", adapt_on_keys, body, rec, poses, prior, training_poses, options,
                                     settings, say)
@@ -117,9 +117,9 @@ def track_sequence(model, source, options: TrackOptions = TrackOptions(), traini
         doubtful = clock.run("report", assess, body, rec, full, checked)
     lost = [rec.range[i] for i in range(len(rec)) if rec.entries[i]["lost"]]
     skipped = [rec.range[i] for i in range(len(rec)) if rec.entries[i]["skipped"]]
+    said = notes(rec, prior_name, options, doubtful) + adapt_note(options, rec, offset, adapted) + resumed_note(resumed)
     return TrackResult(full, body.model, adapted, rec.entries, lost, skipped, clock.rounded(), prior_name,
-                       rec.range.start, notes(rec, prior_name, options, doubtful) + resumed_note(resumed), doubtful,
-                       trail.arrays())
+                       rec.range.start, said, doubtful, trail.arrays())
 
 
 def choose_prior(model, training_poses, which: str):
@@ -182,8 +182,14 @@ def first_frame(body, rec, start_pose, priors, options, settings, checked=None, 
                              f"(all empty or all NaN)")
 
 
-def adapting(options, rec) -> bool:
-    return options.adapt == "on" or (options.adapt == "auto" and len(rec) >= ADAPT_MIN_FRAMES)
+def adapting(options, rec, body, poses) -> tuple:
+    """``(adapt, offset)``: "on" adapts; "auto" when the model lies more than ``SHAPE_OFF`` off the captures
+    at pass 1's poses (``offset``, m: :func:`.adaptation.model_offset`; None unless "auto") and the range has
+    at least ``ADAPT_MIN_FRAMES`` frames: another body's model gains 2-3x, the subject's own nothing."""
+    if options.adapt != "auto":
+        return options.adapt == "on", None
+    offset = model_offset(body, rec, poses, options.adapt_every)
+    return offset > SHAPE_OFF and len(rec) >= ADAPT_MIN_FRAMES, offset
 
 
 def smooth(body, rec, poses, options, settings, say):

@@ -11,6 +11,8 @@ from __future__ import annotations
 from ..parallel import map_pieces, workers
 from ..tracking.checks import check_frame
 from . import metrics
+from .adaptation import SHAPE_OFF
+from .options import ADAPT_MIN_FRAMES
 
 
 def assess(body, rec, poses, checked=None) -> list:
@@ -41,6 +43,18 @@ def _assessed(body, checked, pose, capture):
     posed = body.pose(pose)
     stats = metrics.robust_stats(metrics.point_to_mesh(capture.points, posed, body.model.faces) * 1e3)
     return stats, None if checked is None else check_frame(body.model, pose, posed, capture, checked)
+
+
+def adapt_note(options, rec, offset, adapted) -> list:
+    """What "auto" adaptation decided when the model lies off the captures (``offset``, m; None: not
+    "auto"): adapted, or too few frames to adapt on."""
+    if offset is None or offset <= SHAPE_OFF:
+        return []
+    off = f"adaptation: the model lies {offset * 1e3:.1f} mm off the captures (more than {SHAPE_OFF * 1e3:g} mm)"
+    if adapted:
+        return [f"{off}; its rest shape and joints were adapted to them"]
+    return [f"{off}, but {len(rec)} frame(s) are too few to adapt on (at least {ADAPT_MIN_FRAMES}); adapt "
+            f"\"on\" adapts anyway"]
 
 
 def notes(rec, prior_name, options, doubtful) -> list:
