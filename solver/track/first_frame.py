@@ -223,13 +223,6 @@ def _twisted(body, capture, pose, score, priors, settings, cancel):
     for bone, fit, again in map_pieces(fitted, enumerate(starts)):
         if again < best.get(bone, (None, score))[1]:
             best[bone] = (fit, again)
-    return _combined(body, capture, pose, score, best, priors, settings, cancel, coverage_score)
-
-
-def _combined(body, capture, pose, score, best, priors, settings, cancel, judge):
-    """``(pose, score)``: ``pose`` when ``best`` (bone -> ``(fitted pose, its score)``, each better than
-    ``score`` by ``judge(body, capture, state)``) is empty, its one fit, or the better of its best fit and the
-    fit (finer search stages) of the pose with every bone's subtree turned as in that bone's fit."""
     if not best:
         return pose, score
     winner = min(best.values(), key=lambda c: c[1])
@@ -241,16 +234,15 @@ def _combined(body, capture, pose, score, best, priors, settings, cancel, judge)
         both[:, below[bone]] = fit.rotations[:, below[bone]]
     fit = _fit(body, capture, Poses(both, winner[0].translations, winner[0].scales), priors, SEARCH[1:], settings,
                cancel)
-    return min(winner, (fit.pose, judge(body, capture, fit.state)), key=lambda c: c[1])
+    return min(winner, (fit.pose, coverage_score(body, capture, fit.state)), key=lambda c: c[1])
 
 
 def _ends_put_back(body, capture, pose, score, priors, settings, cancel):
-    """``(pose, score)``: ``pose``, with each hand that is turned further than :data:`HAND_TWIST` about its
-    forearm's rest direction tried untwisted (that twist taken out of its local rotation) and at rest, and
-    each foot turned further than :data:`FOOT_TURN` from its rest on the lower leg tried at rest, all
-    fitted side by side through the finer search stages; where they explain the capture better by the
-    capture-to-model score, the best of each part and, for several parts, their combination
-    (:func:`_combined`) is kept (:func:`capture_score`; the coverage score's model-to-capture half counts true
+    """``(pose, score)``: ``pose``, with each hand in turn that is turned further than :data:`HAND_TWIST`
+    about its forearm's rest direction tried untwisted (that twist taken out of its local rotation) and at
+    rest, and each foot turned further than :data:`FOOT_TURN` from its rest on the lower leg tried at rest,
+    each fitted through the finer search stages and kept when it explains the capture better by the
+    capture-to-model score (:func:`capture_score`; the coverage score's model-to-capture half counts true
     fingers hidden between a hand and a thigh against the truth: an own-model walk's hand 37 deg round with
     its fingers on the thigh scored 1.23e-5 against 1.43e-5 for the hand at rest, 6.0 against 0.6 mm off;
     the capture score 3.54e-7 against 2.97e-7).  A wrist does not turn about the forearm, but a fit can: a
@@ -258,25 +250,17 @@ def _ends_put_back(body, capture, pose, score, priors, settings, cancel):
     off); untwisted, 0.5 mm.  An ankle does not bend 125 deg, as a thin body's model fitted to a heavy
     subject's capture had its left foot.  ``score``: the coverage score of the pose returned."""
     sk, roles = body.model.skeleton, role_bones(body.model.skeleton.names)
-    starts = [(roles[f"{part}.{s}"], start) for s in "LR" for part, start in (
-        ("hand", _untwisted_hand(sk, roles, pose, s)), ("hand", _at_rest(roles, pose, f"hand.{s}", HAND_TWIST)),
-        ("foot", _at_rest(roles, pose, f"foot.{s}", FOOT_TURN))) if start is not None]
-    if not starts:
-        return pose, score
-
-    def fitted(item):
-        k, (bone, start) = item
-        fit = _fit(body, capture, start, priors, SEARCH[1:], settings, cancel, slot=("end", k))
-        return bone, fit.pose, capture_score(body, capture, fit.state)
-
-    judged, best = capture_score(body, capture, State(body, pose)), {}
-    for bone, fit, again in map_pieces(fitted, enumerate(starts)):
-        if again < best.get(bone, (None, judged))[1]:
-            best[bone] = (fit, again)
-    if not best:
-        return pose, score
-    pose, _ = _combined(body, capture, pose, judged, best, priors, settings, cancel, capture_score)
-    return pose, coverage_score(body, capture, State(body, pose))
+    judged = capture_score(body, capture, State(body, pose))
+    for s in "LR":
+        for start in (_untwisted_hand(sk, roles, pose, s), _at_rest(roles, pose, f"hand.{s}", HAND_TWIST),
+                      _at_rest(roles, pose, f"foot.{s}", FOOT_TURN)):
+            if start is None:
+                continue
+            fit = _fit(body, capture, start, priors, SEARCH[1:], settings, cancel)
+            again = capture_score(body, capture, fit.state)
+            if again < judged:
+                pose, judged, score = fit.pose, again, coverage_score(body, capture, fit.state)
+    return pose, score
 
 
 def _untwisted_hand(sk, roles, pose, side):
