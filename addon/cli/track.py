@@ -27,7 +27,7 @@ from ...solver.formats.bundle import save_bundle
 from ...solver.learn.options import name_setting
 from ...solver.track import merge
 from ...solver.track.captures import POINT_EXTENSIONS
-from ...solver.track.options import ADAPT_CHOICES, PRIOR_CHOICES, TrackOptions
+from ...solver.track.options import ADAPT_CHOICES, ADAPT_MIN_FRAMES, PRIOR_CHOICES, TrackOptions
 from .. import jobs
 from ..track import inputs, result, solve
 from ..track.report import report_document, summary_text
@@ -157,7 +157,8 @@ def add_commands(sub):
                         "searching for it")
     p.add_argument("--no-adapt", action="store_true", help="do not adapt the model (same as --adapt off)")
     p.add_argument("--adapt", choices=ADAPT_CHOICES, default=default.adapt,
-                   help=f"adapt the rest mesh and joints to the recording (default {default.adapt})")
+                   help=f"adapt the rest mesh and joints to the recording (default {default.adapt}: when the model "
+                        f"is not the person's and the range has at least {ADAPT_MIN_FRAMES} frames)")
     p.add_argument("--prior", choices=PRIOR_CHOICES, default=default.prior,
                    help=f"pose prior (default {default.prior}: the model's poses, else the generic human prior)")
     p.add_argument("--no-temporal", action="store_true", help="no sliding-window pass with the temporal prior")
