@@ -114,6 +114,7 @@ def _adapted_pair(label, model, training, rec, options, own=False):
 def _auto_decision(label, model, rec, result, options, own):
     """What adapt "auto" decides for ``model`` on ``rec`` from the poses of the run without adaptation."""
     from articula.solver.track.adaptation import SHAPE_OFF, model_offset
+    from articula.solver.track.options import ADAPT_MIN_FRAMES
     from articula.solver.track.recording import Recording
     from articula.solver.tracking.body import Body
     recording = Recording(rec.source, options)
@@ -123,7 +124,7 @@ def _auto_decision(label, model, rec, result, options, own):
     offset = model_offset(Body(model), recording, poses, options.adapt_every)
     adapts = offset > SHAPE_OFF
     _common.report(f"adapt: {label}, model off the captures (auto's measure)", offset * 1e3, "mm",
-                   f"auto adapts above {SHAPE_OFF * 1e3:g} mm on >= 10 frames: "
+                   f"auto adapts above {SHAPE_OFF * 1e3:g} mm on >= {ADAPT_MIN_FRAMES} frames: "
                    f"{'adapts' if adapts else 'keeps the model'}; target: "
                    f"{'keeps the model' if own else 'adapts'}: {'met' if adapts != own else 'MISSED'}")
 

@@ -117,7 +117,7 @@ def track_sequence(model, source, options: TrackOptions = TrackOptions(), traini
         doubtful = clock.run("report", assess, body, rec, full, checked)
     lost = [rec.range[i] for i in range(len(rec)) if rec.entries[i]["lost"]]
     skipped = [rec.range[i] for i in range(len(rec)) if rec.entries[i]["skipped"]]
-    said = notes(rec, prior_name, options, doubtful) + adapt_note(options, rec, offset, adapted) + resumed_note(resumed)
+    said = notes(rec, prior_name, options, doubtful) + adapt_note(rec, offset, adapted) + resumed_note(resumed)
     return TrackResult(full, body.model, adapted, rec.entries, lost, skipped, clock.rounded(), prior_name,
                        rec.range.start, said, doubtful, trail.arrays())
 

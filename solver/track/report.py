@@ -45,7 +45,7 @@ def _assessed(body, checked, pose, capture):
     return stats, None if checked is None else check_frame(body.model, pose, posed, capture, checked)
 
 
-def adapt_note(options, rec, offset, adapted) -> list:
+def adapt_note(rec, offset, adapted) -> list:
     """What "auto" adaptation decided when the model lies off the captures (``offset``, m; None: not
     "auto"): adapted, or too few frames to adapt on."""
     if offset is None or offset <= SHAPE_OFF:

@@ -79,10 +79,10 @@ def test_auto_adapts_another_body_on_enough_frames_and_never_the_models_own(body
     assert auto.adapt == "auto"
     own, other = _recording(body, poses), _recording(body, poses, out=GROWN)
     adapt, offset = pipeline.adapting(auto, own, Body(body), fitted)
-    assert not adapt and offset < 1e-5 and adapt_note(auto, own, offset, adapt) == []
+    assert not adapt and offset < 1e-5 and adapt_note(own, offset, adapt) == []
     adapt, offset = pipeline.adapting(auto, other, Body(body), fitted)
     assert adapt and abs(offset - GROWN) < 0.2 * GROWN
-    assert "adapted" in adapt_note(auto, other, offset, adapt)[0]
+    assert "adapted" in adapt_note(other, offset, adapt)[0]
     assert pipeline.adapting(dataclasses.replace(auto, adapt="off"), other, Body(body), fitted) == (False, None)
     assert pipeline.adapting(dataclasses.replace(auto, adapt="on"), own, Body(body), fitted) == (True, None)
 
@@ -92,5 +92,5 @@ def test_auto_names_a_model_off_the_captures_it_has_too_few_frames_to_adapt(body
     rec = _recording(body, poses, out=GROWN)
     adapt, offset = pipeline.adapting(TrackOptions(), rec, Body(body), {i: poses.take([i]) for i in range(3)})
     assert not adapt and offset > SHAPE_OFF
-    note = adapt_note(TrackOptions(), rec, offset, adapt)
+    note = adapt_note(rec, offset, adapt)
     assert len(note) == 1 and "too few" in note[0] and f"{offset * 1e3:.1f} mm" in note[0], note
