@@ -32,6 +32,8 @@ from .terms import ScanToModel
 FINAL_EPS = 0.002       # Charbonnier scale of the windows' data term (m), as the frame fit's last stage
 FINAL_REACH = 0.04
 WINDOW_HOLD = 0.1       # frames held to their starts along weak directions at this share of the frame ratio
+WINDOW_ITERATIONS = 3   # linearisations per window: a fourth changed the walk and reach benches' errors by
+                        # under 2 % (docs/track.md "7 Dec, afternoon")
 WINDOW_STOP = Stopping(step_rad=5e-4, step_m=1e-4, rel_energy=1e-3)   # every frame's step below these, or a
                                                    # step lowering the energy by less than this share, ends it
 
@@ -91,7 +93,7 @@ def fit_windows(body, rec, poses: dict, frames, options, settings, say=None) -> 
     return out
 
 
-def fit_window(body, captures, starts, w_temp: float, settings, iterations: int = 4, slots=None,
+def fit_window(body, captures, starts, w_temp: float, settings, iterations: int = WINDOW_ITERATIONS, slots=None,
                noise=None) -> list:
     """One window: the frames' poses (list of one-frame Poses) fitted together from ``starts``;
     ``slots``: the frames' keys for held Jacobians (:meth:`.body.Body.jacobian_near`).  Each frame is
