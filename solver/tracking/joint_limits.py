@@ -13,8 +13,9 @@ import numpy as np
 
 from ..geometry.rotations import matrix_to_quat
 
-HINGE_BENT_DEG = 25.0   # a rest bend above this gives the hinge axis (the bones' plane; joints 1-2 cm off
-                        # turn it by < 5 deg), else the foot's forward
+HINGE_AXIS_DEG = 10.0   # a rest bend above this gives the hinge axis (the bones' plane), else the feet's forward
+HINGE_BENT_DEG = 25.0   # ... and above this the axis is sure enough for a sideways bend (joints 1-2 cm off
+                        # turn it by < 5 deg; at 10 deg by up to ~20 deg, which keeps a flexion's sign)
 
 
 @dataclasses.dataclass
@@ -81,10 +82,12 @@ def foot_forwards(model, roles, vertex_region, regions):
 
 def hinges_of(sk, roles, toes):
     """Knees and elbows with their rest flexion axes, and notes on those that cannot be checked.  The axis
-    of a joint bent at rest is normal to its two segments; a straight knee flexes away from its foot's
-    toes (``toes``: :func:`foot_forwards`), a straight elbow towards where the feet point; those axes can be off
-    by the ankle's rest rotation (a learned rig rests in a scanned pose), which keeps the sign of a flexion
-    but not a sideways bend."""
+    of a joint bent at rest (``HINGE_AXIS_DEG``) is normal to its two segments (a rest pose does not bend a
+    knee or elbow backwards that far); a straight knee flexes away from its foot's toes (``toes``:
+    :func:`foot_forwards`), a straight elbow towards where the feet point.  Those guesses hold for a limb
+    hanging or held out sideways, not for one raised in a learned rig's scanned rest pose: the demo's
+    learned rig rests with its right arm raised and its elbow bent 18 deg, and the feet's forward made a
+    right fit (joints 6-8 mm from the truth, bent 21 deg as the truth's 20) read 17 deg backwards."""
     out, notes = [], []
     chains = (("knee", "thigh", "shin", "foot", -1.0), ("elbow", "upper_arm", "forearm", "hand", 1.0))
     for kind, top, mid, end, sign in chains:
@@ -98,14 +101,17 @@ def hinges_of(sk, roles, toes):
             t, u = pts[1][1] - pts[0][1], pts[2][1] - pts[1][1]
             t, u = t / np.linalg.norm(t), u / np.linalg.norm(u)
             axis = np.cross(t, u)
-            bent = np.degrees(np.arccos(np.clip(t @ u, -1.0, 1.0))) >= HINGE_BENT_DEG
-            if not bent:
+            bend = np.degrees(np.arccos(np.clip(t @ u, -1.0, 1.0)))
+            bent = bend >= HINGE_BENT_DEG
+            if bend < HINGE_AXIS_DEG:
                 forward = toes.get(s) if kind == "knee" else sum(toes.values(), np.zeros(3))
                 axis = np.cross(t, sign * forward) if forward is not None else np.zeros(3)
                 if np.linalg.norm(axis) < 0.3:
                     notes.append(f"{name}: straight at rest and no foot to tell forward")
                     continue
-                notes.append(f"{name}: straight at rest, its sideways bend is not checked")
+            if not bent:
+                state = "straight" if bend < HINGE_AXIS_DEG else f"bent {bend:.0f} deg"
+                notes.append(f"{name}: {state} at rest, its sideways bend is not checked")
             out.append(Hinge(name, kind, pts, int(sk.parents[pts[1][0]]), axis / np.linalg.norm(axis), bent))
     return out, notes
 
