@@ -25,9 +25,6 @@ from .frame_fit import Capture
 
 POINT_EXTENSIONS = (".npy", ".xyz", ".txt")
 CLOUD_NEIGHBOURS = 12       # neighbours of a point-cloud normal estimate
-THIN_FILL = 0.985           # thinning aims its cell count at this share of max_points ...
-THIN_ENOUGH = 0.97          # ... and stops at any count from this share up to max_points
-THIN_STEPS = 12             # counts the cell-size search may take
 
 
 @dataclasses.dataclass
@@ -62,13 +59,20 @@ def thin_mesh(points, triangles, max_points: int):
     """Vertex clustering of a triangle mesh to at most about ``max_points`` vertices: the vertices in one
     cubic cell (:func:`..depth.frames.voxel_groups`, cells anchored at the mesh's lowest corner) become
     the one of them nearest their mean, triangles are remapped, collapsed and repeated ones removed.  The
-    cell size comes from :func:`_cell_size`.  A captured vertex, not the cell's mean: on a curved part the
-    mean lies inside the surface (a 1 cm cell on a finger: up to ~1 mm), which biased the fit of noise-free
-    captures (docs/track.md "7 Dec, day")."""
+    cell size is found by bisection on the occupied-cell count (metres; 12 halvings).  A captured vertex,
+    not the cell's mean: on a curved part the mean lies inside the surface (a 1 cm cell on a finger:
+    up to ~1 mm), which biased the fit of noise-free captures (docs/track.md "7 Dec, day")."""
     if len(points) <= max_points:
         return points, triangles
     shifted = points - points.min(axis=0)
-    group, m = voxel_groups(shifted, _cell_size(shifted, triangles, max_points))
+    lo, hi = 0.0, float(np.ptp(points, axis=0).max()) or 1.0
+    for _ in range(12):
+        size = 0.5 * (lo + hi)
+        if voxel_groups(shifted, size)[1] > max_points:
+            lo = size
+        else:
+            hi = size
+    group, m = voxel_groups(shifted, hi)
     counts = np.bincount(group, None, m)
     mean = np.stack([np.bincount(group, points[:, k], m) for k in range(3)], axis=1) / counts[:, None]
     off = np.linalg.norm(points - mean[group], axis=1)
@@ -77,60 +81,6 @@ def thin_mesh(points, triangles, max_points: int):
     first[1:] = group[order][1:] != group[order][:-1]
     tris = group[triangles]
     return points[order[first]], tris[np.sort(_keep_first(tris))]
-
-
-def _cell_size(points, triangles, max_points: int) -> float:
-    """A cubic cell edge (m) at which ``points (N, 3)`` (non-negative coordinates) occupy at most
-    ``max_points`` cells and, when the search gets there, at least 97 % of it.  A surface of area A
-    occupies about c A / s^2 cells of edge s, so the search starts at sqrt(A / max_points) and steps along
-    the power law fitted to its last two counts (secant in log-log), kept inside the bracket found so far;
-    3-4 counts where a bisection over the extent needs 13 (docs/track.md "Pipeline")."""
-    target = THIN_FILL * max_points
-    area = _mesh_area(points, triangles)
-    size = float(np.sqrt(area / target)) if area > 0 else float(np.ptp(points, axis=0).max() or 1.0) / target ** 0.5
-    tried = []                                           # (size, count), in order
-    for _ in range(THIN_STEPS):
-        count = voxel_groups(points, size)[1]
-        tried.append((size, count))
-        if THIN_ENOUGH * max_points <= count <= max_points:
-            return size
-        size = _next_size(tried, target, max_points)
-    fits = [s for s, c in tried if c <= max_points]
-    return min(fits) if fits else _grow_until_fits(points, max(s for s, _ in tried), max_points)
-
-
-def _next_size(tried, target: float, max_points: int) -> float:
-    """The next cell edge of :func:`_cell_size`'s search: the power law through the last two counts
-    (exponent clamped to [1, 3]; 2 with one count) solved for ``target``, kept strictly inside the
-    bracket (largest edge over ``max_points``, smallest edge within it) or its geometric middle."""
-    (s1, c1) = tried[-1]
-    slope = 2.0
-    if len(tried) > 1:
-        s0, c0 = tried[-2]
-        if s0 != s1 and c0 > 0 and c1 > 0 and c0 != c1:
-            slope = float(np.clip(np.log(c0 / c1) / np.log(s1 / s0), 1.0, 3.0))
-    guess = s1 * (max(c1, 1) / target) ** (1.0 / slope)
-    over = [s for s, c in tried if c > max_points]
-    under = [s for s, c in tried if c <= max_points]
-    lo, hi = (max(over) if over else 0.0), (min(under) if under else np.inf)
-    if lo < guess < hi:
-        return float(guess)
-    return float(np.sqrt(lo * hi)) if over and under else float(guess)
-
-
-def _grow_until_fits(points, size: float, max_points: int) -> float:
-    """Double ``size`` until the points occupy at most ``max_points`` cells."""
-    while voxel_groups(points, size)[1] > max_points:
-        size *= 2.0
-    return size
-
-
-def _mesh_area(points, triangles) -> float:
-    """Total area (m^2) of the triangles ``(F, 3)`` on ``points (N, 3)``."""
-    if len(triangles) == 0:
-        return 0.0
-    a, b, c = (points[triangles[:, k]] for k in range(3))
-    return 0.5 * float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum())
 
 
 def _nondegenerate(tris):

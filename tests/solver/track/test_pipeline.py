@@ -5,6 +5,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from articula.sample_scenes import synthetic
 from articula.solver.errors import ArticulaInputError, Cancelled
@@ -47,6 +48,17 @@ def test_clean_drops_nan_rows_their_triangles_and_unused_vertices():
     assert len(p) == 3 and t.tolist() == [[0, 1, 2]]
     with pytest.raises(ArticulaInputError, match="uses vertex 7"):
         cp.clean(pts, np.array([[0, 1, 7]]))
+
+
+def test_thin_mesh_keeps_the_surface_and_valid_triangles(body):
+    v, f = body.rest_vertices, body.faces
+    thin, tris = cp.thin_mesh(v, f, len(v) // 4)
+    assert len(thin) <= len(v) // 4
+    assert tris.min() >= 0 and tris.max() < len(thin)
+    assert (np.sort(tris, axis=1)[:, :-1] != np.sort(tris, axis=1)[:, 1:]).all()
+    # every kept vertex is an original one; every original vertex lies near the thinned mesh
+    assert cKDTree(v).query(thin)[0].max() == 0.0
+    assert np.median(point_to_mesh(v, thin, tris)) < 0.01
 
 
 def test_capture_source_from_files_reads_meshes_and_refuses_missing_and_unknown(tmp_path, body):
