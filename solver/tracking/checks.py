@@ -78,9 +78,9 @@ class CheckOptions:
     part inside another and the 95th percentile of that depth.  knee_back / elbow_back: hyperextension
     (deg) allowed, then doubtful, and lost past the second value; side_bend: sideways bend of a hinge;
     head_turn: the head's rotation from the chest (deg); trunk_twist: the hips' rotation from the chest
-    about the spine's rest direction (deg); trunk_back: the chest bent backwards from the hips (deg; lost from
-    50: the clean reach's start search ranked fits facing away with the chest bent back 53-55 deg first,
-    and only a lost best fits the next candidates, docs/track.md "7 Dec, afternoon");
+    about the spine's rest direction (deg); trunk_back: the chest bent backwards from the hips (deg; lost
+    soon after doubtful: a body fitted facing away bends its chest back this far, and only a lost best fit
+    sends the start search on to its next candidates, docs/track.md "7 Dec, afternoon");
     facing_cos: vertices facing a camera at least this much."""
     explain_mm: float = 35.0
     region_doubtful: float = 0.005

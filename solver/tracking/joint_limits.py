@@ -85,9 +85,8 @@ def hinges_of(sk, roles, toes):
     of a joint bent at rest (``HINGE_AXIS_DEG``) is normal to its two segments (a rest pose does not bend a
     knee or elbow backwards that far); a straight knee flexes away from its foot's toes (``toes``:
     :func:`foot_forwards`), a straight elbow towards where the feet point.  Those guesses hold for a limb
-    hanging or held out sideways, not for one raised in a learned rig's scanned rest pose: the demo's
-    learned rig rests with its right arm raised and its elbow bent 18 deg, and the feet's forward made a
-    right fit (joints 6-8 mm from the truth, bent 21 deg as the truth's 20) read 17 deg backwards."""
+    hanging or held out sideways, not for one raised in a learned rig's scanned rest pose, where they made
+    a right fit read as bent backwards (docs/track.md "7 Dec, afternoon")."""
     out, notes = [], []
     chains = (("knee", "thigh", "shin", "foot", -1.0), ("elbow", "upper_arm", "forearm", "hand", 1.0))
     for kind, top, mid, end, sign in chains:

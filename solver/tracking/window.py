@@ -32,8 +32,8 @@ from .terms import ScanToModel
 FINAL_EPS = 0.002       # Charbonnier scale of the windows' data term (m), as the frame fit's last stage
 FINAL_REACH = 0.04
 WINDOW_HOLD = 0.1       # frames held to their starts along weak directions at this share of the frame ratio
-WINDOW_ITERATIONS = 4   # linearisations per window: with 3 the first window of a run started by the search
-                        # settled less (noisy walk 0.57 -> 0.68 mm; docs/track.md "7 Dec, afternoon")
+WINDOW_ITERATIONS = 4   # linearisations per window: the first window of a run started by the search needs
+                        # them all to settle (docs/track.md "7 Dec, afternoon")
 WINDOW_STOP = Stopping(step_rad=5e-4, step_m=1e-4, rel_energy=1e-3)   # every frame's step below these, or a
                                                    # step lowering the energy by less than this share, ends it
 
