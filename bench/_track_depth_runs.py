@@ -36,3 +36,28 @@ def track(folder, model, **options):
     t0 = time.perf_counter()
     res = track_recording(rec, model, DepthTrackOptions(**options))
     return res, time.perf_counter() - t0
+
+
+def world_variant(r, world):
+    """The recording ``r`` (:func:`recording`) seen in another world: ``world`` is a name of
+    ``_track_metrics.WORLDS`` (the generated Z-up world rotated) or "camera" (no ``cam_to_world``: the
+    camera's own frame, OpenCV axes).  The depth frames are linked, ``intrinsics.json`` rewritten; returns
+    ``(folder, joints (N, 14, 3) in that world)``.  The model stays as it is (its own rest axes)."""
+    import _track_metrics as tm
+    from articula.solver.depth import camera as cam
+    c2w = r["cam_to_world"]
+    if world == "camera":
+        G = np.linalg.inv(c2w)
+    else:
+        G = np.eye(4)
+        G[:3, :3] = tm.WORLDS[world]
+        G[:3, 3] = (0.4, -0.7, 0.25) if world != "zup" else 0.0     # the origin moved too
+    folder = r["out_dir"] + f"_world_{world}"
+    os.makedirs(folder, exist_ok=True)
+    for p in r["depth_paths"]:
+        link = os.path.join(folder, os.path.basename(p))
+        if not os.path.lexists(link):
+            os.symlink(p, link)
+    cam.save_intrinsics(os.path.join(folder, "intrinsics.json"), cam.load_intrinsics(r["intrinsics"]),
+                        cam_to_world=None if world == "camera" else G @ c2w)
+    return folder, r["joints"] @ G[:3, :3].T + G[:3, 3]

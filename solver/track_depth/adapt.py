@@ -15,6 +15,7 @@ from .body_shape import ShapeTerms, same_world_pose, solve_coefficients
 from .body_size import SCALE_RANGE, FramePairs, scaled_model, solve_scales
 from .initialise import cut_edges
 from .observation import floor_margin
+from .orientation import rest_height
 from .surface import SurfaceFit
 from .visibility import visible
 
@@ -56,7 +57,7 @@ class TemplateAdaptation:
     def start_model(self, obs, up):
         """The template scaled uniformly to the observed height (the floor removal takes about 2 cm off
         the feet), unless the person is cut by the image's top or bottom edge (then the template's size)."""
-        body = float(np.ptp(self.template.base.rest_vertices[:, 2]))     # template: metres, Z up
+        body = rest_height(self.template.base)
         s = 1.0 if any(cut_edges(obs)) else np.clip((observed_height(obs, up) + 0.02) / body, *SCALE_RANGE)
         self.state.scales = np.full(len(self.state.scales), s)
         return self.model()

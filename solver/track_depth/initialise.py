@@ -15,6 +15,7 @@ from ..geometry.rotations import matrix_to_quat, quat_mul, rotation_between
 from ..rig.model import Poses
 from ..tracking.body_poses import body_poses
 from .limb_search import place_limbs
+from .orientation import BLENDER_FRONT, BLENDER_UP, rest_axes, rest_height
 from . import icp
 
 YAW_RANGE = 45.0
@@ -22,8 +23,6 @@ YAW_STEP = 15.0
 BODY_POSES = 4           # rest + 3 generic body poses
 SCREEN_ITERATIONS = 5
 EDGE_PIXELS = 2          # a silhouette this close to the image's top or bottom is cut by it
-MODEL_UP = np.array([0.0, 0.0, 1.0])
-MODEL_FRONT = np.array([0.0, -1.0, 0.0])   # MakeHuman and Blender characters face -Y
 
 
 @dataclasses.dataclass
@@ -34,12 +33,12 @@ class Start:
     tried: int
 
 
-def facing_rotation(up: np.ndarray, towards: np.ndarray, yaw_deg: float) -> np.ndarray:
-    """(3, 3) world rotation taking the model's up to ``up`` and its front to ``towards`` (made
-    horizontal), then turned by ``yaw_deg`` about ``up``."""
+def facing_rotation(up: np.ndarray, towards: np.ndarray, yaw_deg: float, axes=(BLENDER_UP, BLENDER_FRONT)) -> np.ndarray:
+    """(3, 3) world rotation taking the model's up ``axes[0]`` to ``up`` and its front ``axes[1]`` to
+    ``towards`` (made horizontal), then turned by ``yaw_deg`` about ``up``."""
     up = up / np.linalg.norm(up)
-    R1 = rotation_between(MODEL_UP, up)
-    front = R1 @ MODEL_FRONT
+    R1 = rotation_between(np.asarray(axes[0], float), up)
+    front = R1 @ np.asarray(axes[1], float)
     t = towards - (towards @ up) * up
     t /= max(np.linalg.norm(t), 1e-12)
     angle = np.arctan2(np.cross(front, t) @ up, front @ t) + np.radians(yaw_deg)
@@ -113,15 +112,16 @@ def hypotheses(model, up, towards, centre, scale: float = 1.0):
     """Start poses: facings x body poses (see the module docstring)."""
     bodies = body_poses(model.skeleton, count=2 * BODY_POSES - 1).rotations[:BODY_POSES]
     yaws = np.arange(-YAW_RANGE, YAW_RANGE + 1e-9, YAW_STEP)
+    axes = rest_axes(model)
     for yaw in yaws:
-        world = facing_rotation(up, towards, yaw)
+        world = facing_rotation(up, towards, yaw, axes)
         for rot in bodies:
             yield placed(model, rot, world, centre, scale)
 
 
 def initialise(body, obs, camera, up, options, limits=None, scale: float = 1.0) -> Start:
     """The best start pose for the observation ``obs`` (see the module docstring)."""
-    height = scale * float(np.ptp(body.model.rest_vertices[:, 2]))
+    height = scale * rest_height(body.model)
     centre = body_centre(obs, camera, up, height)
     towards = camera.centre - centre
     best, tried = None, 0
@@ -132,6 +132,6 @@ def initialise(body, obs, camera, up, options, limits=None, scale: float = 1.0) 
         tried += 1
         if best is None or s < best[0]:
             best = (s, fit)
-    start = place_limbs(body, best[1].pose, obs, camera, options.near_m)
+    start = place_limbs(body, best[1].pose, obs, camera, options.near_m, up)
     fit = fitter(body, obs, camera, start, options, limits)
     return Start(fit, score(body, fit, obs, camera), tried)

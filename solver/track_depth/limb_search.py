@@ -14,6 +14,7 @@ from scipy.spatial import cKDTree
 
 from ..geometry.rotations import matrix_to_quat, quat_to_rotvec, rotation_between
 from ..tracking.limbs import bone_depths, sphere_directions, subtrees
+from .orientation import view_frame
 
 DIRECTIONS = 64
 PAIRED = 6               # a limb's best directions for which its child's direction is searched too
@@ -94,12 +95,13 @@ def _search_bone(body, pose, b, child, rows_of, obs, camera, near_m, sample, can
     return best + (current,)
 
 
-def place_limbs(body, pose, obs, camera, near_m: float):
-    """``pose`` (one frame) with bone directions chosen on the observation (module docstring)."""
+def place_limbs(body, pose, obs, camera, near_m: float, up):
+    """``pose`` (one frame) with bone directions chosen on the observation (module docstring); the
+    directions are spread in the frame of ``up`` and the camera (:func:`.orientation.view_frame`)."""
     sk = body.model.skeleton
     owner = subtrees(sk.parents)
     depth = bone_depths(sk.parents)
-    cand = sphere_directions(DIRECTIONS)
+    cand = sphere_directions(DIRECTIONS) @ view_frame(camera.R, up).T
     sample = obs.points[:: max(1, len(obs.points) // SCORE_POINTS)]
 
     def rows_of(b):

@@ -16,6 +16,7 @@ from ..depth import frames as dp
 from ..depth import recording as rec
 from ..errors import ArticulaInputError
 from .observation import ViewCamera, depth_image, observe
+from .orientation import recording_up
 
 
 def numbering_gaps(names) -> list:
@@ -98,13 +99,10 @@ class DepthRecording:
             self.notes.extend(self.setup.notes)
 
     def up(self) -> np.ndarray:
-        """The up direction in the tracking frame: world +Z with ``cam_to_world``, else the floor's
-        normal, else the camera's up (-Y)."""
-        if self.world:
-            return np.array([0.0, 0.0, 1.0])
-        if self.setup is not None and self.setup.floor is not None:
-            return np.asarray(self.setup.floor[0], float)
-        return np.array([0.0, -1.0, 0.0])
+        """The up direction in the tracking frame (:func:`.orientation.recording_up`): the floor's normal
+        when a floor was found, else the camera's image up; whichever world ``cam_to_world`` names."""
+        floor = self.setup.floor[0] if self.setup is not None and self.setup.floor is not None else None
+        return recording_up(self.camera.R, floor)
 
     def observations(self, max_points: int, start: int = 0):
         """``(k, Observation)`` for every frame from ``start``, decoded in order."""
@@ -151,9 +149,7 @@ class PointsRecording:
         pass
 
     def up(self) -> np.ndarray:
-        if self.seq.floor is not None:
-            return self.camera.R @ np.asarray(self.seq.floor[0], float)
-        return self.camera.R @ np.array([0.0, -1.0, 0.0])
+        return recording_up(self.camera.R, self.seq.floor[0] if self.seq.floor is not None else None)
 
     def observations(self, max_points: int, start: int = 0):
         rays = dp.pixel_rays(self.camera.intr)
