@@ -43,24 +43,35 @@ def _frames(indices, at_most: int = 8) -> str:
 
 def summary_text(outcome) -> str:
     """One line: frames tracked (input frame indices) and by which tracker, their mean distance to the
-    model, re-initialised, lost and empty frames (input frame indices), the model; the solver's notes are
-    reported separately."""
+    model, re-initialised, doubtful, lost and empty frames (input frame indices), parts out of view, the
+    model; the solver's notes are reported separately."""
     result, first = outcome.result, outcome.first_frame
     n = len(result.poses)
-    parts = [f"{n} frame{'s' if n != 1 else ''} tracked (input frames {first}..{first + n - 1}) by the "
+    status = [f["status"] for f in result.frames]
+    good = sum(s in ("tracked", "limbs searched", "initialised") for s in status)
+    parts = [f"{good} of {n} frame{'s' if n != 1 else ''} tracked (input frames {first}..{first + n - 1}) by the "
              f"{result.options.tracker.upper()} depth tracker"]
     dist = mean_mm(result)
     if np.isfinite(dist).any():
         parts.append(f"mean distance to the model {np.nanmedian(dist):.1f} mm (median over frames; worst "
                      f"frame {np.nanmax(dist):.1f} mm)")
-    status = [f["status"] for f in result.frames]
     for kind, text in (("initialised", "started anew"), ("limbs searched", "with the limbs searched again"),
+                       ("doubtful", "doubtful (the fit does not stand as a person; see the notes)"),
                        ("lost", "lost (last pose kept)"), ("no person", "with nobody in view (last pose kept)"),
                        ("partly out of view", "partly out of view before a start (last pose kept)")):
         which = [first + k for k, s in enumerate(status) if s == kind]
         if which:
             parts.append(f"{len(which)} frame{'s' if len(which) != 1 else ''} {text} (input frame"
                          f"{'s' if len(which) != 1 else ''} {_frames(which)})")
+    held = {}
+    for f in result.frames:
+        for p in f.get("out_of_view", ()):
+            held[p] = held.get(p, 0) + 1
+    if held:
+        parts.append("out of view: " + ", ".join(f"{p} in {k} frame{'s' if k != 1 else ''}" for p, k in held.items()))
+    others = sum(1 for f in result.frames if f.get("others"))
+    if others:
+        parts.append(f"another person in view in {others} frame{'s' if others != 1 else ''}")
     model = outcome.model_input.label
     if result.template and (result.options.adapt_size or result.options.adapt_surface):
         model += " (adapted to the person)"

@@ -119,19 +119,30 @@ def hypotheses(model, up, towards, centre, scale: float = 1.0):
             yield placed(model, rot, world, centre, scale)
 
 
-def initialise(body, obs, camera, up, options, limits=None, scale: float = 1.0) -> Start:
-    """The best start pose for the observation ``obs`` (see the module docstring)."""
+def _holding(parts, limits, body, pose, camera):
+    """``(held bones, pose, limits)``: the parts of ``pose`` out of view set and held (:mod:`.out_of_view`)."""
+    if parts is None or limits is None:
+        return (), pose, limits
+    return parts.hold(body, pose, camera, limits)[1:]
+
+
+def initialise(body, obs, camera, up, options, limits=None, scale: float = 1.0, parts=None) -> Start:
+    """The best start pose for the observation ``obs`` (see the module docstring); ``parts``
+    (:class:`.out_of_view.Parts`) holds the parts out of view."""
     height = scale * rest_height(body.model)
     centre = body_centre(obs, camera, up, height)
     towards = camera.centre - centre
     best, tried = None, 0
     fitter = icp.fit_frame        # closest points reach farther than the GMM's 2 cm posteriors
     for pose in hypotheses(body.model, up, towards, centre, scale):
-        fit = fitter(body, obs, camera, pose, options, limits, iterations=SCREEN_ITERATIONS)
+        _, pose, held_limits = _holding(parts, limits, body, pose, camera)
+        fit = fitter(body, obs, camera, pose, options, held_limits, iterations=SCREEN_ITERATIONS)
         s = score(body, fit, obs, camera)
         tried += 1
         if best is None or s < best[0]:
             best = (s, fit)
-    start = place_limbs(body, best[1].pose, obs, camera, options.near_m, up)
-    fit = fitter(body, obs, camera, start, options, limits)
+    held, pose, _ = _holding(parts, limits, body, best[1].pose, camera)
+    start = place_limbs(body, pose, obs, camera, options.near_m, up, held=held)
+    _, start, held_limits = _holding(parts, limits, body, start, camera)
+    fit = fitter(body, obs, camera, start, options, held_limits)
     return Start(fit, score(body, fit, obs, camera), tried)

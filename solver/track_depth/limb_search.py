@@ -95,9 +95,10 @@ def _search_bone(body, pose, b, child, rows_of, obs, camera, near_m, sample, can
     return best + (current,)
 
 
-def place_limbs(body, pose, obs, camera, near_m: float, up):
+def place_limbs(body, pose, obs, camera, near_m: float, up, held=()):
     """``pose`` (one frame) with bone directions chosen on the observation (module docstring); the
-    directions are spread in the frame of ``up`` and the camera (:func:`.orientation.view_frame`)."""
+    directions are spread in the frame of ``up`` and the camera (:func:`.orientation.view_frame`).  The
+    ``held`` bones (parts out of view, :mod:`.out_of_view`) are not searched."""
     sk = body.model.skeleton
     owner = subtrees(sk.parents)
     depth = bone_depths(sk.parents)
@@ -108,7 +109,7 @@ def place_limbs(body, pose, obs, camera, near_m: float, up):
         return np.flatnonzero(np.isin(body.main_bone, owner[b]))
     for b in sorted(range(1, sk.num_bones), key=lambda c: (depth[c], c)):
         n = len(rows_of(b))
-        if n < MIN_POINTS:
+        if n < MIN_POINTS or b in held:
             continue
         child = _child(owner, rows_of, b, sk) if LIMB_POINTS[0] <= n <= LIMB_POINTS[1] else None
         score, G, H, current = _search_bone(body, pose, b, child, rows_of, obs, camera, near_m, sample, cand)

@@ -12,12 +12,15 @@ from ..tracking.pose_prior import generic_prior, rotvec_increment_jacobian
 
 BOX_WEIGHT = 10.0      # m^2 per rad^2 outside the box
 CENTRE_WEIGHT = 0.02   # m^2 per (box width)^2 away from the middle
+HOLD_WEIGHT = 1000.0   # m^2 per rad^2 away from a held rotation (a part out of view keeps it)
 
 
 class JointLimits:
     """Box ``lower``/``upper`` (B, 3) radians (inf = free) and the bones that have one."""
 
-    def __init__(self, skeleton, lower=None, upper=None):
+    def __init__(self, skeleton, lower=None, upper=None, box_weight: float = BOX_WEIGHT,
+                 centre_weight: float = CENTRE_WEIGHT):
+        self.box_weight, self.centre_weight = box_weight, centre_weight
         if lower is None:
             prior = generic_prior(skeleton)
             lower, upper = prior.lower, prior.upper
@@ -25,7 +28,8 @@ class JointLimits:
         self.lower, self.upper = np.asarray(lower, float), np.asarray(upper, float)
         self.bones = np.flatnonzero(np.isfinite(self.lower).all(axis=1) & np.isfinite(self.upper).all(axis=1))
         finite = np.isfinite(self.lower) & np.isfinite(self.upper)
-        self.width = np.where(finite, np.maximum(self.upper - self.lower, np.radians(5.0)), np.inf)
+        with np.errstate(invalid="ignore"):
+            self.width = np.where(finite, np.maximum(self.upper - self.lower, np.radians(5.0)), np.inf)
         self.centre = np.where(finite, 0.5 * (np.where(finite, self.lower, 0) + np.where(finite, self.upper, 0)), 0.0)
 
     @classmethod
@@ -54,7 +58,32 @@ class JointLimits:
         cols = 3 + 3 * b[:, None] + np.arange(3)                     # (k, 3) the bones' parameter columns
         rows[np.arange(len(b))[:, None, None], np.arange(3)[None, :, None], cols[:, None, :]] = D
         rows = rows.reshape(-1, P)
-        w_box = np.where(over.ravel() != 0, BOX_WEIGHT, 0.0)
+        w_box = np.where(over.ravel() != 0, self.box_weight, 0.0)
         system.add_rows(rows, over.ravel(), w_box)
-        scale = (1.0 / self.width[b]).ravel()
-        system.add_rows(rows * scale[:, None], pull.ravel(), np.full(len(scale), CENTRE_WEIGHT))
+        if self.centre_weight > 0:
+            scale = (1.0 / self.width[b]).ravel()
+            system.add_rows(rows * scale[:, None], pull.ravel(), np.full(len(scale), self.centre_weight))
+
+    def holding(self, bones, targets) -> "JointLimits":
+        """These limits plus ``bones`` held at the bone-local rotation vectors ``targets`` (k, 3) by
+        ``HOLD_WEIGHT`` (body parts out of the camera's view, :mod:`.out_of_view`)."""
+        if len(bones) == 0:
+            return self
+        lower = np.full((self.skeleton.num_bones, 3), np.inf)
+        lower[bones] = targets
+        return _Both(self, JointLimits(self.skeleton, lower, lower.copy(), HOLD_WEIGHT, 0.0))
+
+
+class _Both:
+    """Two sets of limits added to the same system."""
+
+    def __init__(self, first: JointLimits, second: JointLimits):
+        self.first, self.second = first, second
+        self.skeleton = first.skeleton
+
+    def add_to(self, system, posed, pose) -> None:
+        self.first.add_to(system, posed, pose)
+        self.second.add_to(system, posed, pose)
+
+    def holding(self, bones, targets):
+        return self.first.holding(bones, targets)

@@ -25,6 +25,8 @@ FREE_BEHIND_M = 0.1      # a pixel seeing this far behind a model point shows fr
 FLOOR_BAND_M = 0.12       # model points lower than this over the floor may hide in the cut-off floor band
 CONTACT_M = 0.02          # see floor_margin
 REACH_M = 0.08            # a component this close (3D) to the person's largest one is part of it
+PERSON_OF_LARGEST = 0.3   # a component this share of the largest one's size may be a person
+PERSON_EXTENT_M = 0.5     # ... when it spans this much in 3D (bounding box diagonal)
 
 
 @dataclasses.dataclass
@@ -61,7 +63,9 @@ class Observation:
     ``boundary`` (N,) bool, points on the silhouette (their normals are unreliable, ch. 5 rejects pairs
     with them); ``edge_points`` (E, 3), ``edge_pixels`` (E, 2), ``edge_normals`` (E, 2) the silhouette
     pixels with outward 2D contour normals; ``mask`` (H, W) bool, the person's pixels; ``depth`` (H, W)
-    metres (NaN invalid), for the free-space test of hypotheses; ``person_pixels`` the component size."""
+    metres (NaN invalid), for the free-space test of hypotheses; ``person_pixels`` the component size;
+    ``others`` the other person-sized components in view ``[(pixels, centre (3,) sensor frame)]``;
+    ``centre`` (3,) the person's median point in the sensor frame (the next frame keeps to it)."""
     points: np.ndarray
     normals: np.ndarray
     pixels: np.ndarray
@@ -73,6 +77,8 @@ class Observation:
     depth: np.ndarray
     person_pixels: int
     floor: tuple | None = None
+    others: list = dataclasses.field(default_factory=list)
+    centre: np.ndarray | None = None
 
     def height(self, points: np.ndarray) -> np.ndarray:
         """Signed height (m) of tracking-frame points above the floor plane (needs ``floor``)."""
@@ -139,23 +145,59 @@ def _jump_cut(keep: np.ndarray, depth_m: np.ndarray, noise: float) -> np.ndarray
     return cut
 
 
-def connected_person(keep: np.ndarray, grid: np.ndarray, depth_m: np.ndarray, noise: float,
-                     min_share: float = MIN_PERSON_SHARE, reach: float = REACH_M) -> np.ndarray:
-    """(H, W) bool mask of the person: the largest 4-connected component of ``keep`` (neighbours further
-    apart in depth than ``JUMP_M + noise z^2`` are not connected) plus the smaller components that come
-    within ``reach`` metres of it in 3D (a forearm pointing at the camera is cut from the upper arm by a
-    depth jump but stays next to it); empty when the largest is below ``min_share`` of the image."""
+def _components(keep, depth_m, noise):
+    """Labels (H, W) of the 4-connected components of ``keep`` cut at depth jumps, their sizes (C,)."""
     cut = _jump_cut(keep, depth_m, noise)
     labels, count = ndimage.label(keep & ~cut)
-    if count == 0:
-        return np.zeros_like(keep)
-    sizes = np.bincount(labels.ravel())[1:]
-    best = int(np.argmax(sizes)) + 1
-    if sizes[best - 1] < min_share * keep.size:
-        return np.zeros_like(keep)
+    return labels, cut, (np.bincount(labels.ravel())[1:] if count else np.zeros(0, np.int64))
+
+
+def _centre(grid, mask) -> np.ndarray:
+    """Median (3,) sensor-frame point of a component (every 16th of its pixels)."""
+    return np.median(grid[mask][::16], axis=0)
+
+
+def _candidates(labels, sizes, grid, min_pixels) -> list:
+    """``[(label, pixels, centre (3,), mean column)]`` of the person-sized components: at least
+    ``min_pixels``, ``PERSON_OF_LARGEST`` of the largest, and ``PERSON_EXTENT_M`` across in 3D."""
+    out = []
+    for lab in np.flatnonzero(sizes >= max(min_pixels, PERSON_OF_LARGEST * sizes.max(initial=0))) + 1:
+        mask = labels == lab
+        pts = grid[mask][::16]
+        if len(pts) and np.linalg.norm(np.ptp(pts, axis=0)) >= PERSON_EXTENT_M:
+            out.append((int(lab), int(sizes[lab - 1]), np.median(pts, axis=0), float(np.nonzero(mask)[1].mean())))
+    return out
+
+
+def _chosen(cands, width: int, choose: str, follow) -> int:
+    """Index into ``cands`` of the person to track: the one nearest ``follow`` (the last frame's person,
+    sensor frame) when given, else by ``choose`` (:data:`.options.PERSON_CHOICES`)."""
+    if follow is not None:
+        return int(np.argmin([np.linalg.norm(c[2] - follow) for c in cands]))
+    key = {"centre": lambda c: abs(c[3] - 0.5 * (width - 1)), "nearest": lambda c: c[2][2],
+           "largest": lambda c: -c[1], "left": lambda c: c[3], "right": lambda c: -c[3]}[choose]
+    return min(range(len(cands)), key=lambda i: key(cands[i]))
+
+
+def connected_person(keep: np.ndarray, grid: np.ndarray, depth_m: np.ndarray, noise: float,
+                     min_share: float = MIN_PERSON_SHARE, reach: float = REACH_M, choose: str = "centre",
+                     follow=None):
+    """``(mask (H, W) bool, others)``: the person, one person-sized 4-connected component of ``keep``
+    (neighbours further apart in depth than ``JUMP_M + noise z^2`` are not connected) chosen by ``choose``
+    or nearest ``follow`` (:func:`_chosen`), plus the smaller components that come within ``reach`` metres
+    of it in 3D (a forearm pointing at the camera is cut from the upper arm by a depth jump but stays next
+    to it); ``others`` ``[(pixels, centre (3,) sensor frame)]`` the other person-sized components.  Empty
+    when no component reaches ``min_share`` of the image."""
+    labels, cut, sizes = _components(keep, depth_m, noise)
+    cands = _candidates(labels, sizes, grid, min_share * keep.size) if len(sizes) else []
+    if not cands:
+        return np.zeros_like(keep), []
+    pick = _chosen(cands, keep.shape[1], choose, follow)
+    best = cands[pick][0]
     person = labels == best
     pts = grid[person]
     tree = cKDTree(pts[:: max(1, len(pts) // 4000)])
+    merged = set()
     for lab in np.flatnonzero(sizes >= MIN_PART_PIXELS) + 1:
         if lab == best:
             continue
@@ -164,8 +206,9 @@ def connected_person(keep: np.ndarray, grid: np.ndarray, depth_m: np.ndarray, no
         d, _ = tree.query(q[:: max(1, len(q) // 200)], distance_upper_bound=reach)
         if np.isfinite(d).any():
             person |= part
+            merged.add(int(lab))
     grown = ndimage.binary_dilation(person) & keep & cut & ~person   # cut pixels at its edge
-    return person | grown
+    return person | grown, [(c[1], c[2]) for i, c in enumerate(cands) if i != pick and c[0] not in merged]
 
 
 def _silhouette(person: np.ndarray):
@@ -193,12 +236,14 @@ def grid_stride(count: int, max_points: int) -> int:
 
 
 def observe(depth_m: np.ndarray, rays, camera: ViewCamera, opts: dp.DepthOptions, background=None, floor=None,
-            max_points: int = 2500, max_edges: int = 400, floor_removed: bool = False) -> Observation:
+            max_points: int = 2500, max_edges: int = 400, floor_removed: bool = False, choose: str = "centre",
+            follow=None) -> Observation:
     """One depth frame (metres, NaN invalid) -> :class:`Observation` of the person (possibly empty).
-    ``floor`` (n, d) sensor frame: removed from the frame unless ``floor_removed`` (already done)."""
+    ``floor`` (n, d) sensor frame: removed from the frame unless ``floor_removed`` (already done);
+    ``choose``/``follow``: which person (:func:`connected_person`)."""
     grid = dp.backproject_grid(depth_m, rays)
     keep = dp.frame_mask(depth_m, grid, opts, background, None if floor_removed else floor)
-    person = connected_person(keep, grid, depth_m, opts.depth_noise)
+    person, others = connected_person(keep, grid, depth_m, opts.depth_noise, choose=choose, follow=follow)
     count = int(person.sum())
     edge, er, ec, en = _silhouette(person)
     s = grid_stride(count, max_points)
@@ -221,7 +266,8 @@ def observe(depth_m: np.ndarray, rays, camera: ViewCamera, opts: dp.DepthOptions
                        pixels=np.stack((cols, rows), 1).astype(np.float64), boundary=edge[rows, cols],
                        edge_points=grid[er, ec].astype(np.float64) @ R.T + t,
                        edge_pixels=np.stack((ec, er), 1).astype(np.float64), edge_normals=en,
-                       mask=person, depth=depth_m, person_pixels=count, floor=plane)
+                       mask=person, depth=depth_m, person_pixels=count, floor=plane, others=others,
+                       centre=_centre(grid, person) if count else None)
 
 
 def depth_image(points_cam: np.ndarray, intr) -> np.ndarray:

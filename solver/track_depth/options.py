@@ -8,6 +8,7 @@ import dataclasses
 from ..errors import ArticulaInputError
 
 TRACKERS = ("icp", "gmm")
+PERSON_CHOICES = ("centre", "nearest", "largest", "left", "right")   # observation.connected_person's choices
 
 
 @dataclasses.dataclass
@@ -44,10 +45,14 @@ class DepthTrackOptions:
     size_frames: int = 5              # F of Algorithm 4
     adapt_surface: bool = True        # template only: normal displacements (ch. 5 §4.5 / ch. 6 §5.5)
     surface_every: int = 5            # L: frames between surface updates (ch. 6)
+    person: str = "centre"            # with several people in view, whom to track from the start: the one
+                                      # nearest the image's centre, "nearest" the camera, "largest", "left", "right"
 
     def validate(self) -> "DepthTrackOptions":
         if self.tracker not in TRACKERS:
             raise ArticulaInputError(f"tracker: {self.tracker!r} is not one of {', '.join(TRACKERS)}")
+        if self.person not in PERSON_CHOICES:
+            raise ArticulaInputError(f"person: {self.person!r} is not one of {', '.join(PERSON_CHOICES)}")
         checks = (("model_points", self.model_points, 50, 20000), ("data_points", self.data_points, 100, 100000),
                   ("max_iterations", self.max_iterations, 1, 200), ("converged_m", self.converged_m, 1e-6, 0.1),
                   ("max_distance", self.max_distance, 0.01, 2.0), ("max_normal_angle", self.max_normal_angle, 1, 180),

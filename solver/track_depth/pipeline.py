@@ -22,7 +22,9 @@ from .limb_search import place_limbs
 from .motion import predict
 from .limits import JointLimits
 from .options import DepthTrackOptions
+from .out_of_view import Parts
 from .smoothing import smooth
+from .standing import Standing
 from .template import load_template
 from .trackers import frame_fitter
 
@@ -50,12 +52,47 @@ class DepthTrackResult:
             "template": self.template, "frames": len(self.frames),
             "tracked": len(tracked), "lost": status.count("lost"), "no_person": status.count("no person"),
             "initialised": status.count("initialised"), "limbs_searched": status.count("limbs searched"),
-            "partly_out_of_view": status.count("partly out of view"), "statuses": status_counts,
+            "partly_out_of_view": status.count("partly out of view"), "doubtful": status.count("doubtful"),
+            "parts_out_of_view": _part_frames(self.frames),
+            "others_in_view": [f["frame"] for f in self.frames if f.get("others")], "statuses": status_counts,
             "frames_per_second": 1000.0 / float(np.mean(ms)) if ms else 0.0,
             "median_mean_mm": float(np.median([f["mean_mm"] for f in tracked])) if tracked else None,
             "seconds": self.seconds, "notes": self.notes, "options": dataclasses.asdict(self.options),
             "per_frame": self.frames,
         }
+
+
+def _part_frames(frames) -> dict:
+    """``{part name: frames it was out of view}``."""
+    out = {}
+    for f in frames:
+        for part in f.get("out_of_view", ()):
+            out[part] = out.get(part, 0) + 1
+    return out
+
+
+PERSON_WORDS = {"centre": "nearest the image's centre", "nearest": "nearest the camera", "largest": "largest in view",
+                "left": "leftmost in the image", "right": "rightmost in the image"}
+
+
+def frame_notes(frames, person: str) -> list:
+    """The report's notes on what the frames saw: other people, parts out of view, doubtful fits."""
+    notes = []
+    others = [f["name"] for f in frames if f.get("others")]
+    if others:
+        notes.append(f"another person or person-sized object was in view in {len(others)} frame"
+                     f"{'s' if len(others) != 1 else ''} ({', '.join(others[:4])}{', ...' if len(others) > 4 else ''}):"
+                     f" the person {PERSON_WORDS[person]} was tracked from the start and followed")
+    parts = _part_frames(frames)
+    if parts:
+        notes.append("out of the camera's view, held (legs straight, arms and head as they were), not tracked: "
+                     + ", ".join(f"{p} ({n} frame{'s' if n != 1 else ''})" for p, n in parts.items()))
+    doubtful = [f for f in frames if f["status"] == "doubtful"]
+    if doubtful:
+        notes.append(f"{len(doubtful)} frame{'s' if len(doubtful) != 1 else ''} doubtful (the fit does not stand "
+                     "as a person, also after a new start): " + "; ".join(f"{f['name']}: {', '.join(f['findings'])}"
+                                                                          for f in doubtful[:4]))
+    return notes
 
 
 def _entry(k, name, status, fit=None, ms=0.0):
@@ -86,6 +123,8 @@ class _Sequence:
         self.pose = None
         self.lost = False
         self.fit = frame_fitter(options)
+        self.parts = Parts(self.body)
+        self.standing = Standing(self.body, self.parts)
 
     def step(self, k, obs):
         name = self.rec.names[k]
@@ -102,29 +141,58 @@ class _Sequence:
             fit, status = self._initialise(obs), "initialised"
         else:
             fit, status = self._track(obs)
-        if self.adaptation is not None and not self._is_lost(fit):
+        fit, status, findings = self._stands(obs, fit, status)
+        if self.adaptation is not None and not self._is_lost(fit) and not findings:
             fit = self._adapt(k, obs, fit)
         self.lost = self._is_lost(fit)
         if self.lost:
             status = "lost"
         self.pose = fit.pose
-        return _entry(k, name, status, fit, 1000 * (time.perf_counter() - t0))
+        entry = _entry(k, name, status, fit, 1000 * (time.perf_counter() - t0))
+        if obs.others:
+            entry["others"] = len(obs.others)
+        held = self.parts.out_of_view(self.body, fit.pose, self.rec.camera)[0]
+        if held:
+            entry["out_of_view"] = held
+        if findings:
+            entry["findings"] = findings
+        return entry
+
+    def _held(self, pose):
+        """``(held bones, pose, limits)``: the parts of ``pose`` out of view set where they are held and
+        the joint limits holding them (:meth:`.out_of_view.Parts.hold`)."""
+        return self.parts.hold(self.body, pose, self.rec.camera, self.limits)[1:]
+
+    def _stands(self, obs, fit, status):
+        """``(fit, status, findings)``: a fit that does not stand as a person (:mod:`.standing`) is started
+        anew (unless it just was); ``doubtful`` when the findings remain."""
+        findings = self.standing.findings(self.body, fit.pose, obs, self.rec.camera, self.rec.up())
+        if findings and status != "initialised" and not any(cut_edges(obs, sides=True)[2:]):
+            again = self._initialise(obs)
+            left = self.standing.findings(self.body, again.pose, obs, self.rec.camera, self.rec.up())
+            if len(left) < len(findings) or (len(left) == len(findings) and again.near_share > fit.near_share):
+                fit, status, findings = again, "initialised", left
+        return fit, ("doubtful" if findings else status), findings
 
     def _initialise(self, obs):
-        return initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits).fit
+        return initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits,
+                          parts=self.parts).fit
 
     def _track(self, obs):
         """The frame tracked from the last pose; limbs searched when points are left unexplained, a new
-        start when the fit explains far less than the recent frames did."""
+        start when the fit is lost, or when the limb search left points unexplained (a jump between
+        poses the fit from the last frame does not follow)."""
         pred = self._prediction()
+        _, start, limits = self._held(self.pose if pred is None else pred)
         if pred is None:
-            fit = self.fit(self.body, obs, self.rec.camera, self.pose, self.opts, self.limits)
+            fit = self.fit(self.body, obs, self.rec.camera, start, self.opts, limits)
         else:
-            fit = self.fit(self.body, obs, self.rec.camera, pred, self.opts, self.limits, predicted=pred)
+            fit = self.fit(self.body, obs, self.rec.camera, start, self.opts, limits, predicted=start)
         status = "tracked"
         if not self._is_lost(fit) and fit.near_share < self._limb_threshold():
             fit, status = self._limbs(obs, fit)
-        if self._is_lost(fit) and not any(cut_edges(obs, sides=True)[2:]):
+        unexplained = self._is_lost(fit) or fit.near_share < self._limb_threshold()
+        if unexplained and not any(cut_edges(obs, sides=True)[2:]):
             again = self._initialise(obs)
             if again.near_share > fit.near_share:
                 fit, status = again, "initialised"
@@ -159,14 +227,17 @@ class _Sequence:
     def _limbs(self, obs, fit):
         """A limb lost (observed points left unexplained): the limb search from the fitted pose, kept when
         it explains more (status "limbs searched")."""
-        start = place_limbs(self.body, fit.pose, obs, self.rec.camera, self.opts.near_m)
-        again = self.fit(self.body, obs, self.rec.camera, start, self.opts, self.limits)
+        bones, pose, _ = self._held(fit.pose)
+        start = place_limbs(self.body, pose, obs, self.rec.camera, self.opts.near_m, self.rec.up(), held=bones)
+        _, start, limits = self._held(start)
+        again = self.fit(self.body, obs, self.rec.camera, start, self.opts, limits)
         return (again, "limbs searched") if again.near_share > fit.near_share + 0.005 else (fit, "tracked")
 
     def _adapt(self, k, obs, fit):
         """The template's body adapted on frame k (size on the first frames, then the surface)."""
         if self.adaptation.wants():
-            self.body, fit = self.adaptation.adapt(k, self.body, fit.pose, obs, self.rec.camera, self.limits, self.fit)
+            _, _, limits = self._held(fit.pose)
+            self.body, fit = self.adaptation.adapt(k, self.body, fit.pose, obs, self.rec.camera, limits, self.fit)
             return fit
         body = self.adaptation.surface_step(self.body, fit.pose, obs, self.rec.camera)
         if body is not None:
@@ -205,7 +276,7 @@ def track_recording(recording, model: Model | None = None, options: DepthTrackOp
     t_setup = time.perf_counter() - t0
     t_frames = time.perf_counter()
     with parallel.single_blas_thread():
-        for k, obs in recording.observations(options.data_points):
+        for k, obs in recording.observations(options.data_points, person=options.person):
             entry = run.step(k, obs)
             run.frames.append(entry)
             run.poses.append(None if run.pose is None else run.pose)
@@ -216,4 +287,5 @@ def track_recording(recording, model: Model | None = None, options: DepthTrackOp
         poses = smooth(poses, [f["status"] for f in run.frames])
     seconds = {"setup": t_setup, "frames": time.perf_counter() - t_frames}
     notes = list(recording.notes) + (["the built-in template body was tracked"] if template is not None else [])
+    notes += frame_notes(run.frames, options.person)
     return DepthTrackResult(run.body.model, poses, run.frames, notes, options, template is not None, seconds)

@@ -104,13 +104,17 @@ class DepthRecording:
         floor = self.setup.floor[0] if self.setup is not None and self.setup.floor is not None else None
         return recording_up(self.camera.R, floor)
 
-    def observations(self, max_points: int, start: int = 0):
-        """``(k, Observation)`` for every frame from ``start``, decoded in order."""
+    def observations(self, max_points: int, start: int = 0, person: str = "centre"):
+        """``(k, Observation)`` for every frame from ``start``, decoded in order; the person chosen by
+        ``person`` (:data:`.options.PERSON_CHOICES`) and then followed from frame to frame."""
         self.prepare()
         frames = rec.depth_frames(self.paths, self.read_exr)
-        s = self.setup
+        s, follow = self.setup, None
         for k, z in rec.stream_metres(frames[start:], self.options, s.shape):
-            yield start + k, observe(z, s.rays, self.camera, self.options, s.background, s.floor, max_points=max_points)
+            obs = observe(z, s.rays, self.camera, self.options, s.background, s.floor, max_points=max_points,
+                          choose=person, follow=follow)
+            follow = obs.centre
+            yield start + k, obs
 
 
 class PointsRecording:
@@ -151,9 +155,12 @@ class PointsRecording:
     def up(self) -> np.ndarray:
         return recording_up(self.camera.R, self.seq.floor[0] if self.seq.floor is not None else None)
 
-    def observations(self, max_points: int, start: int = 0):
+    def observations(self, max_points: int, start: int = 0, person: str = "centre"):
         rays = dp.pixel_rays(self.camera.intr)
+        follow = None
         for i, k in enumerate(self.index[start:], start=start):
             z = depth_image(self.seq.points[self.seq.frame(k)], self.camera.intr)
-            yield i, observe(z, rays, self.camera, self.options, floor=self.seq.floor, max_points=max_points,
-                             floor_removed=True)
+            obs = observe(z, rays, self.camera, self.options, floor=self.seq.floor, max_points=max_points,
+                          floor_removed=True, choose=person, follow=follow)
+            follow = obs.centre
+            yield i, obs

@@ -1,6 +1,7 @@
 """One depth frame as the tracker sees it: the person's connected component, silhouette normals, the
 floor band, free space, and points rendered back into a depth image; visibility of model points."""
 import numpy as np
+import pytest
 
 from articula.solver.depth import frames as dp
 from articula.solver.track_depth.observation import (ViewCamera, connected_person, depth_image, observe)
@@ -23,9 +24,35 @@ def test_largest_component_with_parts_within_reach_and_not_far_objects():
     z[30:34, 45:60] = 2.5                   # ... but touching the body in the image via a strip at its depth
     z[30:34, 59:61] = 1.2
     keep = np.isfinite(z)
-    person = connected_person(keep, _plane_grid(z, intr), z, noise=0.0)
+    person, others = connected_person(keep, _plane_grid(z, intr), z, noise=0.0)
     assert person[15, 48] and person[20, 35]            # forearm rejoined across the jump
     assert not person[45, 70]                           # chair excluded
+    assert others == []                                 # ... and too small to be a second person
+
+
+def _two_people():
+    intr = cam.preset("kinect_v1", (80, 60))
+    z = np.full((60, 80), np.nan, np.float32)
+    z[5:55, 34:46] = 2.5                    # one in the middle
+    z[8:52, 62:72] = 3.5                    # another to the right, farther
+    z[10:50, 4:16] = 2.0                    # a third to the left, nearest
+    return z, _plane_grid(z, intr)
+
+
+@pytest.mark.parametrize("choose, column", [("centre", 40), ("nearest", 10), ("right", 66), ("left", 10),
+                                            ("largest", 40)])
+def test_person_chosen_and_the_others_named(choose, column):
+    z, grid = _two_people()
+    person, others = connected_person(np.isfinite(z), grid, z, noise=0.0, choose=choose)
+    assert person[30, column] and person.sum() == np.isfinite(z[:, column - 6:column + 7]).sum()
+    assert len(others) == 2 and all(px > 300 for px, _ in others)
+
+
+def test_followed_person_is_kept_over_the_rule():
+    z, grid = _two_people()
+    follow = grid[30, 66]                   # last frame's person stood on the right
+    person, others = connected_person(np.isfinite(z), grid, z, noise=0.0, choose="centre", follow=follow)
+    assert person[30, 66] and not person[30, 40] and len(others) == 2
 
 
 def test_nobody_gives_an_empty_observation(model):

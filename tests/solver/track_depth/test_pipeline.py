@@ -159,3 +159,11 @@ def test_smoothing_runs_and_effect():
     before = np.abs(np.diff(quat_to_rotvec(p.rotations[:, 0])[:, 0], 2)).mean()
     after = np.abs(np.diff(quat_to_rotvec(s.rotations[:, 0])[:, 0], 2)).mean()
     assert after < 0.6 * before and np.allclose(s.rotations[0], p.rotations[0])
+    jump = np.zeros((5, 3))
+    jump[2, 0] = np.radians(60.0)        # one frame a different pose: kept as fitted, the others smoothed
+    q = Poses(rotvec_to_quat(jump)[:, None], np.zeros((5, 3)), np.ones(5))
+    out = smooth(q, ["initialised"] + ["tracked"] * 4)
+    assert np.allclose(out.rotations, q.rotations)
+    moved = Poses(p.rotations[:5].copy(), np.array([[0, 0, 0], [0, 0, 0], [0.3, 0, 0], [0, 0, 0], [0, 0, 0.0]]),
+                  np.ones(5))
+    assert np.allclose(smooth(moved, ["initialised"] + ["tracked"] * 4).translations[2], [0.3, 0, 0])
