@@ -27,13 +27,17 @@ from ..addon.track_depth.report import summary_text as depth_summary
 from ..addon.tracking.result import check_output_path
 from ..solver.errors import ArticulaInputError
 from ..solver.track.options import TrackOptions
-from ..solver.track_depth.options import TRACKERS, DepthTrackOptions
+from ..solver.track_depth.options import PERSON_CHOICES, TRACKERS, DepthTrackOptions
 
 _DEFAULT = TrackOptions()
 _DEPTH_DEFAULT = DepthTrackOptions()
 TRACKER_ITEMS = tuple((t.upper(), t.upper(), {"icp": "Iterative closest points with silhouette edges (ch. 5)",
                                                "gmm": "Gaussian mixture of the body's surface (ch. 6)"}.get(t, t))
                       for t in TRACKERS)
+PERSON_ITEMS = tuple((p.upper(), p.title(), {
+    "centre": "The person nearest the middle of the image", "nearest": "The person nearest the camera",
+    "largest": "The person filling most of the image", "left": "The leftmost person in the image",
+    "right": "The rightmost person in the image"}[p]) for p in PERSON_CHOICES)
 ADAPT_ITEMS = (('AUTO', "Auto", "Adapt the rest mesh and joints when the model is not the person's (its surface "
                                  "lies off the captures beyond their noise) and the range is long enough"),
                ('ON', "On", "Always adapt the model to the recording"),
@@ -67,6 +71,9 @@ class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
     depth_tracker: bpy.props.EnumProperty(name="Depth Tracker", items=TRACKER_ITEMS,
                                           default=_DEPTH_DEFAULT.tracker.upper(),
                                           description="How the depth-camera tracker fits each frame")
+    person: bpy.props.EnumProperty(name="Person", items=PERSON_ITEMS, default=_DEPTH_DEFAULT.person.upper(),
+                                   description="With several people in view, whom the depth-camera tracker "
+                                               "starts on (it then follows that person)")
     adapt: bpy.props.EnumProperty(name="Adapt Model", items=ADAPT_ITEMS, default=_DEFAULT.adapt.upper(),
                                   description="Refine the model's rest mesh and joints from the recording")
     prior: bpy.props.EnumProperty(name="Pose Prior", items=PRIOR_ITEMS, default=_DEFAULT.prior.upper(),
@@ -119,6 +126,7 @@ class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
         sub = col.column()
         sub.enabled = self.method != 'CAPTURES'
         sub.prop(self, "depth_tracker")
+        sub.prop(self, "person")
         box = col.box().column()
         box.enabled = self.method != 'DEPTH'
         box.label(text="Scans and point clouds:")
@@ -173,7 +181,7 @@ class ARTICULA_OT_track(JobOperator, bpy.types.Operator):
         if self.start_from_rig:
             raise ArticulaInputError("Start From Rig's Pose is for scans and point clouds; the depth tracker "
                                      "finds the first frame's pose itself")
-        options = DepthTrackOptions(tracker=self.depth_tracker.lower()).validate()
+        options = DepthTrackOptions(tracker=self.depth_tracker.lower(), person=self.person.lower()).validate()
         bundle = bpy.path.abspath(self.bundle) if self.bundle.strip() else ""
         model_input = depth_inputs.find_model(context, self.rig, bundle)
         span = None

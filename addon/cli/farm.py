@@ -24,7 +24,7 @@ from ...solver.depth.camera import preset_key
 from ...solver.farm.subjects_job import SubjectsJob
 from ...solver.farm.track_job import AGREE_MM, SCANS_AGREE_MM
 from ...solver.track.options import TrackOptions
-from ...solver.track_depth.options import TRACKERS
+from ...solver.track_depth.options import PERSON_CHOICES, TRACKERS
 from ..farm import inputs, job_types
 from .track_depth import CAMERAS
 
@@ -54,10 +54,11 @@ def run_track(args) -> int:
         raise ArticulaInputError("give the recording as --depth DIR (depth frames) or --scans DIR (captures)")
     kind = "depth" if args.depth is not None else "scans"
     options = []
-    if args.tracker:
-        if kind != "depth":
-            raise ArticulaInputError("--tracker: for --depth only")
-        options += ["--tracker", args.tracker]
+    for flag, value in (("--tracker", args.tracker), ("--person", args.person)):
+        if value:
+            if kind != "depth":
+                raise ArticulaInputError(f"{flag}: for --depth only")
+            options += [flag, value]
     size, overlap, note = chunks.settings(args.chunk, args.overlap, *inputs.DEFAULT_CHUNK[kind])
     job = inputs.track_job(args.model, args.depth or args.scans, kind, args.out, args.blend or "", size,
                            overlap, options, args.camera or "", args.work_dir or "")
@@ -148,6 +149,8 @@ def add_commands(sub):
     q.add_argument("--camera", type=preset_key, choices=CAMERAS, metavar="PRESET",
                    help="with --depth: the camera of a folder without intrinsics.json")
     q.add_argument("--tracker", type=str.lower, choices=TRACKERS, help="with --depth: the per-frame fit")
+    q.add_argument("--person", type=str.lower, choices=PERSON_CHOICES,
+                   help="with --depth and several people in view: whom to track (as ./run track --person)")
     q.add_argument("--out", required=True, help="tracked bundle to write (.npz)")
     q.add_argument("--blend", help="also bake the tracked rig and action into this .blend")
     q.add_argument("--chunk", type=int, default=0,

@@ -78,7 +78,8 @@ def run(args) -> int:
     if args.scans is None:
         raise ArticulaInputError("nothing to track: give --scans PATH... (captures) or --depth DIR (a depth "
                                  "recording)")
-    given = [flag for flag, value in (("--camera", args.camera), ("--tracker", args.tracker)) if value]
+    given = [flag for flag, value in (("--camera", args.camera), ("--tracker", args.tracker),
+                                      ("--person", args.person)) if value]
     if given:
         raise ArticulaInputError(f"{', '.join(given)}: for --depth only")
     if not args.model:

@@ -22,7 +22,7 @@ from ...solver.depth import camera as cam
 from ...solver.errors import ArticulaInputError
 from ...solver.formats.axes import AUTO
 from ...solver.track.options import TrackOptions
-from ...solver.track_depth.options import TRACKERS, DepthTrackOptions
+from ...solver.track_depth.options import PERSON_CHOICES, TRACKERS, DepthTrackOptions
 from .. import jobs
 from ..track import inputs
 from ..track_depth import inputs as depth_inputs
@@ -44,6 +44,9 @@ def add_arguments(p) -> None:
                    help=f"with --depth: the camera of a folder without intrinsics.json ({', '.join(CAMERAS)})")
     p.add_argument("--tracker", type=str.lower, choices=TRACKERS,
                    help=f"with --depth: the per-frame fit (default {DepthTrackOptions().tracker})")
+    p.add_argument("--person", type=str.lower, choices=PERSON_CHOICES,
+                   help="with --depth and several people in view: whom to track from the start (default "
+                        f"{DepthTrackOptions().person}: the one nearest the image's centre; then followed)")
 
 
 def refuse_scan_flags(args) -> None:
@@ -64,7 +67,8 @@ def run(args) -> int:
     for path in (args.out, args.report):
         check_output_path(path or "")
     check_blend_output(args.blend)
-    options = DepthTrackOptions(tracker=args.tracker or DepthTrackOptions().tracker).validate()
+    default = DepthTrackOptions()
+    options = DepthTrackOptions(tracker=args.tracker or default.tracker, person=args.person or default.person).validate()
     if args.model:
         model_input = inputs.model_from_bundle(os.path.abspath(args.model))
         model_input.matrix = np.eye(4)

@@ -121,6 +121,29 @@ class Observation:
         out[i] = free & (behind | unknown)
         return out
 
+    def seen_through(self, points: np.ndarray, camera: "ViewCamera", margin_m: float) -> np.ndarray:
+        """(N,) True for points (tracking frame) in view where the camera clearly sees past them: more
+        than ``margin_m`` (at the point's depth) outside the person's silhouette, onto a measured depth more
+        than ``FREE_BEHIND_M`` behind them or onto a pixel that far from any measured depth.  Stricter than
+        :meth:`in_free_space`: a part fitted a few centimetres off a thin silhouette, or over the holes a
+        depth sensor leaves around a person, does not count."""
+        uv, z = camera.project(points)
+        H, W = self.mask.shape
+        u, v = np.round(uv[:, 0]), np.round(uv[:, 1])
+        i = np.flatnonzero((z > 0) & (u >= 0) & (u < W) & (v >= 0) & (v < H))
+        ui, vi = u[i].astype(int), v[i].astype(int)
+        if not hasattr(self, "_distances"):
+            self._distances = (ndimage.distance_transform_edt(~self.mask),
+                               ndimage.distance_transform_edt(~np.isfinite(self.depth)))
+        to_person, to_measured = self._distances
+        margin = camera.intr.fx * margin_m / z[i]
+        seen = self.depth[vi, ui]
+        with np.errstate(invalid="ignore"):
+            behind = seen > z[i] + FREE_BEHIND_M
+        out = np.zeros(len(points), bool)
+        out[i] = (to_person[vi, ui] > margin) & (behind | (to_measured[vi, ui] > margin))
+        return out
+
     def edge_tree(self) -> cKDTree:
         if not hasattr(self, "_edge_tree"):
             self._edge_tree = cKDTree(self.edge_pixels)

@@ -17,7 +17,7 @@ from ..errors import ArticulaInputError
 from ..rig.model import Model, Poses
 from .adapt import TemplateAdaptation
 from .body import TrackingBody
-from .initialise import cut_edges, initialise
+from .initialise import cut_edges, initialise, score
 from .limb_search import place_limbs
 from .motion import predict
 from .limits import JointLimits
@@ -107,6 +107,8 @@ RECENT = 15       # frames whose typical explained share sets the limb-search th
 LIMB_DROP = 0.03  # share below the typical one at which the limbs are searched again
 PREDICTION_GAIN = 0.5   # share of the last frame-to-frame change carried into the GMM tracker's prediction
 LOST_DROP = 0.25  # share below the typical one at which the frame is lost (and started anew)
+RESTART_GAIN = 0.05  # share a new start must explain beyond a fit that is not lost to replace it
+CHECK_SLACK = 0.01   # share a fit with fewer findings may explain less than the one it replaces
 
 
 class _Sequence:
@@ -164,15 +166,34 @@ class _Sequence:
         return self.parts.hold(self.body, pose, self.rec.camera, self.limits)[1:]
 
     def _stands(self, obs, fit, status):
-        """``(fit, status, findings)``: a fit that does not stand as a person (:mod:`.standing`) is started
-        anew (unless it just was); ``doubtful`` when the findings remain."""
-        findings = self.standing.findings(self.body, fit.pose, obs, self.rec.camera, self.rec.up())
-        if findings and status != "initialised" and not any(cut_edges(obs, sides=True)[2:]):
-            again = self._initialise(obs)
-            left = self.standing.findings(self.body, again.pose, obs, self.rec.camera, self.rec.up())
-            if len(left) < len(findings) or (len(left) == len(findings) and again.near_share > fit.near_share):
-                fit, status, findings = again, "initialised", left
+        """``(fit, status, findings)`` after the checks (:mod:`.standing`): on a fit with findings the limbs
+        are searched again, a fit that does not stand is started anew (unless it just was); either is kept
+        when it leaves fewer findings and explains the frame about as well; ``doubtful`` when findings remain."""
+        found = self._findings(obs, fit)
+        if found[0] or found[1]:
+            fit, status, found = self._better(obs, fit, status, found, self._limbs(obs, fit, always=True))
+        if found[0] and status != "initialised" and not any(cut_edges(obs, sides=True)[2:]):
+            fit, status, found = self._better(obs, fit, status, found, (self._initialise(obs), "initialised"))
+        findings = found[0] + found[1]
         return fit, ("doubtful" if findings else status), findings
+
+    def _findings(self, obs, fit) -> tuple:
+        return self.standing.findings(self.body, fit.pose, obs, self.rec.camera, self.rec.up())
+
+    def _better(self, obs, fit, status, found, candidate):
+        """The candidate ``(fit, status)`` when it has fewer findings (stance first) and explains the frame
+        about as well (explained points, and :func:`.initialise.score` with the free space), else the fit
+        as it was."""
+        other, other_status = candidate
+        if other is fit:
+            return fit, status, found
+        again = self._findings(obs, other)
+        fewer = (len(again[0]), len(again[1])) < (len(found[0]), len(found[1]))
+        cam = self.rec.camera
+        if fewer and other.near_share >= fit.near_share - CHECK_SLACK and \
+                score(self.body, other, obs, cam) <= score(self.body, fit, obs, cam) + CHECK_SLACK:
+            return other, other_status, again
+        return fit, status, found
 
     def _initialise(self, obs):
         return initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits,
@@ -191,10 +212,11 @@ class _Sequence:
         status = "tracked"
         if not self._is_lost(fit) and fit.near_share < self._limb_threshold():
             fit, status = self._limbs(obs, fit)
-        unexplained = self._is_lost(fit) or fit.near_share < self._limb_threshold()
-        if unexplained and not any(cut_edges(obs, sides=True)[2:]):
+        lost = self._is_lost(fit)
+        if (lost or fit.near_share < self._limb_threshold()) and not any(cut_edges(obs, sides=True)[2:]):
             again = self._initialise(obs)
-            if again.near_share > fit.near_share:
+            gain = 0.0 if lost else RESTART_GAIN
+            if again.near_share > fit.near_share + gain:
                 fit, status = again, "initialised"
         return fit, status
 
@@ -224,14 +246,17 @@ class _Sequence:
         typical = self._typical_share()
         return self.opts.limb_share if typical is None else min(self.opts.limb_share, typical - LIMB_DROP)
 
-    def _limbs(self, obs, fit):
+    def _limbs(self, obs, fit, always=False):
         """A limb lost (observed points left unexplained): the limb search from the fitted pose, kept when
-        it explains more (status "limbs searched")."""
+        it explains more (status "limbs searched"); with ``always`` the searched fit is returned whatever
+        it explains (the caller judges it)."""
         bones, pose, _ = self._held(fit.pose)
         start = place_limbs(self.body, pose, obs, self.rec.camera, self.opts.near_m, self.rec.up(), held=bones)
         _, start, limits = self._held(start)
         again = self.fit(self.body, obs, self.rec.camera, start, self.opts, limits)
-        return (again, "limbs searched") if again.near_share > fit.near_share + 0.005 else (fit, "tracked")
+        if always or again.near_share > fit.near_share + 0.005:
+            return again, "limbs searched"
+        return fit, "tracked"
 
     def _adapt(self, k, obs, fit):
         """The template's body adapted on frame k (size on the first frames, then the surface)."""

@@ -4,9 +4,12 @@
 * the head not below the hips (an upside-down fit);
 * no foot above the hips (a leg folded up onto other data);
 * with a floor: when the person's points reach down to it (standing on it), the lower foot near it;
-* each part (:mod:`.out_of_view`) in view mostly where the camera sees the person, not through free space.
+* each part (:mod:`.out_of_view`) in view mostly where the camera sees the person, not where it clearly
+  sees past it (:meth:`.observation.Observation.seen_through`: the sensor's holes around a person and a
+  hand fitted a few centimetres off a thin silhouette are small errors, not a wrong pose).
 
-A fit with findings is started anew by the pipeline and reported ``doubtful`` when that does not help.
+The pipeline searches the limbs again on a fit with findings and starts a fit that does not stand (the
+first three) anew; what remains is reported ``doubtful``.
 """
 from __future__ import annotations
 
@@ -21,7 +24,8 @@ FOOT_ABOVE_M = 0.0       # a foot higher than the hips by more than this is fold
 REACHES_FLOOR_M = 0.15   # the person's lowest points this near the floor: they stand on it
 FOOT_OFF_FLOOR_M = 0.35  # ...and then the lower foot joint (ankle) is no higher than this
 FREE_SHARE = 0.6         # a part with more of its in-view points in free space sits on nothing
-MIN_IN_VIEW = 10
+FREE_MARGIN_M = 0.08     # ... where no depth was measured within this distance (at the point's depth)
+MIN_IN_VIEW = 30       # smaller parts (hands) are too few points to judge
 
 
 class Standing:
@@ -34,9 +38,13 @@ class Standing:
         self.feet = [(part_name(r), roles[r]) for r in ("foot.L", "foot.R") if r in roles]
         self.parts = parts
 
-    def findings(self, body, pose, obs, camera, up) -> list:
-        """Readable findings (empty when the fit stands) for ``pose`` (one frame) on ``obs``."""
+    def findings(self, body, pose, obs, camera, up) -> tuple:
+        """``(stance, parts)``: readable findings on how ``pose`` (one frame) stands and on parts the
+        camera sees through, on ``obs`` (both empty when the fit passes)."""
         posed = body.pose(pose)
+        return self._stance(posed, obs, up), self._in_free_space(posed, obs, camera)
+
+    def _stance(self, posed, obs, up) -> list:
         out = []
         if self.hips is not None and self.head is not None:
             h = posed.joints @ up
@@ -50,15 +58,20 @@ class Standing:
             foot = float(obs.height(posed.joints[[b for _, b in self.feet]]).min())
             if low < REACHES_FLOOR_M and foot > FOOT_OFF_FLOOR_M:
                 out.append(f"feet {foot:.2f} m above the floor the person stands on")
-        out.extend(self._in_free_space(posed, obs, camera))
         return out
 
     def _in_free_space(self, posed, obs, camera) -> list:
         uv, z = camera.project(posed.points)
         seen = in_view(uv, z, camera.intr)
+        H, W = obs.mask.shape
+        px = np.round(uv[seen]).astype(np.int64)
+        outside = np.zeros(len(seen), bool)
+        outside[seen] = ~obs.mask_dilated()[np.clip(px[:, 1], 0, H - 1), np.clip(px[:, 0], 0, W - 1)]
         out = []
         for role, _, _, rows, _ in self.parts.parts:
             r = rows[seen[rows]]
-            if len(r) >= MIN_IN_VIEW and obs.in_free_space(posed.points[r], camera).mean() > FREE_SHARE:
+            if len(r) < MIN_IN_VIEW or outside[r].mean() <= FREE_SHARE:      # cheap test first
+                continue
+            if obs.seen_through(posed.points[r], camera, FREE_MARGIN_M).mean() > FREE_SHARE:
                 out.append(f"{part_name(role)} where the camera sees through")
         return out

@@ -143,6 +143,14 @@ def test_real_kinect_frames_are_tracked_with_the_template(pkg, tmp_path, capsys)
     hips = np.einsum("nij,j->ni", Rm[:, 0], bundle.model.skeleton.heads[0]) + tm[:, 0]
     assert np.all((hips[:, 2] > 0.8) & (hips[:, 2] < 4.5)), hips               # metres in front of the camera
     assert "model: the built-in template body" in capsys.readouterr().out
+    assert doc["per_frame"][0]["others"] == 1 and doc["others_in_view"] == [0]
+    right = str(tmp_path / "r.npz")               # the other person of frame 0, chosen by --person
+    assert pkg("addon.cli.main").main(["track", "--depth", KINECT, "--camera", "KINECT_V1", "--frames", "0:1",
+                                       "--person", "right", "--out", right]) == 0
+    other = load_bundle(right)
+    Ro, to = forward_kinematics(other.model.skeleton, other.poses)
+    hips_right = Ro[0, 0] @ other.model.skeleton.heads[0] + to[0, 0]
+    assert hips_right[0] > hips[0, 0] + 0.3, (hips_right, hips[0])       # camera +X is the image's right
 
 
 def test_bad_input_fails_and_writes_nothing(pkg, bench, tmp_path, capsys):

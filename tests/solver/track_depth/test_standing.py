@@ -69,7 +69,7 @@ def test_held_legs_stay_below_the_hips_in_a_fit(model):
     hips, feet = _heights(body, folded)
     assert (feet > hips).all()
     standing = Standing(body, parts)
-    assert any("above the hips" in f for f in standing.findings(body, folded, obs, camera, UP))
+    assert any("above the hips" in f for f in standing.findings(body, folded, obs, camera, UP)[0])
     opts = DepthTrackOptions()
     limits = JointLimits(model.skeleton)
     names, _, start, held = parts.hold(body, folded, camera, limits)
@@ -77,7 +77,7 @@ def test_held_legs_stay_below_the_hips_in_a_fit(model):
     fit = icp.fit_frame(body, obs, camera, start, opts, held)
     hips, feet = _heights(body, fit.pose)
     assert (feet < hips - 0.5).all()
-    assert standing.findings(body, fit.pose, obs, camera, UP) == []
+    assert standing.findings(body, fit.pose, obs, camera, UP) == ([], [])
 
 
 def test_upside_down_is_a_finding_and_the_rest_pose_is_not(model):
@@ -86,13 +86,13 @@ def test_upside_down_is_a_finding_and_the_rest_pose_is_not(model):
     camera = front_camera(model)
     rest = Poses.identity(1, model.skeleton.num_bones)
     obs = observation(model, rest, camera)
-    assert standing.findings(body, rest, obs, camera, UP) == []
+    assert standing.findings(body, rest, obs, camera, UP) == ([], [])
     flipped = rest.take(0)
     F = model.skeleton.frames[0]
     flip = np.diag([1.0, -1.0, -1.0])                         # half a turn about world x
     flipped.rotations[0, 0] = matrix_to_quat(F.T @ flip @ F)
-    found = standing.findings(body, flipped, obs, camera, UP)
-    assert any("upside down" in f for f in found)
+    stance, _ = standing.findings(body, flipped, obs, camera, UP)
+    assert any("upside down" in f for f in stance)
 
 
 def test_a_part_in_free_space_is_named(model):
@@ -104,5 +104,19 @@ def test_a_part_in_free_space_is_named(model):
     moved = rest.take(0)
     b = role_bones(model.skeleton.names)["upper_arm.L"]
     moved.rotations[0, b] = rotvec_to_quat(np.array([0.0, 1.2, 0.0]))     # the left arm swung where nobody is
-    found = standing.findings(body, moved, obs, camera, UP)
-    assert any(f.startswith("left") and "sees through" in f for f in found), found
+    stance, found = standing.findings(body, moved, obs, camera, UP)
+    assert stance == [] and any(f.startswith("left") and "sees through" in f for f in found), found
+
+
+def test_a_few_centimetres_off_is_not_seeing_through(model):
+    """The whole body moved 3 cm sideways is a small error (no finding); 40 cm, the camera sees past it."""
+    body = TrackingBody(model)
+    standing = Standing(body, Parts(body))
+    camera = front_camera(model)
+    rest = Poses.identity(1, model.skeleton.num_bones)
+    obs = observation(model, rest, camera, noise=True)
+    for shift, expect in ((0.03, False), (0.4, True)):
+        moved = rest.take(0)
+        moved.translations[0] = (shift, 0.0, 0.0)
+        _, parts = standing.findings(body, moved, obs, camera, UP)
+        assert bool(parts) == expect, (shift, parts)
