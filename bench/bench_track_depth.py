@@ -14,13 +14,19 @@ Scenarios (``--only`` picks some):
 * ``template``: no model; the built-in template adapts (shape basis + part lengths): joint error
   (target <= 50 mm), adapted bone lengths against the subject's (target within 15 mm), surface error
   (median distance of the subject's visible vertices to the tracked template surface; target 10 mm).
-* ``speed``: frames/s at 320x240 of the exact model and of the template with and without adaptation
-  (target >= 30 frames/s with the person's model).
+* ``worlds``: each subject's recording with intrinsics.json's world Z-up, Y-up, tilted 30 deg (origin
+  moved) and absent (the camera's frame), exact model and template: joint errors in that world (targets
+  <= 25 / <= 50 mm and no lost frame in every world; the same numbers in every world).
+* ``kinect``: the real Kinect v1 frames of ../shared/data/depth/skeltrack_kinect with the template: feet
+  above the hips (target none), frames with the legs flagged out of view, frames naming a second person.
+* ``speed``: frames/s at 320x240 of the exact model and of the template with and without adaptation:
+  tracking alone (frames tracked from the frame before; target >= 30 with the person's model), the
+  start, and end to end including start-up (target >= 2 frames/s).
 * ``bad``: frames with nobody in view, a person leaving the frame edge, missing frame numbers, absurd
   intrinsics, 8-bit PNGs, and a long recording (``--long N`` frames) for bounded memory.
 
 Usage: ./run bench track_depth [--subjects 0,1,2] [--resolutions 320x240,640x480] [--frames 64]
-                               [--only exact,template,speed,bad] [--trackers icp,gmm] [--long 3000]
+                               [--only exact,template,worlds,kinect,speed,bad] [--trackers icp,gmm] [--long 3000]
 """
 import argparse
 import os
@@ -32,7 +38,7 @@ import _common  # noqa: E402  (makes ``import articula`` work)
 import numpy as np  # noqa: E402
 
 from _depth_bad_inputs import bad_inputs  # noqa: E402
-from _track_depth_runs import cache, joints_of, recording, track  # noqa: E402
+from _track_depth_runs import cache, joints_of, recording, track, world_variant  # noqa: E402
 
 OPTS = {}   # DepthTrackOptions fields of the template runs (scripts set them)
 SEGMENTS = (("shoulder.L", "elbow.L"), ("elbow.L", "wrist.L"), ("shoulder.R", "elbow.R"), ("elbow.R", "wrist.R"),
@@ -135,7 +141,56 @@ def speed(subjects, frames):
         res, wall = track(r["out_dir"], model, **opts)
         rep = res.report()
         _common.report(f"speed 320x240 {label}", rep["frames_per_second"], "frames/s",
-                       f"tracking alone; {len(res.poses) / wall:.1f} end to end; target >= 30 with the person's model")
+                       f"tracking alone (frames tracked from the one before); start {rep['start_ms']:.0f} ms; "
+                       f"{len(res.poses) / wall:.1f} frames/s end to end with start-up ({len(res.poses)} frames); "
+                       "targets >= 30 tracking alone with the person's model, >= 2 end to end")
+
+
+def worlds(subjects, frames):
+    from articula.solver.track_depth.options import DepthTrackOptions
+    from articula.solver.track_depth.pipeline import track_recording
+    from articula.solver.track_depth.source import DepthRecording
+    for label, exact_model, target in (("exact", True, 25.0), ("template", False, 50.0)):
+        means = {}
+        for world in ("zup", "yup", "tilt30", "camera"):
+            errs, lost = [], 0
+            for s in subjects:
+                r = recording(s, (320, 240), frames)
+                folder, truth = world_variant(r, world)
+                res = track_recording(DepthRecording.from_folder(folder), r["model"] if exact_model else None,
+                                      DepthTrackOptions(**({} if exact_model else OPTS)))
+                bones = r["joint_bones"] if exact_model else _template_joints(res.model)
+                errs.append(np.linalg.norm(joints_of(res.model, res.poses, bones) - truth, axis=2).mean())
+                lost += res.report()["lost"]
+            means[world] = 1000 * float(np.mean(errs))
+            _common.report(f"worlds {label} {world}: major joints, mean over subjects", means[world], "mm",
+                           f"subjects {', '.join(f'{1000 * e:.1f}' for e in errs)}; lost frames {lost}; "
+                           f"target <= {target:g} mm, 0 lost")
+        _common.report(f"worlds {label}: largest minus smallest", max(means.values()) - min(means.values()), "mm",
+                       "target: the same numbers in every world")
+
+
+def kinect():
+    from articula.solver.rig.kinematics import forward_kinematics
+    from articula.solver.roles import role_bones
+    from articula.solver.track_depth.pipeline import track_recording
+    from articula.solver.track_depth.source import DepthRecording
+    repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    folder = os.path.join(os.path.dirname(repo), "shared", "data", "depth", "skeltrack_kinect")
+    rec = DepthRecording.from_folder(folder, preset="kinect_v1")
+    res = track_recording(rec)
+    rep = res.report()
+    sk = res.model.skeleton
+    roles = role_bones(sk.names)
+    Rm, tm = forward_kinematics(sk, res.poses)
+    h = (np.einsum("nbij,bj->nbi", Rm, sk.heads) + tm) @ rec.up()
+    above = int((h[:, [roles["foot.L"], roles["foot.R"]]].max(axis=1) > h[:, roles["hips"]]).sum())
+    legs = min(rep["parts_out_of_view"].get("left leg", 0), rep["parts_out_of_view"].get("right leg", 0))
+    _common.report("kinect: frames with a foot above the hips", above, "frames",
+                   f"of {rep['frames']}; target 0; statuses {rep['statuses']}")
+    _common.report("kinect: frames with both legs flagged out of view", legs, "frames", "the camera sees the hips up")
+    _common.report("kinect: frames naming another person", len(rep["others_in_view"]), "frames",
+                   f"frames {rep['others_in_view']} (the second person is in the first and last frame)")
 
 
 def main(argv=None) -> int:
@@ -143,7 +198,7 @@ def main(argv=None) -> int:
     p.add_argument("--subjects", default="0,1,2")
     p.add_argument("--resolutions", default="320x240,640x480")
     p.add_argument("--frames", type=int, default=64)
-    p.add_argument("--only", default="exact,template,speed,bad")
+    p.add_argument("--only", default="exact,template,worlds,kinect,speed,bad")
     p.add_argument("--trackers", default="icp,gmm")
     p.add_argument("--long", type=int, default=3000, help="frames of the long recording (bad input)")
     a = p.parse_args(argv)
@@ -163,6 +218,10 @@ def main(argv=None) -> int:
         exact(subjects, resolutions, a.frames, trackers)
     if "template" in only:
         template(subjects, resolutions, a.frames)
+    if "worlds" in only:
+        worlds(subjects, a.frames)
+    if "kinect" in only:
+        kinect()
     if "speed" in only:
         speed(subjects, a.frames)
     if "bad" in only:

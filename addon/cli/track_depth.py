@@ -68,7 +68,8 @@ def run(args) -> int:
         check_output_path(path or "")
     check_blend_output(args.blend)
     default = DepthTrackOptions()
-    options = DepthTrackOptions(tracker=args.tracker or default.tracker, person=args.person or default.person).validate()
+    options = DepthTrackOptions(tracker=args.tracker or default.tracker,
+                                person=args.person or default.person).validate()
     if args.model:
         model_input = inputs.model_from_bundle(os.path.abspath(args.model))
         model_input.matrix = np.eye(4)

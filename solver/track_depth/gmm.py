@@ -12,7 +12,8 @@ data and get next to no posterior mass anyway.
 
 E-step truncation (ours): each observed point's posterior is evaluated on its ``gmm_neighbours`` nearest
 model points, which also drops the farther components from its normaliser; on a ~1000-point body at
-sigma = 2 cm that moves single posteriors by a few hundredths (k = 8), less as sigma shrinks.
+sigma = 2 cm that moves single posteriors by a few hundredths, less as sigma shrinks (k = 5 was as
+accurate as 8 on the benchmark, docs/track_depth.md).
 
 Units: the M-step rows are the CPD reduction, one point row per model point m towards ``x~_m / P1_m``
 with weight ``P1_m / sigma^2`` (:meth:`.normal_equations.System.add_points`), i.e. twice the

@@ -33,7 +33,8 @@ class Start:
     tried: int
 
 
-def facing_rotation(up: np.ndarray, towards: np.ndarray, yaw_deg: float, axes=(BLENDER_UP, BLENDER_FRONT)) -> np.ndarray:
+def facing_rotation(up: np.ndarray, towards: np.ndarray, yaw_deg: float,
+                    axes=(BLENDER_UP, BLENDER_FRONT)) -> np.ndarray:
     """(3, 3) world rotation taking the model's up ``axes[0]`` to ``up`` and its front ``axes[1]`` to
     ``towards`` (made horizontal), then turned by ``yaw_deg`` about ``up``."""
     up = up / np.linalg.norm(up)

@@ -53,16 +53,11 @@ class JointLimits:
         D = Jlog @ to_local                                     # (k, 3, 3)
         over = r - np.clip(r, self.lower[b], self.upper[b])
         pull = (r - self.centre[b]) / self.width[b]
-        P = system.H.shape[0]
-        rows = np.zeros((len(b), 3, P))
         cols = 3 + 3 * b[:, None] + np.arange(3)                     # (k, 3) the bones' parameter columns
-        rows[np.arange(len(b))[:, None, None], np.arange(3)[None, :, None], cols[:, None, :]] = D
-        rows = rows.reshape(-1, P)
-        w_box = np.where(over.ravel() != 0, self.box_weight, 0.0)
-        system.add_rows(rows, over.ravel(), w_box)
+        system.add_blocks(cols, D, over, np.where(over != 0, self.box_weight, 0.0))
         if self.centre_weight > 0:
-            scale = (1.0 / self.width[b]).ravel()
-            system.add_rows(rows * scale[:, None], pull.ravel(), np.full(len(scale), self.centre_weight))
+            scale = 1.0 / self.width[b]
+            system.add_blocks(cols, D * scale[:, :, None], pull, np.full(pull.shape, self.centre_weight))
 
     def holding(self, bones, targets) -> "JointLimits":
         """These limits plus ``bones`` held at the bone-local rotation vectors ``targets`` (k, 3) by

@@ -34,7 +34,8 @@ class System:
         self.B, self.H, self.g, self.energy = num_bones, np.zeros((P, P)), np.zeros(P), 0.0
 
     def add_points(self, a: np.ndarray, r: np.ndarray, w: np.ndarray) -> None:
-        """Point rows: lever arms ``a`` (m, 3, B), residuals ``r`` (m, 3) = model - target, weights (m,)."""
+        """Point rows: lever arms ``a`` (m, 3, B), residuals ``r`` (m, 3) = model - target, weights (m,).
+        The sums over points are matrix products (one Gram matrix, six matrix-vector products)."""
         m, B = len(a), self.B
         if m == 0:
             return
@@ -44,14 +45,16 @@ class System:
         blocks = trace[:, :, None, None] * np.eye(3) - G.transpose(0, 2, 3, 1)   # [j, k, r, s]
         H = self.H
         H[3:, 3:] += blocks.transpose(0, 2, 1, 3).reshape(3 * B, 3 * B)
-        sw = w.sum()
-        H[:3, :3] += sw * np.eye(3)
-        side = -skew((a * w[:, None, None]).sum(axis=0).T)                       # (B, 3, 3)
+        H[:3, :3] += w.sum() * np.eye(3)
+        side = -skew(np.tensordot(w, a, axes=(0, 0)).T)                          # (B, 3, 3)
         H[:3, 3:] += side.transpose(1, 0, 2).reshape(3, 3 * B)
         H[3:, :3] += side.transpose(1, 0, 2).reshape(3, 3 * B).T
         wr = r * w[:, None]
         self.g[:3] += wr.sum(axis=0)
-        self.g[3:] += cross(a.transpose(0, 2, 1), wr[:, None, :]).sum(axis=0).reshape(-1)
+        a0, a1, a2 = a[:, 0].T, a[:, 1].T, a[:, 2].T                             # (B, m) each
+        g = np.stack((a1 @ wr[:, 2] - a2 @ wr[:, 1], a2 @ wr[:, 0] - a0 @ wr[:, 2],
+                      a0 @ wr[:, 1] - a1 @ wr[:, 0]), axis=1)                    # sum_m a_mj x (w r)_m
+        self.g[3:] += g.reshape(-1)
         self.energy += float((w * (r * r).sum(axis=1)).sum())
 
     def add_projected(self, a: np.ndarray, h: np.ndarray, e: np.ndarray, w: np.ndarray) -> None:
@@ -66,6 +69,15 @@ class System:
         """Dense rows (m, P) with residuals (m,) and weights (m,)."""
         self.H += (rows * w[:, None]).T @ rows
         self.g += rows.T @ (w * e)
+        self.energy += float((w * e * e).sum())
+
+    def add_blocks(self, cols: np.ndarray, D: np.ndarray, e: np.ndarray, w: np.ndarray) -> None:
+        """Rows that each touch one joint's three parameters: ``cols`` (k, 3) the joints' parameter ids,
+        ``D`` (k, 3, 3) three rows per joint on them, residuals ``e`` (k, 3), weights ``w`` (k, 3); the
+        same as :meth:`add_rows` on the dense rows, summed block by block."""
+        wD = D * w[:, :, None]
+        self.H[cols[:, :, None], cols[:, None, :]] += np.swapaxes(D, 1, 2) @ wD
+        self.g[cols] += np.einsum("kri,kr->ki", wD, e)
         self.energy += float((w * e * e).sum())
 
     def add_diagonal(self, index, weight: float, target=None) -> None:

@@ -31,7 +31,7 @@ class DepthTrackOptions:
     damping: float = 0.05             # lambda_r of the small-update regulariser (metres^2 per radian^2)
     gmm_sigma: float = 0.02           # initial sigma of the GMM tracker (Table 6.2: 0.02 m), reset every frame
     gmm_outliers: float = 0.01        # u, uniform outlier weight (ch. 6)
-    gmm_neighbours: int = 8           # model components evaluated per observed point (truncated E-step, ours)
+    gmm_neighbours: int = 5           # model components evaluated per observed point (truncated E-step, ours)
     gmm_points: int = 1000            # observed points per frame for the GMM (a stride of the grid sample; ch. 6 ~1000)
     gmm_iterations: int = 5           # EM iterations per step of Algorithm 3 (ch. 6: < 15 per frame)
     gmm_converged_m: float = 0.001    # EM stops when no model point moves more than this (ch. 6: 1 mm)

@@ -70,20 +70,17 @@ class Parts:
         bone of a leg out of view and its links to the trunk) and their bone-local rotation vectors (k, 3)."""
         if not self.parts:
             return [], np.zeros(0, np.int64), np.zeros((0, 3))
-        straight = pose.take(slice(None))
+        straight = pose.take(slice(None))      # legs straight; arms and head as they are (no leg carries them)
         for role, b, sub, rows, is_straight in self.parts:
             if is_straight:
                 straight.rotations[0, sub] = (1.0, 0.0, 0.0, 0.0)
-        views = {}
+        uv, z = camera.project(body.pose(straight).points)
+        outside = ~in_view(uv, z, camera.intr)
         names, held, targets, covered = [], [], [], set()
         for role, b, sub, rows, is_straight in self.parts:
             if b in covered:            # below a part already out of view
                 continue
-            use = straight if is_straight else pose
-            if id(use) not in views:
-                uv, z = camera.project(body.pose(use).points)
-                views[id(use)] = in_view(uv, z, camera.intr)
-            if (~views[id(use)][rows]).mean() > OUTSIDE_SHARE:
+            if outside[rows].mean() > OUTSIDE_SHARE:
                 names.append(part_name(role))
                 covered.update(sub.tolist())
                 if is_straight:

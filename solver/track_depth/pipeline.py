@@ -32,8 +32,10 @@ from .trackers import frame_fitter
 @dataclasses.dataclass
 class DepthTrackResult:
     """``model`` tracked (the given one or the adapted template), ``poses`` one per frame, ``frames``
-    per-frame dicts (name, status, pairs, edges, iterations, near_share, mean_mm, ms), ``notes``,
-    ``options``, ``template`` (True when the built-in body was used), ``seconds`` by stage."""
+    per-frame dicts (name, status, pairs, edges, iterations, near_share, mean_mm, ms; out_of_view,
+    findings, others when there are), ``notes``, ``options``, ``template`` (True when the built-in body
+    was used), ``seconds`` by stage.  The report's ``frames_per_second`` is the tracking rate of the frames
+    tracked from the frame before; ``start_ms`` the mean time of a start (first frame, new starts)."""
     model: Model
     poses: Poses
     frames: list
@@ -46,7 +48,8 @@ class DepthTrackResult:
         status = [f["status"] for f in self.frames]
         tracked = [f for f in self.frames if f["status"] in ("tracked", "limbs searched", "initialised")]
         status_counts = {s: status.count(s) for s in sorted(set(status))}
-        ms = [f["ms"] for f in tracked]
+        ms = [f["ms"] for f in self.frames if f["status"] == "tracked"]       # from the frame before
+        starts = [f["ms"] for f in self.frames if f["status"] == "initialised"]
         return {
             "format": "articula-depth-track-report/1", "tracker": self.options.tracker,
             "template": self.template, "frames": len(self.frames),
@@ -56,6 +59,7 @@ class DepthTrackResult:
             "parts_out_of_view": _part_frames(self.frames),
             "others_in_view": [f["frame"] for f in self.frames if f.get("others")], "statuses": status_counts,
             "frames_per_second": 1000.0 / float(np.mean(ms)) if ms else 0.0,
+            "start_ms": float(np.mean(starts)) if starts else None,
             "median_mean_mm": float(np.median([f["mean_mm"] for f in tracked])) if tracked else None,
             "seconds": self.seconds, "notes": self.notes, "options": dataclasses.asdict(self.options),
             "per_frame": self.frames,
@@ -109,6 +113,7 @@ PREDICTION_GAIN = 0.5   # share of the last frame-to-frame change carried into t
 LOST_DROP = 0.25  # share below the typical one at which the frame is lost (and started anew)
 RESTART_GAIN = 0.05  # share a new start must explain beyond a fit that is not lost to replace it
 CHECK_SLACK = 0.01   # share a fit with fewer findings may explain less than the one it replaces
+FOLLOWED = ("tracked", "limbs searched", "initialised", "doubtful")   # a pose the next frame follows from
 
 
 class _Sequence:
@@ -143,8 +148,8 @@ class _Sequence:
             fit, status = self._initialise(obs), "initialised"
         else:
             fit, status = self._track(obs)
-        fit, status, findings = self._stands(obs, fit, status)
-        if self.adaptation is not None and not self._is_lost(fit) and not findings:
+        fit, status, findings, falls = self._stands(obs, fit, status)
+        if self.adaptation is not None and not self._is_lost(fit) and not falls:
             fit = self._adapt(k, obs, fit)
         self.lost = self._is_lost(fit)
         if self.lost:
@@ -166,16 +171,16 @@ class _Sequence:
         return self.parts.hold(self.body, pose, self.rec.camera, self.limits)[1:]
 
     def _stands(self, obs, fit, status):
-        """``(fit, status, findings)`` after the checks (:mod:`.standing`): on a fit with findings the limbs
-        are searched again, a fit that does not stand is started anew (unless it just was); either is kept
-        when it leaves fewer findings and explains the frame about as well; ``doubtful`` when findings remain."""
+        """``(fit, status, findings, falls)`` after the checks (:mod:`.standing`): a fit that does not stand is
+        started anew (unless it just was) and replaced when the new start stands better and explains the
+        frame as well; parts the camera sees through are reported, not searched again (a new limb search
+        explains the same points with other wrong limbs as often as it fixes one: docs/track_depth.md);
+        ``doubtful`` when findings remain; ``falls`` when it still does not stand."""
         found = self._findings(obs, fit)
-        if found[0] or found[1]:
-            fit, status, found = self._better(obs, fit, status, found, self._limbs(obs, fit, always=True))
         if found[0] and status != "initialised" and not any(cut_edges(obs, sides=True)[2:]):
             fit, status, found = self._better(obs, fit, status, found, (self._initialise(obs), "initialised"))
         findings = found[0] + found[1]
-        return fit, ("doubtful" if findings else status), findings
+        return fit, ("doubtful" if findings else status), findings, bool(found[0])
 
     def _findings(self, obs, fit) -> tuple:
         return self.standing.findings(self.body, fit.pose, obs, self.rec.camera, self.rec.up())
@@ -225,7 +230,7 @@ class _Sequence:
         both were tracked; the ICP tracker starts from the last pose (prediction measured worse there)."""
         if self.opts.tracker != "gmm" or len(self.poses) < 2 or self.poses[-2] is None or self.poses[-1] is None:
             return None
-        if not all(f["status"] in ("tracked", "limbs searched", "initialised") for f in self.frames[-2:]):
+        if not all(f["status"] in FOLLOWED for f in self.frames[-2:]):
             return None
         return predict(self.poses[-2], self.poses[-1], PREDICTION_GAIN)
 
@@ -246,15 +251,14 @@ class _Sequence:
         typical = self._typical_share()
         return self.opts.limb_share if typical is None else min(self.opts.limb_share, typical - LIMB_DROP)
 
-    def _limbs(self, obs, fit, always=False):
+    def _limbs(self, obs, fit):
         """A limb lost (observed points left unexplained): the limb search from the fitted pose, kept when
-        it explains more (status "limbs searched"); with ``always`` the searched fit is returned whatever
-        it explains (the caller judges it)."""
+        it explains more (status "limbs searched")."""
         bones, pose, _ = self._held(fit.pose)
         start = place_limbs(self.body, pose, obs, self.rec.camera, self.opts.near_m, self.rec.up(), held=bones)
         _, start, limits = self._held(start)
         again = self.fit(self.body, obs, self.rec.camera, start, self.opts, limits)
-        if always or again.near_share > fit.near_share + 0.005:
+        if again.near_share > fit.near_share + 0.005:
             return again, "limbs searched"
         return fit, "tracked"
 

@@ -1,7 +1,8 @@
 """The tracked poses smoothed over time once every frame is tracked (ours; a centred 3-tap filter,
 weights 1/4 1/2 1/4, on the joints' local rotations and the root translation): the per-frame fits
 jitter with the sensor noise, and a centred filter removes jitter without the lag a causal one adds.
-Runs of frames are smoothed separately: a re-initialised, lost, doubtful or empty frame starts a new run,
+Runs of frames are smoothed separately: a re-initialised, lost or empty frame starts a new run (a doubtful
+one, tracked from the frame before, continues it),
 and a frame whose joints jump from a neighbour by more than ``JUMP_DEG`` (or its root by ``JUMP_M``) is
 kept as fitted: the filter is for sensor jitter, and averaging two different poses gives neither."""
 from __future__ import annotations
@@ -28,11 +29,11 @@ def runs(statuses) -> list:
     """``(start, stop)`` of the runs of consecutive frames tracked from their predecessor."""
     out, start = [], None
     for k, s in enumerate(list(statuses) + ["end"]):
-        cont = s in ("tracked", "limbs searched")
+        cont = s in ("tracked", "limbs searched", "doubtful")
         if start is not None and not cont:
             out.append((start, k))
             start = None
-        if s in ("tracked", "limbs searched", "initialised") and start is None:
+        if s in ("tracked", "limbs searched", "initialised", "doubtful") and start is None:
             start = k
     return out
 

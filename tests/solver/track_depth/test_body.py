@@ -91,3 +91,16 @@ def test_gauss_newton_step_recovers_a_small_pose_change(model, body):
         s.add_points(body.lever_arms(posed), posed.points - target, np.ones(len(target)))
         p = body.apply(p, s.solve(1e-9), posed)
     assert np.abs(body.pose(p).points - target).max() < 1e-5
+
+
+def test_block_rows_match_dense_rows():
+    rng = np.random.default_rng(2)
+    B, bones = 6, np.array([1, 3, 4])
+    cols = 3 + 3 * bones[:, None] + np.arange(3)
+    D, e, w = rng.normal(size=(3, 3, 3)), rng.normal(size=(3, 3)), rng.random((3, 3))
+    dense = np.zeros((3, 3, 3 + 3 * B))
+    dense[np.arange(3)[:, None, None], np.arange(3)[None, :, None], cols[:, None, :]] = D
+    a, b = System(B), System(B)
+    a.add_blocks(cols, D, e, w)
+    b.add_rows(dense.reshape(9, -1), e.ravel(), w.ravel())
+    assert np.allclose(a.H, b.H) and np.allclose(a.g, b.g) and np.isclose(a.energy, b.energy)
