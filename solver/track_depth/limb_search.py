@@ -16,7 +16,7 @@ from ..geometry.rotations import matrix_to_quat, quat_to_rotvec, rotation_betwee
 from ..tracking.limbs import bone_depths, sphere_directions, subtrees
 from .orientation import view_frame
 
-DIRECTIONS = 64
+DIRECTIONS = 128
 PAIRED = 6               # a limb's best directions for which its child's direction is searched too
 LIMB_POINTS = (40, 400)  # subtree sizes (subset points) searched with their child
 MIN_GAIN = 0.01          # absolute score decrease a new configuration must bring

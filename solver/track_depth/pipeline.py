@@ -111,7 +111,6 @@ RECENT = 15       # frames whose typical explained share sets the limb-search th
 LIMB_DROP = 0.03  # share below the typical one at which the limbs are searched again
 PREDICTION_GAIN = 0.5   # share of the last frame-to-frame change carried into the GMM tracker's prediction
 LOST_DROP = 0.25  # share below the typical one at which the frame is lost (and started anew)
-RESTART_GAIN = 0.05  # share a new start must explain beyond a fit that is not lost to replace it
 CHECK_SLACK = 0.01   # share a fit with fewer findings may explain less than the one it replaces
 FOLLOWED = ("tracked", "limbs searched", "initialised", "doubtful")   # a pose the next frame follows from
 
@@ -220,8 +219,7 @@ class _Sequence:
         lost = self._is_lost(fit)
         if (lost or fit.near_share < self._limb_threshold()) and not any(cut_edges(obs, sides=True)[2:]):
             again = self._initialise(obs)
-            gain = 0.0 if lost else RESTART_GAIN
-            if again.near_share > fit.near_share + gain:
+            if again.near_share > fit.near_share:
                 fit, status = again, "initialised"
         return fit, status
 
