@@ -175,7 +175,7 @@ def kinect():
     from articula.solver.roles import role_bones
     from articula.solver.track_depth.pipeline import track_recording
     from articula.solver.track_depth.source import DepthRecording
-    repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    repo = os.path.dirname(os.path.dirname(os.path.realpath(__file__)))
     folder = os.path.join(os.path.dirname(repo), "shared", "data", "depth", "skeltrack_kinect")
     rec = DepthRecording.from_folder(folder, preset="kinect_v1")
     res = track_recording(rec)

@@ -80,12 +80,16 @@ def test_held_legs_stay_below_the_hips_in_a_fit(model):
     assert standing.findings(body, fit.pose, obs, camera, UP) == ([], [])
 
 
-def test_upside_down_is_a_finding_and_the_rest_pose_is_not(model):
+def _rest_seen(model, noise=False):
+    """``(body, standing, camera, rest pose, observation of the rest pose)`` from in front."""
     body = TrackingBody(model)
-    standing = Standing(body, Parts(body))
     camera = front_camera(model)
     rest = Poses.identity(1, model.skeleton.num_bones)
-    obs = observation(model, rest, camera)
+    return body, Standing(body, Parts(body)), camera, rest, observation(model, rest, camera, noise=noise)
+
+
+def test_upside_down_is_a_finding_and_the_rest_pose_is_not(model):
+    body, standing, camera, rest, obs = _rest_seen(model)
     assert standing.findings(body, rest, obs, camera, UP) == ([], [])
     flipped = rest.take(0)
     F = model.skeleton.frames[0]
@@ -96,11 +100,7 @@ def test_upside_down_is_a_finding_and_the_rest_pose_is_not(model):
 
 
 def test_a_part_in_free_space_is_named(model):
-    body = TrackingBody(model)
-    standing = Standing(body, Parts(body))
-    camera = front_camera(model)
-    rest = Poses.identity(1, model.skeleton.num_bones)
-    obs = observation(model, rest, camera)
+    body, standing, camera, rest, obs = _rest_seen(model)
     moved = rest.take(0)
     b = role_bones(model.skeleton.names)["upper_arm.L"]
     moved.rotations[0, b] = rotvec_to_quat(np.array([0.0, 1.2, 0.0]))     # the left arm swung where nobody is
@@ -110,11 +110,7 @@ def test_a_part_in_free_space_is_named(model):
 
 def test_a_few_centimetres_off_is_not_seeing_through(model):
     """The whole body moved 3 cm sideways is a small error (no finding); 40 cm, the camera sees past it."""
-    body = TrackingBody(model)
-    standing = Standing(body, Parts(body))
-    camera = front_camera(model)
-    rest = Poses.identity(1, model.skeleton.num_bones)
-    obs = observation(model, rest, camera, noise=True)
+    body, standing, camera, rest, obs = _rest_seen(model, noise=True)
     for shift, expect in ((0.03, False), (0.4, True)):
         moved = rest.take(0)
         moved.translations[0] = (shift, 0.0, 0.0)
