@@ -10,8 +10,6 @@ are poses of the model itself.  Parameter vector (3 + 3B): ``[dt (3), omega_0 (3
 """
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
 from ..errors import ArticulaInputError
@@ -61,16 +59,21 @@ def spread_subset(vertices: np.ndarray, count: int, seed: int = 0) -> np.ndarray
     return np.sort(rng.choice(ids, size=min(count, len(ids)), replace=False))
 
 
-@dataclasses.dataclass
 class PosedBody:
     """One pose of the body: ``points`` (M, 3) and ``normals`` (M, 3) of the subset, ``per_bone`` (M, I, 3)
     each vertex moved by each of its influences, ``joints`` (B, 3) posed heads, ``world`` (B, 3, 3) world
-    rotations of the parts (scale removed)."""
-    points: np.ndarray
-    normals: np.ndarray
-    per_bone: np.ndarray
-    joints: np.ndarray
-    world: np.ndarray
+    rotations of the parts (scale removed).  The normals are computed when first asked for (most posings
+    need only the points)."""
+
+    def __init__(self, points, per_bone, joints, world, normals_of):
+        self.points, self.per_bone, self.joints, self.world = points, per_bone, joints, world
+        self._normals_of, self._normals = normals_of, None
+
+    @property
+    def normals(self) -> np.ndarray:
+        if self._normals is None:
+            self._normals = self._normals_of()
+        return self._normals
 
 
 class TrackingBody:
@@ -116,15 +119,17 @@ class TrackingBody:
         B = len(Rm)
         flat = Rm.transpose(2, 0, 1).reshape(3, 3 * B)                  # [c, (b, r)] = Rm[b, r, c]
         moved = (self.rest @ flat).reshape(-1, B, 3) + tm[None]         # (M, B, 3) every bone's map
-        turned = (self.rest_normals @ flat).reshape(-1, B, 3)
         rows = np.arange(len(self.rest))[:, None]
         per_bone = moved[rows, self.bones]                              # (M, I, 3)
         points = np.einsum("mi,mir->mr", self.weights, per_bone)
-        n = np.einsum("mi,mir->mr", self.weights, turned[rows, self.bones])
         heads = self.model.skeleton.heads
         joints = np.einsum("brc,bc->br", Rm, heads) + tm
         world = Rm / poses.scales[0]
-        return PosedBody(points, n, per_bone, joints, world)
+
+        def normals():
+            turned = (self.rest_normals @ flat).reshape(-1, B, 3)
+            return np.einsum("mi,mir->mr", self.weights, turned[rows, self.bones])
+        return PosedBody(points, per_bone, joints, world, normals)
 
     def lever_arms(self, posed: PosedBody, rows=None) -> np.ndarray:
         """(m, 3, B) lever arms of the chosen subset points (``rows``, default all): the point's motion

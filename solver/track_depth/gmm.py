@@ -110,11 +110,12 @@ def _active(posed, camera, step: int) -> np.ndarray:
 @dataclasses.dataclass
 class EMState:
     """``pose`` (one frame), ``sigma2`` (m^2), EM ``iterations`` so far, posterior ``mass`` P of the last
-    E-step (Eq. 6.6)."""
+    E-step (Eq. 6.6), ``posed`` the body posed by ``pose`` once known."""
     pose: Poses
     sigma2: float
     iterations: int = 0
     mass: float = 0.0
+    posed: object = None
 
 
 def _m_step(body, posed, pose, rows, P1, PX, sigma2, opts, prior, predicted):
@@ -140,7 +141,7 @@ def em(body, x, camera, state: EMState, opts, prior, predicted, step: int, max_i
     """EM iterations (Algorithm 2) of step ``step`` (1 or 2) of Algorithm 3 on the observed points ``x``
     (N, 3), from and into ``state``, until no active model point moves more than ``gmm_converged_m``;
     the active points are chosen again every iteration."""
-    posed = body.pose(state.pose)
+    posed = state.posed if state.posed is not None else body.pose(state.pose)
     for _ in range(max_iterations):
         rows = _active(posed, camera, step)
         if len(rows) < 10:
@@ -158,6 +159,7 @@ def em(body, x, camera, state: EMState, opts, prior, predicted, step: int, max_i
         state.sigma2 = max(sigma2_update(x, posed.points[rows], idx, p), SIGMA_FLOOR ** 2)
         if np.linalg.norm(posed.points[rows] - moved, axis=1).max() < opts.gmm_converged_m:
             break
+    state.posed = posed
     return state
 
 
@@ -181,6 +183,7 @@ def fit_frame(body, obs, camera, pose, opts, prior=None, iterations=None, predic
         x = sample(obs, opts.gmm_points)
         for step in ((1, 2) if camera is not None else (1,)):
             state = em(body, x, camera, state, opts, prior, predicted, step, cap)
-    share, mean = coverage(body, body.pose(state.pose), obs, opts.near_m)
+    posed = state.posed if state.posed is not None else body.pose(state.pose)
+    share, mean = coverage(body, posed, obs, opts.near_m)
     return FrameFit(state.pose, state.iterations, int(round(state.mass)), 0, share, mean,
-                    time.perf_counter() - t0)
+                    time.perf_counter() - t0, posed)

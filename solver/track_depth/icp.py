@@ -28,7 +28,7 @@ MAX_TURN = 0.5           # largest joint rotation (rad) of one linear step; long
 class FrameFit:
     """``pose`` (one frame), ``iterations``, ``pairs`` / ``edges`` of the last iteration, ``near_share``
     of observed points within ``near_m`` of the model, their ``mean_m`` distance (capped at 0.2 m),
-    ``seconds``."""
+    ``seconds``; ``posed`` the body posed by ``pose`` (:class:`.body.PosedBody`, for the checks)."""
     pose: object
     iterations: int
     pairs: int
@@ -36,6 +36,7 @@ class FrameFit:
     near_share: float
     mean_m: float
     seconds: float
+    posed: object = None
 
 
 def surface_pairs(body, posed, vis, obs, opts):
@@ -198,5 +199,6 @@ def fit_frame(body, obs, camera, pose, opts, prior=None, iterations=None) -> Fra
         pose = body.apply(pose, delta, posed)
         if np.linalg.norm(predicted_motion(delta, a), axis=1).max() < opts.converged_m:
             break
-    share, mean = coverage(body, body.pose(pose), obs, opts.near_m)
-    return FrameFit(pose, it, len(rows), n_edges, share, mean, time.perf_counter() - t0)
+    posed = body.pose(pose)
+    share, mean = coverage(body, posed, obs, opts.near_m)
+    return FrameFit(pose, it, len(rows), n_edges, share, mean, time.perf_counter() - t0, posed)

@@ -106,7 +106,8 @@ def free_space(posed, obs, camera) -> float:
 
 def score(body, fit, obs, camera) -> float:
     """Lower is better: unexplained observed points + model points in free space."""
-    return (1.0 - fit.near_share) + free_space(body.pose(fit.pose), obs, camera)
+    posed = fit.posed if fit.posed is not None else body.pose(fit.pose)
+    return (1.0 - fit.near_share) + free_space(posed, obs, camera)
 
 
 def hypotheses(model, up, towards, centre, scale: float = 1.0):

@@ -122,32 +122,47 @@ class Observation:
         return out
 
     def seen_through(self, points: np.ndarray, camera: "ViewCamera", margin_m: float) -> np.ndarray:
-        """(N,) True for points (tracking frame) in view where the camera clearly sees past them: more
-        than ``margin_m`` (at the point's depth) outside the person's silhouette, onto a measured depth more
-        than ``FREE_BEHIND_M`` behind them or onto a pixel that far from any measured depth.  Stricter than
-        :meth:`in_free_space`: a part fitted a few centimetres off a thin silhouette, or over the holes a
-        depth sensor leaves around a person, does not count."""
+        """(N,) True for points (tracking frame) in view where the camera clearly sees past them: no pixel
+        of the person's silhouette within ``margin_m`` (at the point's depth; a square of pixels around its
+        pixel), and there a measured depth more than ``FREE_BEHIND_M`` behind the point or no measured
+        depth in the square.  Stricter than :meth:`in_free_space`: a part fitted a few centimetres off a
+        thin silhouette, or over the holes a depth sensor leaves around a person, does not count."""
         uv, z = camera.project(points)
         H, W = self.mask.shape
         u, v = np.round(uv[:, 0]), np.round(uv[:, 1])
         i = np.flatnonzero((z > 0) & (u >= 0) & (u < W) & (v >= 0) & (v < H))
         ui, vi = u[i].astype(int), v[i].astype(int)
-        if not hasattr(self, "_distances"):
-            self._distances = (ndimage.distance_transform_edt(~self.mask),
-                               ndimage.distance_transform_edt(~np.isfinite(self.depth)))
-        to_person, to_measured = self._distances
-        margin = camera.intr.fx * margin_m / z[i]
+        if not hasattr(self, "_counts"):
+            self._counts = (_summed_area(self.mask), _summed_area(np.isfinite(self.depth)))
+        r = np.ceil(camera.intr.fx * margin_m / z[i]).astype(int)
         seen = self.depth[vi, ui]
         with np.errstate(invalid="ignore"):
             behind = seen > z[i] + FREE_BEHIND_M
         out = np.zeros(len(points), bool)
-        out[i] = (to_person[vi, ui] > margin) & (behind | (to_measured[vi, ui] > margin))
+        person, measured = (_box_count(c, ui, vi, r) for c in self._counts)
+        out[i] = (person == 0) & (behind | (measured == 0))
         return out
 
     def edge_tree(self) -> cKDTree:
         if not hasattr(self, "_edge_tree"):
             self._edge_tree = cKDTree(self.edge_pixels)
         return self._edge_tree
+
+
+def _summed_area(mask: np.ndarray) -> np.ndarray:
+    """(H + 1, W + 1) int64 summed-area table of a boolean image (a zero row and column first)."""
+    out = np.zeros((mask.shape[0] + 1, mask.shape[1] + 1), np.int64)
+    np.cumsum(np.cumsum(mask, axis=0), axis=1, out=out[1:, 1:])
+    return out
+
+
+def _box_count(table: np.ndarray, u: np.ndarray, v: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """(N,) how many true pixels the image of ``table`` (:func:`_summed_area`) holds in the squares of
+    half-width ``r`` around pixels ``(u, v)`` (clipped to the image)."""
+    H, W = table.shape[0] - 1, table.shape[1] - 1
+    u0, u1 = np.clip(u - r, 0, W), np.clip(u + r + 1, 0, W)
+    v0, v1 = np.clip(v - r, 0, H), np.clip(v + r + 1, 0, H)
+    return table[v1, u1] - table[v0, u1] - table[v1, u0] + table[v0, u0]
 
 
 def _jump_cut(keep: np.ndarray, depth_m: np.ndarray, noise: float) -> np.ndarray:

@@ -182,15 +182,13 @@ class _Sequence:
         return fit, ("doubtful" if findings else status), findings, bool(found[0])
 
     def _findings(self, obs, fit) -> tuple:
-        return self.standing.findings(self.body, fit.pose, obs, self.rec.camera, self.rec.up())
+        return self.standing.findings(self.body, fit.pose, obs, self.rec.camera, self.rec.up(), fit.posed)
 
     def _better(self, obs, fit, status, found, candidate):
         """The candidate ``(fit, status)`` when it has fewer findings (stance first) and explains the frame
         about as well (explained points, and :func:`.initialise.score` with the free space), else the fit
         as it was."""
         other, other_status = candidate
-        if other is fit:
-            return fit, status, found
         again = self._findings(obs, other)
         fewer = (len(again[0]), len(again[1])) < (len(found[0]), len(found[1]))
         cam = self.rec.camera

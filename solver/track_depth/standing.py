@@ -38,10 +38,10 @@ class Standing:
         self.feet = [(part_name(r), roles[r]) for r in ("foot.L", "foot.R") if r in roles]
         self.parts = parts
 
-    def findings(self, body, pose, obs, camera, up) -> tuple:
-        """``(stance, parts)``: readable findings on how ``pose`` (one frame) stands and on parts the
-        camera sees through, on ``obs`` (both empty when the fit passes)."""
-        posed = body.pose(pose)
+    def findings(self, body, pose, obs, camera, up, posed=None) -> tuple:
+        """``(stance, parts)``: readable findings on how ``pose`` (one frame; ``posed`` the body posed by
+        it when known) stands and on parts the camera sees through, on ``obs`` (both empty when it passes)."""
+        posed = body.pose(pose) if posed is None else posed
         return self._stance(posed, obs, up), self._in_free_space(posed, obs, camera)
 
     def _stance(self, posed, obs, up) -> list:
@@ -63,15 +63,14 @@ class Standing:
     def _in_free_space(self, posed, obs, camera) -> list:
         uv, z = camera.project(posed.points)
         seen = in_view(uv, z, camera.intr)
-        H, W = obs.mask.shape
-        px = np.round(uv[seen]).astype(np.int64)
-        outside = np.zeros(len(seen), bool)
-        outside[seen] = ~obs.mask_dilated()[np.clip(px[:, 1], 0, H - 1), np.clip(px[:, 0], 0, W - 1)]
+        through = None
         out = []
         for role, _, _, rows, _ in self.parts.parts:
             r = rows[seen[rows]]
-            if len(r) < MIN_IN_VIEW or outside[r].mean() <= FREE_SHARE:      # cheap test first
+            if len(r) < MIN_IN_VIEW:
                 continue
-            if obs.seen_through(posed.points[r], camera, FREE_MARGIN_M).mean() > FREE_SHARE:
+            if through is None:
+                through = obs.seen_through(posed.points, camera, FREE_MARGIN_M)
+            if through[r].mean() > FREE_SHARE:
                 out.append(f"{part_name(role)} where the camera sees through")
         return out

@@ -106,3 +106,12 @@ def test_visibility_excludes_back_and_occluded_points(model):
     n = posed.normals.copy()
     n[back] = -n[back]
     assert len(back) > 10 and visible(posed.points, n, camera, 0.03)[back].mean() < 0.2
+
+
+def test_box_counts_match_brute_force():
+    from articula.solver.track_depth.observation import _box_count, _summed_area
+    rng = np.random.default_rng(4)
+    img = rng.random((23, 31)) < 0.2
+    u, v, r = rng.integers(0, 31, 40), rng.integers(0, 23, 40), rng.integers(0, 6, 40)
+    want = [img[max(b - k, 0):b + k + 1, max(a - k, 0):a + k + 1].sum() for a, b, k in zip(u, v, r)]
+    assert np.array_equal(_box_count(_summed_area(img), u, v, r), want)
