@@ -24,7 +24,7 @@ FOOT_ABOVE_M = 0.0       # a foot higher than the hips by more than this is fold
 REACHES_FLOOR_M = 0.15   # the person's lowest points this near the floor: they stand on it
 FOOT_OFF_FLOOR_M = 0.35  # ...and then the lower foot joint (ankle) is no higher than this
 FREE_SHARE = 0.6         # a part with more of its in-view points in free space sits on nothing
-FREE_MARGIN_M = 0.08     # ... where no depth was measured within this distance (at the point's depth)
+FREE_MARGIN_M = 0.06     # ... where no depth was measured within this distance (at the point's depth)
 MIN_IN_VIEW = 30       # smaller parts (hands) are too few points to judge
 
 
