@@ -189,16 +189,10 @@ def test_bad_input_fails_and_writes_nothing(pkg, bench, tmp_path, capsys):
         assert not os.path.exists(out) and not os.path.exists(rep), args
 
 
-def test_tracker_flag_reaches_the_solver(pkg, bench, tmp_path, monkeypatch):
-    """``--tracker gmm`` is the depth tracker's option (the run itself is the solver's to test)."""
-    solve = pkg("addon.track_depth.solve")
-    seen = []
-
-    def stop(recording, model, options, progress=None):
-        seen.append(options.tracker)
-        raise pkg("solver.errors").Cancelled("stub")
-
-    monkeypatch.setattr(solve, "track_recording", stop)
+def test_tracker_flag_reaches_the_solver(pkg, bench, tmp_path, solver_options):
+    """``--tracker gmm`` and ``--person`` are the depth tracker's options (the run itself is the solver's to
+    test)."""
     out = str(tmp_path / "t.npz")
-    assert pkg("addon.cli.main").main(["track", "--depth", bench["out_dir"], "--tracker", "GMM", "--out", out]) == 3
-    assert seen == ["gmm"] and not os.path.exists(out)
+    assert pkg("addon.cli.main").main(["track", "--depth", bench["out_dir"], "--tracker", "GMM", "--person", "left",
+                                       "--out", out]) == 3
+    assert [(o.tracker, o.person) for o in solver_options] == [("gmm", "left")] and not os.path.exists(out)
