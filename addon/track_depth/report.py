@@ -56,7 +56,7 @@ def summary_text(outcome) -> str:
         parts.append(f"mean distance to the model {np.nanmedian(dist):.1f} mm (median over frames; worst "
                      f"frame {np.nanmax(dist):.1f} mm)")
     for kind, text in (("initialised", "started anew"), ("limbs searched", "with the limbs searched again"),
-                       ("doubtful", "doubtful (the fit does not stand as a person; see the notes)"),
+                       ("doubtful", "doubtful (the fit fails the checks; see the notes)"),
                        ("lost", "lost (last pose kept)"), ("no person", "with nobody in view (last pose kept)"),
                        ("partly out of view", "partly out of view before a start (last pose kept)")):
         which = [first + k for k, s in enumerate(status) if s == kind]

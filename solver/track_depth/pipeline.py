@@ -89,13 +89,13 @@ def frame_notes(frames, person: str) -> list:
                      f" the person {PERSON_WORDS[person]} was tracked from the start and followed")
     parts = _part_frames(frames)
     if parts:
-        notes.append("out of the camera's view, held (legs straight, arms and head as they were), not tracked: "
+        notes.append("out of the camera's view, not tracked (a leg is held straight): "
                      + ", ".join(f"{p} ({n} frame{'s' if n != 1 else ''})" for p, n in parts.items()))
     doubtful = [f for f in frames if f["status"] == "doubtful"]
     if doubtful:
-        notes.append(f"{len(doubtful)} frame{'s' if len(doubtful) != 1 else ''} doubtful (the fit does not stand "
-                     "as a person, also after a new start): " + "; ".join(f"{f['name']}: {', '.join(f['findings'])}"
-                                                                          for f in doubtful[:4]))
+        notes.append(f"{len(doubtful)} frame{'s' if len(doubtful) != 1 else ''} doubtful (the fit fails the checks "
+                     "of a standing person): " + "; ".join(f"{f['name']}: {', '.join(f['findings'])}"
+                                                           for f in doubtful[:4]))
     return notes
 
 
