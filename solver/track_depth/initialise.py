@@ -125,7 +125,7 @@ def _holding(parts, limits, body, pose, camera):
     """``(held bones, pose, limits)``: the parts of ``pose`` out of view set and held (:mod:`.out_of_view`)."""
     if parts is None or limits is None:
         return (), pose, limits
-    return parts.hold(body, pose, camera, limits)[1:]
+    return parts.hold(body, pose, camera, limits)
 
 
 def initialise(body, obs, camera, up, options, limits=None, scale: float = 1.0, parts=None) -> Start:

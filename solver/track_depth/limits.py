@@ -79,6 +79,3 @@ class _Both:
     def add_to(self, system, posed, pose) -> None:
         self.first.add_to(system, posed, pose)
         self.second.add_to(system, posed, pose)
-
-    def holding(self, bones, targets):
-        return self.first.holding(bones, targets)

@@ -184,7 +184,8 @@ def _jump_cut(keep: np.ndarray, depth_m: np.ndarray, noise: float) -> np.ndarray
 
 
 def _components(keep, depth_m, noise):
-    """Labels (H, W) of the 4-connected components of ``keep`` cut at depth jumps, their sizes (C,)."""
+    """``(labels (H, W), cut (H, W) bool, sizes (C,))``: the 4-connected components of ``keep`` with the
+    pixels cut at depth jumps (:func:`_jump_cut`) taken out."""
     cut = _jump_cut(keep, depth_m, noise)
     labels, count = ndimage.label(keep & ~cut)
     return labels, cut, (np.bincount(labels.ravel())[1:] if count else np.zeros(0, np.int64))
@@ -203,7 +204,7 @@ def _candidates(labels, sizes, grid, min_pixels) -> list:
         mask = labels == lab
         pts = grid[mask][::16]
         if len(pts) and np.linalg.norm(np.ptp(pts, axis=0)) >= PERSON_EXTENT_M:
-            out.append((int(lab), int(sizes[lab - 1]), np.median(pts, axis=0), float(np.nonzero(mask)[1].mean())))
+            out.append((int(lab), int(sizes[lab - 1]), _centre(grid, mask), float(np.nonzero(mask)[1].mean())))
     return out
 
 

@@ -91,11 +91,11 @@ class Parts:
         return names, np.array(held, np.int64), np.concatenate(targets)
 
     def hold(self, body, pose, camera, limits) -> tuple:
-        """``(names, bones, pose, limits)``: the parts of ``pose`` out of view, the bones held, ``pose`` with
-        them set to what they are held at, and ``limits`` (:class:`.limits.JointLimits`) holding them."""
-        names, bones, targets = self.out_of_view(body, pose, camera)
+        """``(bones, pose, limits)``: the bones held (:meth:`out_of_view`), ``pose`` with them set to what
+        they are held at, and ``limits`` (:class:`.limits.JointLimits`) holding them."""
+        _, bones, targets = self.out_of_view(body, pose, camera)
         if not len(bones):
-            return names, bones, pose, limits
+            return bones, pose, limits
         held = pose.take(slice(None))
         held.rotations[0, bones] = rotvec_to_quat(targets)
-        return names, bones, held, limits.holding(bones, targets)
+        return bones, held, limits.holding(bones, targets)

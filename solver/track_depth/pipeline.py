@@ -23,7 +23,7 @@ from .motion import predict
 from .limits import JointLimits
 from .options import DepthTrackOptions
 from .out_of_view import Parts
-from .smoothing import smooth
+from .smoothing import FOLLOWED, smooth
 from .standing import Standing
 from .template import load_template
 from .trackers import frame_fitter
@@ -112,7 +112,6 @@ LIMB_DROP = 0.03  # share below the typical one at which the limbs are searched 
 PREDICTION_GAIN = 0.5   # share of the last frame-to-frame change carried into the GMM tracker's prediction
 LOST_DROP = 0.25  # share below the typical one at which the frame is lost (and started anew)
 CHECK_SLACK = 0.01   # share a fit with fewer findings may explain less than the one it replaces
-FOLLOWED = ("tracked", "limbs searched", "initialised", "doubtful")   # a pose the next frame follows from
 
 
 class _Sequence:
@@ -131,6 +130,7 @@ class _Sequence:
         self.fit = frame_fitter(options)
         self.parts = Parts(self.body)
         self.standing = Standing(self.body, self.parts)
+        self.up = recording.up()                  # the recording is prepared: its floor is known
 
     def step(self, k, obs):
         name = self.rec.names[k]
@@ -142,7 +142,7 @@ class _Sequence:
         if starting and any(cut_edges(obs, sides=True)[2:]):
             return _entry(k, name, "partly out of view")     # no start from half a person: wait for all of it
         if self.adaptation is not None and self.pose is None and self.adaptation.done == 0:
-            self.body = TrackingBody(self.adaptation.start_model(obs, self.rec.up()), ids=self.body.ids)
+            self.body = TrackingBody(self.adaptation.start_model(obs, self.up), ids=self.body.ids)
         if starting:
             fit, status = self._initialise(obs), "initialised"
         else:
@@ -167,7 +167,7 @@ class _Sequence:
     def _held(self, pose):
         """``(held bones, pose, limits)``: the parts of ``pose`` out of view set where they are held and
         the joint limits holding them (:meth:`.out_of_view.Parts.hold`)."""
-        return self.parts.hold(self.body, pose, self.rec.camera, self.limits)[1:]
+        return self.parts.hold(self.body, pose, self.rec.camera, self.limits)
 
     def _stands(self, obs, fit, status):
         """``(fit, status, findings, falls)`` after the checks (:mod:`.standing`): a fit that does not stand is
@@ -182,7 +182,7 @@ class _Sequence:
         return fit, ("doubtful" if findings else status), findings, bool(found[0])
 
     def _findings(self, obs, fit) -> tuple:
-        return self.standing.findings(self.body, fit.pose, obs, self.rec.camera, self.rec.up(), fit.posed)
+        return self.standing.findings(self.body, fit.pose, obs, self.rec.camera, self.up, fit.posed)
 
     def _better(self, obs, fit, status, found, candidate):
         """The candidate ``(fit, status)`` when it has fewer findings (stance first) and explains the frame
@@ -198,7 +198,7 @@ class _Sequence:
         return fit, status, found
 
     def _initialise(self, obs):
-        return initialise(self.body, obs, self.rec.camera, self.rec.up(), self.opts, self.limits,
+        return initialise(self.body, obs, self.rec.camera, self.up, self.opts, self.limits,
                           parts=self.parts).fit
 
     def _track(self, obs):
@@ -214,8 +214,8 @@ class _Sequence:
         status = "tracked"
         if not self._is_lost(fit) and fit.near_share < self._limb_threshold():
             fit, status = self._limbs(obs, fit)
-        lost = self._is_lost(fit)
-        if (lost or fit.near_share < self._limb_threshold()) and not any(cut_edges(obs, sides=True)[2:]):
+        unexplained = self._is_lost(fit) or fit.near_share < self._limb_threshold()
+        if unexplained and not any(cut_edges(obs, sides=True)[2:]):
             again = self._initialise(obs)
             if again.near_share > fit.near_share:
                 fit, status = again, "initialised"
@@ -251,7 +251,7 @@ class _Sequence:
         """A limb lost (observed points left unexplained): the limb search from the fitted pose, kept when
         it explains more (status "limbs searched")."""
         bones, pose, _ = self._held(fit.pose)
-        start = place_limbs(self.body, pose, obs, self.rec.camera, self.opts.near_m, self.rec.up(), held=bones)
+        start = place_limbs(self.body, pose, obs, self.rec.camera, self.opts.near_m, self.up, held=bones)
         _, start, limits = self._held(start)
         again = self.fit(self.body, obs, self.rec.camera, start, self.opts, limits)
         if again.near_share > fit.near_share + 0.005:

@@ -13,6 +13,7 @@ from ..geometry.rotations import quat_normalize
 from ..rig.model import Poses
 
 WEIGHTS = np.array([0.25, 0.5, 0.25])
+FOLLOWED = ("tracked", "limbs searched", "initialised", "doubtful")   # a pose the next frame follows from
 JUMP_DEG = 30.0   # a joint turning more than this between neighbouring frames is a jump, not jitter
 JUMP_M = 0.15     # the root moving more than this between neighbouring frames is a jump
 
@@ -29,11 +30,11 @@ def runs(statuses) -> list:
     """``(start, stop)`` of the runs of consecutive frames tracked from their predecessor."""
     out, start = [], None
     for k, s in enumerate(list(statuses) + ["end"]):
-        cont = s in ("tracked", "limbs searched", "doubtful")
+        cont = s in FOLLOWED and s != "initialised"
         if start is not None and not cont:
             out.append((start, k))
             start = None
-        if s in ("tracked", "limbs searched", "initialised", "doubtful") and start is None:
+        if s in FOLLOWED and start is None:
             start = k
     return out
 
