@@ -69,14 +69,14 @@ def main(argv=None):
     ap.add_argument("--columns", type=int, default=4)
     a = ap.parse_args(argv)
     from articula.solver.formats.bundle import load_bundle
-    from articula.solver.track_depth.body import TrackingBody
+    from articula.solver.tracking.blend_body import BlendBody
     from articula.solver.track_depth.pipeline import track_recording
     from articula.solver.track_depth.source import DepthRecording
     rec = DepthRecording.from_folder(a.folder, preset=a.camera)
     model = load_bundle(a.model).model if a.model else None
     res = track_recording(rec, model)
     print(res.report()["per_frame"][:3], res.notes)
-    body = TrackingBody(res.model, count=4000)
+    body = BlendBody(res.model, count=4000)
     picks = [int(k) for k in a.frames.split(",")] if a.frames else list(range(len(rec)))
     panels = {}
     for k, obs in rec.observations(2500):

@@ -10,7 +10,7 @@ import dataclasses
 import numpy as np
 
 from . import icp
-from .body import TrackingBody
+from ..tracking.blend_body import BlendBody
 from .body_shape import ShapeTerms, same_world_pose, solve_coefficients
 from .body_size import SCALE_RANGE, FramePairs, scaled_model, solve_scales
 from .initialise import cut_edges
@@ -82,7 +82,7 @@ class TemplateAdaptation:
         if self.since < self.opts.surface_every:
             return None
         self.since = 0
-        return TrackingBody(self.surface.displaced(), ids=body.ids)
+        return BlendBody(self.surface.displaced(), ids=body.ids)
 
     def contact(self, posed, obs, ids):
         """(vertex id, n, d): the lowest model point stands on the floor, when the person's lowest
@@ -118,7 +118,7 @@ class TemplateAdaptation:
             self._record(k, body, pose, obs, camera)
             model = self._solve()
             pose = same_world_pose(body.model.skeleton, model.skeleton, pose)
-            body = TrackingBody(model, ids=body.ids)
+            body = BlendBody(model, ids=body.ids)
             fit = fit_frame(body, obs, camera, pose, self.opts, limits)
             pose = fit.pose
         self.done += 1

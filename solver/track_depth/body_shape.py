@@ -13,7 +13,7 @@ from scipy.optimize import lsq_linear
 from ..geometry.rotations import matrix_to_quat
 from ..rig.kinematics import forward_kinematics, world_rotations
 from ..rig.model import Poses
-from .body import linear_blend_weights
+from ..tracking.blend_body import linear_blend_weights
 from .body_size import PartFrames, pooled
 
 RIDGE = 0.01     # pull of every coefficient to 0 (the default body), relative to the data term's diagonal

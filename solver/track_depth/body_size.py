@@ -17,7 +17,7 @@ import numpy as np
 
 from ..rig.kinematics import forward_kinematics
 from ..rig.model import Model, Skeleton
-from .body import linear_blend_weights
+from ..tracking.blend_body import linear_blend_weights
 
 SYMMETRY_WEIGHT = 1.0      # nu of left/right pairs (Eq. 5.19)
 CONNECTED_WEIGHT = 0.5     # nu of a part and its parent

@@ -16,7 +16,7 @@ sigma = 2 cm that moves single posteriors by a few hundredths, less as sigma shr
 accurate as 8 on the benchmark, docs/track_depth.md).
 
 Units: the M-step rows are the CPD reduction, one point row per model point m towards ``x~_m / P1_m``
-with weight ``P1_m / sigma^2`` (:meth:`.normal_equations.System.add_points`), i.e. twice the
+with weight ``P1_m / sigma^2`` (:meth:`solver.tracking.normal_equations.System.add_points`), i.e. twice the
 dissertation's ``Q = sum p_mn |x_n - v_m|^2 / (2 sigma^2)``, so the regularisers enter with twice its
 weights: damping ``2 lambda_r`` on every parameter (metres, radians) and ``2 lambda_p`` per rad^2 on each
 non-root joint's bone-local rotation away from the prediction.  The options hold the lambdas in the
@@ -32,11 +32,11 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry.rotations import quat_conj, quat_mul, quat_to_rotvec
 from ..rig.model import Poses
-from ..tracking.pose_prior import rotvec_increment_jacobian
+from ..tracking.lm import iterate
+from ..tracking.normal_equations import System
+from ..tracking.priors import TowardPose
 from .icp import MAX_TURN, FrameFit, coverage
-from .normal_equations import System
 from .visibility import facing, in_view
 
 SIGMA_FLOOR = 0.002      # metres: sigma never drops below this (exact data would make it vanish)
@@ -80,21 +80,15 @@ def sigma2_update(x: np.ndarray, v: np.ndarray, idx: np.ndarray, p: np.ndarray) 
     return float((p * d2).sum() / max(3.0 * p.sum(), 1e-12))
 
 
-def add_prediction(system: System, body, posed, pose: Poses, predicted: Poses, weight: float) -> None:
-    """E_p (Eq. 6.13) as rows ``weight |log(q_b q_pred_b^-1)|^2`` on every non-root joint's local rotation;
-    a world increment omega_b changes the local rotation by the left increment ``F_bᵀ W_pᵀ omega_b``
-    (:meth:`.body.TrackingBody.apply`), so the rows are ``J_l^-1(d) F_bᵀ W_pᵀ``."""
+def prediction_term(body, predicted: Poses, weight: float) -> TowardPose:
+    """E_p (Eq. 6.13) as :class:`solver.tracking.priors.TowardPose`: rows ``log(q_pred_b^-1 q_b)`` on every
+    non-root joint's local rotation, each adding ``weight J^T J`` to the normal matrix."""
     sk = body.model.skeleton
+    W = np.zeros((body.size, body.size))
     b = np.flatnonzero(np.asarray(sk.parents) >= 0)
-    if len(b) == 0 or weight <= 0:
-        return
-    d = quat_to_rotvec(quat_mul(pose.rotations[0, b], quat_conj(predicted.rotations[0, b])))
-    to_local = np.swapaxes(sk.frames[b], 1, 2) @ np.swapaxes(posed.world[sk.parents[b]], 1, 2)
-    D = rotvec_increment_jacobian(-d) @ to_local                     # (k, 3, 3) rows of each bone's block
-    cols = 3 + 3 * b[:, None] + np.arange(3)                         # (k, 3) parameter ids of the blocks
-    system.H[cols[:, :, None], cols[:, None, :]] += weight * np.swapaxes(D, 1, 2) @ D
-    system.g[cols] += weight * np.einsum("kri,kr->ki", D, d)
-    system.energy += weight * float((d * d).sum())
+    idx = (3 + 3 * b[:, None] + np.arange(3)).ravel()
+    W[idx, idx] = weight
+    return TowardPose(predicted, W)
 
 
 def _active(posed, camera, step: int) -> np.ndarray:
@@ -118,48 +112,55 @@ class EMState:
     posed: object = None
 
 
-def _m_step(body, posed, pose, rows, P1, PX, sigma2, opts, prior, predicted):
-    """The damped step (3 + 3B,) of Eq. 6.10 with E_r, E_p and the scaled joint limits."""
-    keep = P1 > MIN_MASS
-    rows, P1, PX = rows[keep], P1[keep], PX[keep]
-    system = System(body.num_bones)
-    a = body.lever_arms(posed, rows)
-    system.add_points(a, posed.points[rows] - PX / P1[:, None], P1 / sigma2)
-    if predicted is not None:
-        add_prediction(system, body, posed, pose, predicted, 2.0 * opts.gmm_lambda_p)
-    if prior is not None:
-        limits = System(body.num_bones)
-        prior.add_to(limits, posed, pose)
-        system.H += limits.H / sigma2
-        system.g += limits.g / sigma2
-    delta = system.solve(2.0 * opts.gmm_lambda_r)
-    turn = np.linalg.norm(delta[3:].reshape(-1, 3), axis=1).max(initial=0.0)
-    return delta * (MAX_TURN / turn) if turn > MAX_TURN else delta
+class Mixture:
+    """The GMM data term of one step of Algorithm 3 (``step`` 1 or 2) on the observed points ``x`` (N, 3),
+    for :func:`solver.tracking.lm.iterate`: at every pose the active model points (:func:`_active`) and
+    their E-step (Eq. 6.4; None below 10 points or a mass of 6), the M-step's point rows of the CPD
+    reduction plus E_p (``pull``); the priors weigh ``1 / sigma^2`` (``prior_scale``).  After each step
+    sigma^2 is updated (Eq. 6.11) and it has converged when no active point moved ``gmm_converged_m``."""
 
+    def __init__(self, x, camera, opts, pull, step: int, sigma2: float):
+        self.x, self.camera, self.opts, self.pull, self.step, self.sigma2 = x, camera, opts, pull, step, sigma2
+        self.mass = 0.0
+        self._e = None
 
-def em(body, x, camera, state: EMState, opts, prior, predicted, step: int, max_iterations: int) -> EMState:
-    """EM iterations (Algorithm 2) of step ``step`` (1 or 2) of Algorithm 3 on the observed points ``x``
-    (N, 3), from and into ``state``, until no active model point moves more than ``gmm_converged_m``;
-    the active points are chosen again every iteration."""
-    posed = state.posed if state.posed is not None else body.pose(state.pose)
-    for _ in range(max_iterations):
-        rows = _active(posed, camera, step)
+    @property
+    def prior_scale(self) -> float:
+        return 1.0 / self.sigma2
+
+    def linearise(self, body, posed):
+        rows = _active(posed, self.camera, self.step)
         if len(rows) < 10:
-            break
-        idx, p = posterior(x, posed.points[rows], state.sigma2, opts.gmm_outliers, opts.gmm_neighbours)
-        P1, PX = reduce(x, idx, p, len(rows))
-        state.mass = float(P1.sum())
-        if state.mass < 6:
-            break
-        delta = _m_step(body, posed, state.pose, rows, P1, PX, state.sigma2, opts, prior, predicted)
-        state.pose = body.apply(state.pose, delta, posed)
-        state.iterations += 1
-        moved = posed.points[rows]
-        posed = body.pose(state.pose)
-        state.sigma2 = max(sigma2_update(x, posed.points[rows], idx, p), SIGMA_FLOOR ** 2)
-        if np.linalg.norm(posed.points[rows] - moved, axis=1).max() < opts.gmm_converged_m:
-            break
-    state.posed = posed
+            return None
+        idx, p = posterior(self.x, posed.points[rows], self.sigma2, self.opts.gmm_outliers, self.opts.gmm_neighbours)
+        P1, PX = reduce(self.x, idx, p, len(rows))
+        self.mass = float(P1.sum())
+        if self.mass < 6:
+            return None
+        self._e = rows, idx, p
+        keep = P1 > MIN_MASS
+        rows, P1, PX = rows[keep], P1[keep], PX[keep]
+        system = System(body, posed)
+        system.add_points(body.lever_arms(posed, rows), posed.points[rows] - PX / P1[:, None], P1 / self.sigma2)
+        lin = system.linear()
+        return lin if self.pull is None else lin + self.pull.linearise(body, posed)
+
+    def converged(self, body, posed, moved, step) -> bool:
+        rows, idx, p = self._e
+        self.sigma2 = max(sigma2_update(self.x, moved.points[rows], idx, p), SIGMA_FLOOR ** 2)
+        return np.linalg.norm(moved.points[rows] - posed.points[rows], axis=1).max() < self.opts.gmm_converged_m
+
+
+def em(body, x, camera, state: EMState, opts, prior, pull, step: int, max_iterations: int) -> EMState:
+    """EM iterations (Algorithm 2) of step ``step`` (1 or 2) of Algorithm 3 on the observed points ``x``
+    (N, 3) with the limits ``prior`` and E_p ``pull``, from and into ``state`` (:class:`Mixture`): the
+    damped M-step (``2 lambda_r``, Eq. 6.10) until no active model point moves more than
+    ``gmm_converged_m``."""
+    data = Mixture(x, camera, opts, pull, step, state.sigma2)
+    state.pose, state.posed, it = iterate(body, state.pose, data, prior, 2.0 * opts.gmm_lambda_r, MAX_TURN,
+                                          max_iterations, posed=state.posed)
+    state.iterations += it
+    state.sigma2, state.mass = data.sigma2, data.mass
     return state
 
 
@@ -168,21 +169,23 @@ def sample(obs, count: int) -> np.ndarray:
     return obs.points[:: max(1, int(np.ceil(len(obs.points) / max(count, 1))))]
 
 
-def fit_frame(body, obs, camera, pose, opts, prior=None, iterations=None, predicted=None) -> FrameFit:
+def fit_frame(body, obs, camera, pose, opts, prior=(), iterations=None, predicted=None) -> FrameFit:
     """Algorithm 3 from ``pose`` (one frame) on the observation ``obs``: step one on the model points in
     view, step two on those facing the camera, each at most ``iterations`` (default ``gmm_iterations``) EM
     iterations.  ``predicted`` (one frame, e.g. :func:`.motion.predict` of the last two poses, usually
-    also the start ``pose``) is the target of E_p; without it the start pose is.  ``prior``: joint limits.
+    also the start ``pose``) is the target of E_p; without it the start pose is.  ``prior``: terms of
+    :mod:`solver.tracking.priors` (joint limits).
     Without a ``camera`` (complete data, e.g. a scan) one step with every model point.
     ``FrameFit.pairs`` is the posterior mass P (observed points the model explains), ``edges`` 0."""
     t0 = time.perf_counter()
     cap = iterations or opts.gmm_iterations
     predicted = pose if predicted is None else predicted
+    pull = prediction_term(body, predicted, 2.0 * opts.gmm_lambda_p) if opts.gmm_lambda_p > 0 else None
     state = EMState(pose, opts.gmm_sigma ** 2)
     if not obs.empty:
         x = sample(obs, opts.gmm_points)
         for step in ((1, 2) if camera is not None else (1,)):
-            state = em(body, x, camera, state, opts, prior, predicted, step, cap)
+            state = em(body, x, camera, state, opts, prior, pull, step, cap)
     posed = state.posed if state.posed is not None else body.pose(state.pose)
     share, mean = coverage(body, posed, obs, opts.near_m)
     return FrameFit(state.pose, state.iterations, int(round(state.mass)), 0, share, mean,

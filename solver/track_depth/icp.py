@@ -2,8 +2,9 @@
 point-to-point closest points from the visible model points, pruned by distance, normal angle, silhouette
 points and relaxed bijectivity (Eq. 5.3, same main bone both ways), plus edge-to-edge pairs on the
 silhouette (two-stage search: k nearest edge pixels in 2D, the closest of them in 3D) with the projective
-edge rows of Eq. 5.4; the linear system of Eq. 5.6 is solved and the model re-posed until no visible
-point moves more than ``converged_m``.
+edge rows of Eq. 5.4 (:class:`DepthPairs`, a data term of the tracking core); the linear system of
+Eq. 5.6 with the priors is solved and the model re-posed until no visible point moves more than
+``converged_m`` (:func:`solver.tracking.lm.iterate`).
 
 Edge rows are metric (pixel error x depth / focal length, i.e. Eq. 5.4 divided by the focal length), so
 ``edge_weight`` weighs them against the point rows in the same units (the dissertation's lambda_e =
@@ -17,7 +18,8 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .normal_equations import System, cross
+from ..tracking.lm import iterate
+from ..tracking.normal_equations import System
 from .visibility import visible
 
 GRAZING_COS = 0.35       # model points whose normal is this close to perpendicular to the view are contour points
@@ -127,17 +129,6 @@ def edge_rows(points, pixels, camera):
     return h, e
 
 
-def predicted_motion(delta, a):
-    """(m, 3) linear motion of points with lever arms ``a`` (m, 3, B) under the step ``delta``."""
-    omega = delta[3:].reshape(-1, 3)
-    return delta[:3] + cross(omega[None], a.transpose(0, 2, 1)).sum(axis=1)
-
-
-def _shorten(delta):
-    turn = np.linalg.norm(delta[3:].reshape(-1, 3), axis=1).max(initial=0.0)
-    return delta * (MAX_TURN / turn) if turn > MAX_TURN else delta
-
-
 def coverage(body, posed, obs, near_m: float, sample: int = 800):
     """Share of observed points within ``near_m`` of a model point and their mean distance (capped)."""
     if obs.empty:
@@ -148,8 +139,9 @@ def coverage(body, posed, obs, near_m: float, sample: int = 800):
     return float((d <= near_m).mean()), float(d.mean())
 
 
-def build_system(body, posed, pose, obs, camera, opts, prior=None):
-    """The linear system of one ICP iteration and the rows it used."""
+def build_system(body, posed, obs, camera, opts):
+    """The linearisation (:class:`solver.tracking.terms.Linear`) of one ICP iteration's rows, the rows it
+    used, their lever arms and the number of edge pairs."""
     vis = np.flatnonzero(visible(posed.points, posed.normals, camera, opts.visibility_tolerance))
     rows, targets = surface_pairs(body, posed, vis, obs, opts)
     if opts.data_weight > 0:
@@ -158,7 +150,7 @@ def build_system(body, posed, pose, obs, camera, opts, prior=None):
         rows, targets = np.concatenate([rows, drows]), np.concatenate([targets, dtargets])
     else:
         w = np.full(len(rows), opts.point_weight)
-    system = System(body.num_bones)
+    system = System(body, posed)
     a = body.lever_arms(posed, rows)
     r = posed.points[rows] - targets
     if opts.plane_weight > 0:
@@ -172,9 +164,27 @@ def build_system(body, posed, pose, obs, camera, opts, prior=None):
         system.add_projected(np.concatenate([ae, ae]), h, e, np.full(len(e), opts.edge_weight))
     if obs.floor is not None and opts.floor_weight > 0:
         add_floor_rows(system, body, posed, obs, opts.floor_weight)
-    if prior is not None:
-        prior.add_to(system, posed, pose)
-    return system, rows, a, len(erows)
+    return system.linear(), rows, a, len(erows)
+
+
+class DepthPairs:
+    """The ICP data term of one frame for :func:`solver.tracking.lm.iterate`: at every pose the pairs
+    of :func:`build_system` found anew (None below 6 pairs); converged when the step moves no paired point
+    by more than ``converged_m`` (linearised motion).  ``pairs`` / ``edges``: counts of the last pose."""
+    prior_scale = 1.0
+
+    def __init__(self, obs, camera, opts):
+        self.obs, self.camera, self.opts = obs, camera, opts
+        self.pairs = self.edges = 0
+        self._arms = None
+
+    def linearise(self, body, posed):
+        lin, rows, self._arms, self.edges = build_system(body, posed, self.obs, self.camera, self.opts)
+        self.pairs = len(rows)
+        return lin if len(rows) >= 6 else None
+
+    def converged(self, body, posed, moved, step) -> bool:
+        return np.linalg.norm(body.motion(posed, step, self._arms), axis=1).max() < self.opts.converged_m
 
 
 def add_floor_rows(system, body, posed, obs, weight: float) -> None:
@@ -186,19 +196,11 @@ def add_floor_rows(system, body, posed, obs, weight: float) -> None:
                              np.full(len(below), weight))
 
 
-def fit_frame(body, obs, camera, pose, opts, prior=None, iterations=None) -> FrameFit:
-    """ICP from ``pose`` (one frame) on the observation ``obs`` (see the module docstring)."""
+def fit_frame(body, obs, camera, pose, opts, prior=(), iterations=None) -> FrameFit:
+    """ICP from ``pose`` (one frame) on the observation ``obs`` (see the module docstring); ``prior``:
+    terms of :mod:`solver.tracking.priors` (joint limits)."""
     t0 = time.perf_counter()
-    it, rows, n_edges = 0, (), 0
-    for it in range(1, (iterations or opts.max_iterations) + 1):
-        posed = body.pose(pose)
-        system, rows, a, n_edges = build_system(body, posed, pose, obs, camera, opts, prior)
-        if len(rows) < 6:
-            break
-        delta = _shorten(system.solve(opts.damping))
-        pose = body.apply(pose, delta, posed)
-        if np.linalg.norm(predicted_motion(delta, a), axis=1).max() < opts.converged_m:
-            break
-    posed = body.pose(pose)
+    data = DepthPairs(obs, camera, opts)
+    pose, posed, it = iterate(body, pose, data, prior, opts.damping, MAX_TURN, iterations or opts.max_iterations)
     share, mean = coverage(body, posed, obs, opts.near_m)
-    return FrameFit(pose, it, len(rows), n_edges, share, mean, time.perf_counter() - t0, posed)
+    return FrameFit(pose, it, data.pairs, data.edges, share, mean, time.perf_counter() - t0, posed)

@@ -123,12 +123,12 @@ def hypotheses(model, up, towards, centre, scale: float = 1.0):
 
 def _holding(parts, limits, body, pose, camera):
     """``(held bones, pose, limits)``: the parts of ``pose`` out of view set and held (:mod:`.out_of_view`)."""
-    if parts is None or limits is None:
+    if parts is None:
         return (), pose, limits
     return parts.hold(body, pose, camera, limits)
 
 
-def initialise(body, obs, camera, up, options, limits=None, scale: float = 1.0, parts=None) -> Start:
+def initialise(body, obs, camera, up, options, limits=(), scale: float = 1.0, parts=None) -> Start:
     """The best start pose for the observation ``obs`` (see the module docstring); ``parts``
     (:class:`.out_of_view.Parts`) holds the parts out of view."""
     height = scale * rest_height(body.model)

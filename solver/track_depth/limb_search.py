@@ -52,9 +52,11 @@ def _turns(points, joint, cand):
 
 
 def _apply(body, pose, b, G):
-    delta = np.zeros(body.num_params)
-    delta[3 + 3 * b:6 + 3 * b] = quat_to_rotvec(matrix_to_quat(G))
-    return body.apply(pose, delta, body.pose(pose))
+    """``pose`` with bone b's subtree turned by the world rotation ``G`` (3, 3) about its joint."""
+    delta = np.zeros(body.size)
+    A = body.axes(body.pose(pose))[b]
+    delta[3 + 3 * b:6 + 3 * b] = A.T @ quat_to_rotvec(matrix_to_quat(G))
+    return body.moved(pose, delta)
 
 
 def _child(owner, rows_of, b, sk):

@@ -16,6 +16,7 @@ import numpy as np
 from ..geometry.rotations import rotvec_to_quat
 from ..roles import role_bones
 from ..tracking.limbs import subtrees
+from ..tracking.priors import held_at
 from .visibility import in_view
 
 PART_ROLES = ("thigh", "shin", "foot", "upper_arm", "forearm", "hand", "head")
@@ -47,7 +48,7 @@ def _links(parents, b, stops) -> list:
 
 
 class Parts:
-    """The parts of a tracking body (:class:`.body.TrackingBody`), parents first: ``(role, bone, held bones
+    """The parts of a tracking body (:class:`solver.tracking.blend_body.BlendBody`), parents first: ``(role, bone, held bones
     (its subtree and the links to the trunk), its own points (its subtree's without the next part's),
     straight)``."""
 
@@ -92,10 +93,11 @@ class Parts:
 
     def hold(self, body, pose, camera, limits) -> tuple:
         """``(bones, pose, limits)``: the bones held (:meth:`out_of_view`), ``pose`` with them set to what
-        they are held at, and ``limits`` (:class:`.limits.JointLimits`) holding them."""
+        they are held at, and the prior terms ``limits`` (a list) with a box holding them
+        (:func:`solver.tracking.priors.held_at`)."""
         _, bones, targets = self.out_of_view(body, pose, camera)
         if not len(bones):
             return bones, pose, limits
         held = pose.take(slice(None))
         held.rotations[0, bones] = rotvec_to_quat(targets)
-        return bones, held, limits.holding(bones, targets)
+        return bones, held, [*limits, held_at(body.num_bones, bones, targets)]

@@ -15,12 +15,12 @@ import numpy as np
 from .. import parallel
 from ..errors import ArticulaInputError
 from ..rig.model import Model, Poses
+from ..tracking.blend_body import BlendBody
+from ..tracking.priors import generic_limits
 from .adapt import TemplateAdaptation
-from .body import TrackingBody
 from .initialise import cut_edges, initialise, score
 from .limb_search import place_limbs
 from .motion import predict
-from .limits import JointLimits
 from .options import DepthTrackOptions
 from .out_of_view import Parts
 from .smoothing import FOLLOWED, smooth
@@ -120,10 +120,10 @@ class _Sequence:
     def __init__(self, recording, model, options, limits, progress, template=None):
         self.rec, self.opts, self.progress = recording, options, progress
         self.model = model
-        self.body = TrackingBody(model, count=options.model_points)
+        self.body = BlendBody(model, count=options.model_points)
         self.adaptation = (TemplateAdaptation(template, options, recording.options, recording.camera.centre)
                            if template is not None else None)
-        self.limits = limits if limits is not None else JointLimits(model.skeleton)
+        self.limits = list(limits) if limits is not None else [generic_limits(model.skeleton)]
         self.poses, self.frames = [], []          # the run appends to both
         self.pose = None
         self.lost = False
@@ -142,7 +142,7 @@ class _Sequence:
         if starting and any(cut_edges(obs, sides=True)[2:]):
             return _entry(k, name, "partly out of view")     # no start from half a person: wait for all of it
         if self.adaptation is not None and self.pose is None and self.adaptation.done == 0:
-            self.body = TrackingBody(self.adaptation.start_model(obs, self.up), ids=self.body.ids)
+            self.body = BlendBody(self.adaptation.start_model(obs, self.up), ids=self.body.ids)
         if starting:
             fit, status = self._initialise(obs), "initialised"
         else:
@@ -284,10 +284,11 @@ def _fill(poses: list, num_bones: int) -> Poses:
 
 
 def track_recording(recording, model: Model | None = None, options: DepthTrackOptions = DepthTrackOptions(),
-                    limits: JointLimits | None = None, progress=None) -> DepthTrackResult:
+                    limits=None, progress=None) -> DepthTrackResult:
     """Track every frame of ``recording`` (:class:`.source.DepthRecording`) with ``model``, or with the
-    built-in template body (:mod:`.template`) adapted to the person when ``model`` is None.
-    ``progress(fraction, text)`` is called after every frame and may raise :class:`Cancelled`."""
+    built-in template body (:mod:`.template`) adapted to the person when ``model`` is None.  ``limits``:
+    the prior terms of every fit (default the generic joint limits,
+    :func:`solver.tracking.priors.generic_limits`; ``[]`` for none).  ``progress(fraction, text)`` is called after every frame and may raise :class:`Cancelled`."""
     options.validate()
     template = load_template() if model is None else None
     if template is not None:

@@ -20,7 +20,7 @@ from ..geometry.mesh_graph import adjacency
 from ..geometry.normals import vertex_normals
 from ..rig.kinematics import forward_kinematics
 from ..rig.model import Model
-from .body import linear_blend_weights
+from ..tracking.blend_body import linear_blend_weights
 
 EDGE_WEIGHT = 2.0        # lambda_e of Eq. 6.20 for the tracker's subset spacing (ours)
 RIDGE = 0.01             # lambda_d: pull of unseen vertices to no displacement

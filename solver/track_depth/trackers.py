@@ -1,5 +1,6 @@
 """The per-frame trackers by name (``DepthTrackOptions.tracker``): each is a function
-``fit(body, obs, camera, pose, options, limits=None, iterations=None) -> icp.FrameFit``."""
+``fit(body, obs, camera, pose, options, prior=(), iterations=None) -> icp.FrameFit`` (``prior``: the
+terms of :mod:`solver.tracking.priors`, the joint limits)."""
 from __future__ import annotations
 
 from . import gmm, icp

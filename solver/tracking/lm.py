@@ -9,6 +9,10 @@ trial pose (correspondences re-found there) is lower; mu falls on acceptance and
 rejected step ends it when it was nearly that small or when the linear model promised less than
 ``REJECTED_GAIN`` of the energy: what is left is below the energy's kinks (capture points switching
 between neighbouring fingers or triangles change it by more than that).
+
+Fits that re-find their correspondences after every step instead of testing it (the depth trackers'
+ICP and EM iterations) run :func:`iterate`: damped Gauss–Newton steps (:func:`gauss_newton_step`) on the
+same linearisations, every term and prior alike.
 """
 from __future__ import annotations
 
@@ -57,11 +61,7 @@ class State:
         return sum(t.energy(body, self) for t in terms)
 
     def linearise(self, body, terms):
-        lin = None
-        for t in terms:
-            one = t.linearise(body, self)
-            lin = one if lin is None else lin + one
-        return lin
+        return linearise_sum(terms, body, self)
 
 
 def minimise(body, start, terms, stopping: Stopping = Stopping(), cancel=None) -> Fit:
@@ -107,6 +107,61 @@ def damped_step(H, g, mu):
         return -cho_solve(cho_factor(A, check_finite=False), g, check_finite=False)
     except np.linalg.LinAlgError:
         return -np.linalg.lstsq(A, g, rcond=None)[0]
+
+
+def gauss_newton_step(lin, damping: float, max_turn: float = None) -> np.ndarray:
+    """``-(H + damping I)^-1 g``: the step minimising the linearisation ``lin`` plus ``damping |step|^2``
+    (the depth-camera dissertation's small-update term E_r, ch. 5 Eq. 5.6, ch. 6 Eq. 6.10), for fits
+    that re-find their correspondences after every step (ICP, EM) instead of testing it; shortened so
+    that no bone turns by more than ``max_turn`` radians."""
+    A = lin.H + damping * np.eye(len(lin.g))
+    try:
+        step = -cho_solve(cho_factor(A, check_finite=False), lin.g, check_finite=False)
+    except np.linalg.LinAlgError:
+        step = -np.linalg.lstsq(A, lin.g, rcond=None)[0]
+    if max_turn is not None:
+        turn = np.linalg.norm(step[3:].reshape(-1, 3), axis=1).max(initial=0.0)
+        if turn > max_turn:
+            step = step * (max_turn / turn)
+    return step
+
+
+def iterate(body, pose, data, priors=(), damping: float = 0.0, max_turn: float = None,
+            max_iterations: int = 10, posed=None, cancel=None):
+    """Damped Gauss–Newton iterations for data terms that re-find their correspondences after every step
+    (the depth trackers' ICP and EM): at each pose ``data.linearise(body, posed)`` (None: too little
+    data, stop) plus the ``priors`` weighted by ``data.prior_scale`` give the step
+    (:func:`gauss_newton_step`); ``data.converged(body, posed, moved, step)`` ends it.  ``pose``: one
+    frame (``posed``: the body at it, when known); returns ``(pose, posed, iterations)`` with ``posed`` the
+    body at the final pose."""
+    posed = body.pose(pose) if posed is None else posed
+    it = 0
+    while it < max_iterations:
+        if cancel is not None:
+            cancel()
+        lin = data.linearise(body, posed)
+        if lin is None:
+            break
+        it += 1
+        if priors:
+            lin = lin + linearise_sum(priors, body, posed).scaled(data.prior_scale)
+        step = gauss_newton_step(lin, damping, max_turn)
+        pose = body.moved(pose, step)
+        moved = body.pose(pose)
+        done = data.converged(body, posed, moved, step)
+        posed = moved
+        if done:
+            break
+    return pose, posed, it
+
+
+def linearise_sum(terms, body, state):
+    """The sum of ``terms``' linearisations at ``state`` (None for no terms)."""
+    lin = None
+    for t in terms:
+        one = t.linearise(body, state)
+        lin = one if lin is None else lin + one
+    return lin
 
 
 def small_step(step, stopping: Stopping, slack: float = 1.0) -> bool:

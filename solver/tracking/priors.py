@@ -8,15 +8,25 @@
 * :class:`PairPrior`: the pairwise Gaussian-mixture pose prior (model-adaptive mocap dissertation §4.1.3,
   Eq. 4.7-4.8) of :class:`solver.track.pose_prior.PosePrior`, weighted.
 * :class:`JointBox`: a quadratic penalty beyond per-joint box limits of the rotation vectors (§4.1.4;
-  soft instead of the active set, so one solver serves every term).
+  soft instead of the active set, so one solver serves every term), with an optional weak pull to the
+  boxes' middles; :func:`generic_limits` the generic human prior's boxes (ours: the depth-camera
+  dissertation's trackers have none, ch. 5 §5.5 names the drift of weakly seen joints as a failure).
+
+Every prior works on any body with the parameters of :class:`.body.Body` (``body.size``,
+``body.columns``), the exact one or :class:`.blend_body.BlendBody`; it reads only ``state.pose``.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ..geometry.rotations import quat_conj, quat_mul, quat_to_rotvec
-from .pose_prior import rotvec_increment_jacobian
+from .pose_prior import generic_prior, rotvec_increment_jacobian
 from .terms import Linear
+
+BOX_WEIGHT = 10.0           # generic limits: m^2 per rad^2 outside the box (against unit point rows)
+CENTRE_WEIGHT = 0.02        # ... m^2 per (box width)^2 away from its middle
+HOLD_WEIGHT = 1000.0        # m^2 per rad^2 away from a held rotation
+MIN_WIDTH = np.radians(5.0)  # narrower boxes pull to their middle as this wide
 
 
 def pose_difference(pose, target):
@@ -83,31 +93,55 @@ class PairPrior:
 
 
 class JointBox:
-    """``weight * 1/2 sum (r - clip(r, lower, upper))^2`` over the bones' rotation vectors ``r = log q``
-    (radians); lower, upper ``(B, 3)`` (+-inf: free); bone 0 (the root) is never limited."""
+    """Soft box limits on the bones' rotation vectors ``r = log q`` (radians, bone-local axes):
+    ``weight * 1/2 sum (r - clip(r, lower, upper))^2`` plus ``centre_weight * 1/2 sum ((r - centre) /
+    width)^2``, a weak pull to the middle of each box scaled by its width (floored at ``MIN_WIDTH``), so
+    joints the data hardly see (hip girdle, clavicles, spine segments) do not wander while a limb's wide
+    range is barely pulled.  ``lower``, ``upper`` ``(B, 3)`` (+-inf: free); the root (bone 0) and bones
+    without a finite box are never limited.  ``lower == upper`` holds a bone at a rotation."""
 
-    def __init__(self, lower, upper, weight: float):
-        self.lower, self.upper, self.weight = np.asarray(lower, float), np.asarray(upper, float), weight
+    def __init__(self, lower, upper, weight: float, centre_weight: float = 0.0):
+        self.lower, self.upper = np.array(lower, dtype=float), np.array(upper, dtype=float)
         self.lower[0], self.upper[0] = -np.inf, np.inf
+        self.weight, self.centre_weight = weight, centre_weight
+        self.bones = np.flatnonzero(np.isfinite(self.lower).all(axis=1) & np.isfinite(self.upper).all(axis=1))
+        lo, hi = self.lower[self.bones], self.upper[self.bones]
+        self.centre, self.width = 0.5 * (lo + hi), np.maximum(hi - lo, MIN_WIDTH)
 
-    def _excess(self, pose):
-        r = quat_to_rotvec(pose.rotations[0])
-        return r, r - np.clip(r, self.lower, self.upper)
+    def _rows(self, pose):
+        """Residual blocks ``(k, 3)`` of the limited bones: beyond the box, and the scaled pull."""
+        r = quat_to_rotvec(pose.rotations[0, self.bones])
+        return r, r - np.clip(r, self.lower[self.bones], self.upper[self.bones]), (r - self.centre) / self.width
 
     def energy(self, body, state) -> float:
-        pose = state.pose
-        _, x = self._excess(pose)
-        return 0.5 * self.weight * float(np.sum(x * x))
+        _, over, pull = self._rows(state.pose)
+        return 0.5 * (self.weight * float(np.sum(over * over)) + self.centre_weight * float(np.sum(pull * pull)))
 
     def linearise(self, body, state) -> Linear:
-        pose = state.pose
-        r, x = self._excess(pose)
+        r, over, pull = self._rows(state.pose)
         P = body.size
-        J = np.zeros((len(r), 3, P))
-        blocks = rotvec_increment_jacobian(r)
-        for b in range(len(r)):
-            J[b, :, 3 + 3 * b:6 + 3 * b] = blocks[b]
-        active = (x != 0).ravel()
-        J = J.reshape(-1, P)[active]
-        e = x.ravel()[active]
-        return Linear(self.weight * (J.T @ J), self.weight * (J.T @ e), 0.5 * self.weight * float(e @ e))
+        H, g = np.zeros((P, P)), np.zeros(P)
+        D = rotvec_increment_jacobian(r)                                  # (k, 3, 3) d log(q exp d) / d d
+        cols = 3 + 3 * self.bones[:, None] + np.arange(3)                 # (k, 3) parameter ids
+        w = np.where(over != 0, self.weight, 0.0)
+        DD = np.swapaxes(D, 1, 2) @ (D * w[:, :, None])
+        DDc = np.swapaxes(D, 1, 2) @ (D * (self.centre_weight / self.width ** 2)[:, :, None])
+        H[cols[:, :, None], cols[:, None, :]] += DD + DDc
+        g[cols] += np.einsum("kri,kr->ki", D, w * over + self.centre_weight * pull / self.width)
+        return Linear(H, g, self.energy(body, state))
+
+
+
+def held_at(num_bones: int, bones, targets) -> JointBox:
+    """A box holding ``bones`` at the bone-local rotation vectors ``targets`` (k, 3) by ``HOLD_WEIGHT``
+    (body parts out of a camera's view); the others free."""
+    lower = np.full((num_bones, 3), np.inf)
+    lower[np.asarray(bones, dtype=np.int64)] = targets
+    return JointBox(lower, lower, HOLD_WEIGHT)
+
+
+def generic_limits(skeleton) -> JointBox:
+    """Box limits from the generic human prior mapped by bone names (:func:`.pose_prior.generic_prior`)
+    with its weak pull to the middle of each box (``BOX_WEIGHT``, ``CENTRE_WEIGHT``)."""
+    prior = generic_prior(skeleton)
+    return JointBox(prior.lower, prior.upper, BOX_WEIGHT, CENTRE_WEIGHT)

@@ -25,6 +25,10 @@ class Linear:
     def __add__(self, other):
         return Linear(self.H + other.H, self.g + other.g, self.energy + other.energy)
 
+    def scaled(self, factor: float) -> "Linear":
+        """The same term weighted by ``factor``."""
+        return Linear(self.H * factor, self.g * factor, self.energy * factor)
+
 
 def charbonnier(r, eps):
     """Penalty ``eps^2 (sqrt(1 + (r/eps)^2) - 1)`` (~ r^2/2 near 0, ~ eps |r| far) and its IRLS weight."""

@@ -9,7 +9,7 @@ import numpy as np
 from articula.solver.geometry.rotations import quat_mul, rotvec_to_quat
 from articula.solver.rig.skinning import hybrid_skin
 from articula.solver.track_depth import icp
-from articula.solver.track_depth.body import TrackingBody
+from articula.solver.tracking.blend_body import BlendBody
 from articula.solver.track_depth.options import DepthTrackOptions
 
 from .conftest import front_camera, mild_poses, observation
@@ -38,7 +38,7 @@ def test_floor_rows_lift_toes_out_of_the_floor(model):
         b = model.skeleton.names.index(name)
         start.rotations[0, b] = quat_mul(start.rotations[0, b], toes_down)
     assert hybrid_skin(model, start)[0][:, 2].min() - floor_z < -0.05       # the start sinks 5+ cm
-    fit = icp.fit_frame(TrackingBody(model), obs, camera, start, DepthTrackOptions(tracker="icp"))
+    fit = icp.fit_frame(BlendBody(model), obs, camera, start, DepthTrackOptions(tracker="icp"))
     verts = hybrid_skin(model, fit.pose)[0]
     feet = np.flatnonzero(true_verts[:, 2] - floor_z < 0.08)
     assert verts[:, 2].min() - floor_z > -0.01

@@ -12,9 +12,8 @@ from articula.solver.geometry.surface_distance import distance_to_surface
 from articula.solver.rig.model import Poses
 from articula.solver.geometry.normals import vertex_normals
 from articula.solver.track_depth import gmm
-from articula.solver.track_depth.body import TrackingBody
-from articula.solver.track_depth.limits import JointLimits
-from articula.solver.track_depth.normal_equations import System
+from articula.solver.tracking.blend_body import BlendBody
+from articula.solver.tracking.priors import generic_limits
 from articula.solver.track_depth.observation import Observation, ViewCamera
 from articula.solver.track_depth.options import DepthTrackOptions
 from articula.solver.track_depth.template import load_template
@@ -30,12 +29,12 @@ def model():
 
 @pytest.fixture(scope="module")
 def body(model):
-    return TrackingBody(model, count=1000)
+    return BlendBody(model, count=1000)
 
 
 @pytest.fixture(scope="module")
 def full(model):
-    return TrackingBody(model, ids=np.arange(model.num_vertices))
+    return BlendBody(model, ids=np.arange(model.num_vertices))
 
 
 def posed(model, elbow_deg=0.0, forearm_axis=(1.0, 0.0, 0.0)):
@@ -111,24 +110,24 @@ def test_reduction_and_sigma_update_are_the_dense_sums():
 
 
 def test_prediction_rows_are_the_linearised_rotation_gap(model, body):
+    """E_p's gradient is the central difference of ``sum |log(q_pred^-1 q)|^2`` (non-root joints) and its
+    normal matrix adds ``weight J^T J``; the root's position and turn are free."""
     rng = np.random.default_rng(2)
     B = model.skeleton.num_bones
     start = Poses(rotvec_to_quat(0.3 * rng.standard_normal((B, 3)))[None], np.zeros((1, 3)), np.ones(1))
     pred = Poses(quat_mul(rotvec_to_quat(0.2 * rng.standard_normal((B, 3))), start.rotations[0])[None],
                  np.zeros((1, 3)), np.ones(1))
-    at = body.pose(start)
-    system = System(B)
-    gmm.add_prediction(system, body, at, start, pred, 1.0)
+    lin = gmm.prediction_term(body, pred, 1.0).linearise(body, body.pose(start))
 
     def energy(step):
-        q = body.apply(start, step, at).rotations[0, 1:]
-        return float((quat_to_rotvec(quat_mul(q, quat_conj(pred.rotations[0, 1:]))) ** 2).sum())
+        q = body.moved(start, step).rotations[0, 1:]
+        return float((quat_to_rotvec(quat_mul(quat_conj(pred.rotations[0, 1:]), q)) ** 2).sum())
 
-    assert system.energy == pytest.approx(energy(np.zeros(3 + 3 * B)))
+    assert 2 * lin.energy == pytest.approx(energy(np.zeros(3 + 3 * B)))
     h = 1e-6
     grad = [(energy(h * e) - energy(-h * e)) / (2 * h) for e in np.eye(3 + 3 * B)]
-    np.testing.assert_allclose(grad, 2 * system.g, atol=1e-6)
-    assert not system.g[:6].any()                                 # neither the root's position nor its turn
+    np.testing.assert_allclose(grad, 2 * lin.g, atol=1e-6)
+    assert not lin.g[:6].any()                                    # neither the root's position nor its turn
 
 
 def complete_fit(model, body, full, true, start, extra=None, **kw):
@@ -136,7 +135,7 @@ def complete_fit(model, body, full, true, start, extra=None, **kw):
     if extra is not None:
         points = np.concatenate([points, extra])
     opts = DepthTrackOptions(tracker="gmm", gmm_points=10 ** 5, gmm_lambda_p=0.0, **kw)
-    limits = JointLimits(model.skeleton)
+    limits = [generic_limits(model.skeleton)]
     return gmm.fit_frame(body, observation(points), None, start, opts, limits, iterations=15)
 
 
@@ -196,11 +195,11 @@ def test_two_step_scheme_puts_the_data_on_the_visible_surface(model, body, full)
     start = posed(model)
     start = Poses(start.rotations, start.translations + [0.02, 0.04, -0.02], start.scales)
     opts = DepthTrackOptions(tracker="gmm", gmm_points=len(points), gmm_lambda_p=0.0, gmm_iterations=15)
-    fit = frame_fitter(opts)(body, observation(points), camera, start, opts, JointLimits(model.skeleton))
+    fit = frame_fitter(opts)(body, observation(points), camera, start, opts, [generic_limits(model.skeleton)])
     sd = signed_distances(model, full, fit.pose, points)
     assert abs(sd.mean()) < 0.002 and np.median(np.abs(sd)) < 0.004
     one = gmm.em(body, points, camera, gmm.EMState(start, opts.gmm_sigma ** 2), opts,
-                 JointLimits(model.skeleton), start, 1, 15)             # step one alone: every point in view
+                 [generic_limits(model.skeleton)], None, 1, 15)              # step one alone: every point in view
     sinks = signed_distances(model, full, one.pose, points).mean()
     assert sinks < -0.0008 and abs(sd.mean()) < 0.6 * abs(sinks)     # the back surface pulls the data inside
     joints = np.linalg.norm(body.pose(fit.pose).joints - body.pose(true).joints, axis=1)

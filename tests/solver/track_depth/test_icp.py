@@ -2,7 +2,7 @@
 rows, and recovery of a known pose change from a rendered depth frame."""
 import numpy as np
 from articula.solver.track_depth import icp
-from articula.solver.track_depth.body import TrackingBody
+from articula.solver.tracking.blend_body import BlendBody
 from articula.solver.track_depth.options import DepthTrackOptions
 
 from .conftest import front_camera, mild_poses, observation
@@ -23,7 +23,7 @@ def test_pairs_obey_distance_normal_and_bijectivity(model):
     camera = front_camera(model)
     pose = mild_poses(model, seed=0, angle=0.0)
     obs = observation(model, pose, camera)
-    body = TrackingBody(model, count=800)
+    body = BlendBody(model, count=800)
     posed = body.pose(pose)
     vis = np.arange(len(body.ids))
     opts = DepthTrackOptions(max_distance=0.05)
@@ -40,7 +40,7 @@ def test_relaxed_bijectivity_rejects_pairs_across_parts(model):
     camera = front_camera(model)
     pose = mild_poses(model, seed=0, angle=0.0)
     obs = observation(model, pose, camera)
-    body = TrackingBody(model, count=800)
+    body = BlendBody(model, count=800)
     posed = body.pose(pose)
     rows, _ = icp.surface_pairs(body, posed, np.arange(len(body.ids)), obs, DepthTrackOptions())
     # observed points 8 cm off: a target's nearest model point is now mostly another point; with every
@@ -59,12 +59,14 @@ def test_known_pose_change_is_recovered(model):
     swing/twist skin); no joint limits (random poses leave the human box)."""
     camera = front_camera(model)
     start = mild_poses(model, seed=3, angle=0.3)
-    body = TrackingBody(model, count=1000)
-    delta = np.zeros(body.num_params)
+    body = BlendBody(model, count=1000)
+    delta = np.zeros(body.size)
     rng = np.random.default_rng(4)
     delta[3:] = rng.uniform(-1, 1, 3 * body.num_bones) * np.radians(15) / np.sqrt(3)
     delta[3:6] = 0.0
-    truth = body.apply(start, delta, body.pose(start))
+    A = body.axes(body.pose(start))                          # the turns in world axes, as local increments
+    delta[3:] = np.einsum("bji,bj->bi", A, delta[3:].reshape(-1, 3)).ravel()
+    truth = body.moved(start, delta)
     obs = observation(model, truth, camera)
     fit = icp.fit_frame(body, obs, camera, start, DepthTrackOptions(max_iterations=30))
     err = np.linalg.norm(body.pose(fit.pose).joints - body.pose(truth).joints, axis=1)

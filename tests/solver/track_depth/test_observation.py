@@ -92,9 +92,9 @@ def test_free_space(model):
 
 
 def test_visibility_excludes_back_and_occluded_points(model):
-    from articula.solver.track_depth.body import TrackingBody
+    from articula.solver.tracking.blend_body import BlendBody
     camera = front_camera(model)
-    body = TrackingBody(model, count=1000)
+    body = BlendBody(model, count=1000)
     posed = body.pose(mild_poses(model, seed=0, angle=0.0))
     vis = visible(posed.points, posed.normals, camera, 0.03)
     toward = (posed.normals * (camera.centre - posed.points)).sum(axis=1) > 0

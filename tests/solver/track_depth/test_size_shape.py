@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from articula.solver.rig.kinematics import world_rotations
-from articula.solver.track_depth.body import TrackingBody
+from articula.solver.tracking.blend_body import BlendBody
 from articula.solver.track_depth.body_shape import ShapeTerms, same_world_pose, solve_coefficients
 from articula.solver.track_depth.body_size import FramePairs, linear_terms, scaled_model, solve_scales
 
@@ -18,9 +18,9 @@ def test_scale_terms_are_exact(model):
     s = rng.uniform(0.8, 1.2, model.skeleton.num_bones)
     p = mild_poses(model, seed=1)
     p.translations[:] = [0.1, -0.2, 0.05]
-    body = TrackingBody(model, count=300)
+    body = BlendBody(model, count=300)
     c, E = linear_terms(model, body.ids, p)
-    expect = TrackingBody(scaled_model(model, s), ids=body.ids).pose(p).points
+    expect = BlendBody(scaled_model(model, s), ids=body.ids).pose(p).points
     assert np.abs(c + np.einsum("b,mbc->mc", s, E) - expect).max() < 1e-9
 
 
@@ -33,7 +33,7 @@ def test_scaled_model_keeps_girth_and_frames(model):
 
 
 def _pairs(true_model, body_ids, poses):
-    return [FramePairs(body_ids, TrackingBody(true_model, ids=body_ids).pose(p.take(0)).points, p.take(0))
+    return [FramePairs(body_ids, BlendBody(true_model, ids=body_ids).pose(p.take(0)).points, p.take(0))
             for p in poses]
 
 
@@ -46,7 +46,7 @@ def test_known_part_scales_are_recovered(model):
         if n.startswith(("UpLeg", "Leg.")):
             s[i] = 0.95
     truth = scaled_model(model, s)
-    ids = TrackingBody(model, count=800).ids
+    ids = BlendBody(model, count=800).ids
     frames = _pairs(truth, ids, [mild_poses(model, seed=k, angle=0.5) for k in range(3)])
     got = solve_scales(model, frames, np.ones(len(names)))
     big = [i for i, n in enumerate(names) if n.startswith(("Arm", "ForeArm", "UpLeg", "Leg."))]
@@ -60,17 +60,17 @@ def test_shape_terms_are_exact_and_coefficients_recovered(template):
     coeffs = np.zeros(template.num_basis)
     coeffs[[0, 6, 9]] = rng.uniform(0.2, 0.8, 3)        # one basis vector of three macros
     p = mild_poses(base, seed=2)
-    body = TrackingBody(base, count=500)
+    body = BlendBody(base, count=500)
     c0, E = ShapeTerms(template)(body.ids, p)
     shaped = template.shaped(coeffs)
-    expect = TrackingBody(shaped, ids=body.ids).pose(same_world_pose(base.skeleton, shaped.skeleton, p)).points
+    expect = BlendBody(shaped, ids=body.ids).pose(same_world_pose(base.skeleton, shaped.skeleton, p)).points
     assert np.abs(c0 + np.einsum("k,mkr->mr", coeffs, E) - expect).max() < 1e-9
     frames = [FramePairs(body.ids, expect, p)]
     got = solve_coefficients(ShapeTerms(template), frames)
     # the macro basis is nearly collinear (height, proportions, gender): the body, not the numbers, is unique
     fitted = template.shaped(got)
-    pts = TrackingBody(fitted, ids=body.ids).pose(same_world_pose(base.skeleton, fitted.skeleton, p)).points
-    moved = np.linalg.norm(expect - TrackingBody(base, ids=body.ids).pose(p).points, axis=1)
+    pts = BlendBody(fitted, ids=body.ids).pose(same_world_pose(base.skeleton, fitted.skeleton, p)).points
+    moved = np.linalg.norm(expect - BlendBody(base, ids=body.ids).pose(p).points, axis=1)
     assert np.median(np.linalg.norm(pts - expect, axis=1)) < 0.1 * np.median(moved)
 
 

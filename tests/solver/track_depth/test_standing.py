@@ -9,8 +9,8 @@ from articula.solver.geometry.rotations import matrix_to_quat, rotvec_to_quat
 from articula.solver.rig.model import Poses
 from articula.solver.roles import role_bones
 from articula.solver.track_depth import icp
-from articula.solver.track_depth.body import TrackingBody
-from articula.solver.track_depth.limits import JointLimits
+from articula.solver.tracking.blend_body import BlendBody
+from articula.solver.tracking.priors import generic_limits
 from articula.solver.track_depth.observation import ViewCamera
 from articula.solver.track_depth.options import DepthTrackOptions
 from articula.solver.track_depth.out_of_view import Parts, part_name
@@ -40,7 +40,7 @@ def test_part_names():
 
 
 def test_legs_below_the_image_are_flagged_and_held_straight(model):
-    body = TrackingBody(model)
+    body = BlendBody(model)
     parts = Parts(body)
     camera = _upper_camera(model)
     pose = Poses.identity(1, model.skeleton.num_bones)
@@ -57,7 +57,7 @@ def test_legs_below_the_image_are_flagged_and_held_straight(model):
 def test_held_legs_stay_below_the_hips_in_a_fit(model):
     """The legs start folded up (feet above the hips) on a frame that sees the hips up: with the parts out
     of view held, the ICP fit puts them straight below the hips; the checks find the folded start."""
-    body = TrackingBody(model)
+    body = BlendBody(model)
     parts = Parts(body)
     camera = _upper_camera(model)
     truth = mild_poses(model, seed=3, angle=0.2)
@@ -71,7 +71,7 @@ def test_held_legs_stay_below_the_hips_in_a_fit(model):
     standing = Standing(body, parts)
     assert any("above the hips" in f for f in standing.findings(body, folded, obs, camera, UP)[0])
     opts = DepthTrackOptions()
-    limits = JointLimits(model.skeleton)
+    limits = [generic_limits(model.skeleton)]
     names = parts.out_of_view(body, folded, camera)[0]
     assert set(names) == {"left leg", "right leg"}
     _, start, held = parts.hold(body, folded, camera, limits)
@@ -83,7 +83,7 @@ def test_held_legs_stay_below_the_hips_in_a_fit(model):
 
 def _rest_seen(model, noise=False):
     """``(body, standing, camera, rest pose, observation of the rest pose)`` from in front."""
-    body = TrackingBody(model)
+    body = BlendBody(model)
     camera = front_camera(model)
     rest = Poses.identity(1, model.skeleton.num_bones)
     return body, Standing(body, Parts(body)), camera, rest, observation(model, rest, camera, noise=noise)

@@ -2,12 +2,10 @@
 and the joint limits' rows (finite differences, box rows only outside the box)."""
 import numpy as np
 
-from articula.solver.geometry.rotations import quat_to_rotvec
 from articula.solver.rig.model import Model
 from articula.solver.geometry.normals import vertex_normals
-from articula.solver.track_depth.body import TrackingBody
-from articula.solver.track_depth.limits import JointLimits
-from articula.solver.track_depth.normal_equations import System
+from articula.solver.tracking.blend_body import BlendBody
+from articula.solver.tracking.priors import BOX_WEIGHT, CENTRE_WEIGHT, JointBox, generic_limits
 from articula.solver.track_depth.surface import SurfaceFit
 
 from .conftest import mild_poses
@@ -17,8 +15,8 @@ def test_inflated_body_is_recovered(model):
     n = vertex_normals(model.rest_vertices, model.faces)
     fat = Model(model.rest_vertices + 0.01 * n, model.faces, model.skeleton, model.anchor,
                 model.twist_weights, model.swing_weights)
-    body = TrackingBody(model, count=1500)
-    truth = TrackingBody(fat, ids=body.ids)
+    body = BlendBody(model, count=1500)
+    truth = BlendBody(fat, ids=body.ids)
     fit = SurfaceFit(model)
     for k in range(3):
         p = mild_poses(model, seed=k, angle=0.3)
@@ -30,27 +28,21 @@ def test_inflated_body_is_recovered(model):
     assert (far > 0).all()
 
 
-def test_limit_rows_match_finite_differences_and_vanish_inside(model):
-    body = TrackingBody(model, count=200)
-    lim = JointLimits(model.skeleton)
+def test_generic_limit_rows_match_finite_differences_and_vanish_inside(model):
+    """The template's generic limits (box and centre pull) on the blend body: the gradient is the
+    energy's central difference; inside a wide box only the weak centre pull is left."""
+    body = BlendBody(model, count=200)
+    lim = generic_limits(model.skeleton)
+    assert len(lim.bones) > 10
     p = mild_poses(model, seed=5, angle=0.8)
     posed = body.pose(p)
-    s = System(body.num_bones)
-    lim.add_to(s, posed, p)
-    # the gradient of the limits' energy by finite differences of the bone-local rotation vectors
-    def energy(pose):
-        r = quat_to_rotvec(pose.rotations[0, lim.bones])
-        over = r - np.clip(r, lim.lower[lim.bones], lim.upper[lim.bones])
-        pull = (r - lim.centre[lim.bones]) / lim.width[lim.bones]
-        from articula.solver.track_depth.limits import BOX_WEIGHT, CENTRE_WEIGHT
-        return BOX_WEIGHT * (over ** 2).sum() + CENTRE_WEIGHT * (pull ** 2).sum()
+    lin = lim.linearise(body, posed)
     rng = np.random.default_rng(0)
-    d = rng.normal(size=body.num_params) * 1e-6
+    d = rng.normal(size=body.size) * 1e-6
     d[:3] = 0
-    e0, e1 = energy(p), energy(body.apply(p, d, posed))
-    assert abs((e1 - e0) - 2 * s.g @ d) < 1e-3 * abs(e1 - e0) + 1e-12
-    inside = JointLimits(model.skeleton, lower=np.full((model.skeleton.num_bones, 3), -10.0),
-                         upper=np.full((model.skeleton.num_bones, 3), 10.0))
-    s2 = System(body.num_bones)
-    inside.add_to(s2, posed, p)
-    assert np.abs(s2.g).max() < 0.01 * np.abs(s.g).max()
+    up, down = body.pose(body.moved(p, d)), body.pose(body.moved(p, -d))
+    fd = lim.energy(body, up) - lim.energy(body, down)
+    assert abs(fd - 2 * lin.g @ d) < 1e-3 * abs(fd) + 1e-12
+    B = model.skeleton.num_bones
+    inside = JointBox(np.full((B, 3), -10.0), np.full((B, 3), 10.0), BOX_WEIGHT, CENTRE_WEIGHT)
+    assert np.abs(inside.linearise(body, posed).g).max() < 0.01 * np.abs(lin.g).max()

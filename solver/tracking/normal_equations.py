@@ -1,12 +1,17 @@
-"""Normal equations of the linearised pose update (depth-camera tracking dissertation, Eq. 5.6 and 6.10),
-assembled without forming the Jacobian: point rows ``J_m = [I, -[a_m0]x, ..., -[a_m,B-1]x]``
-(:meth:`.body.TrackingBody.lever_arms`) reduce to one ``(3B x 3B)`` Gram matrix of the lever arms.
+"""Normal equations of point rows on a :class:`.blend_body.BlendBody`, assembled from lever arms without
+forming the Jacobian (depth-camera tracking dissertation, Eq. 5.6 and 6.10): point rows
+``J_m = [I, -[a_m0]x, ..., -[a_m,B-1]x]`` in the world-axes increments reduce to one ``(3B x 3B)`` Gram
+matrix of the lever arms.  :meth:`System.linear` hands the sums out in the body's parameters
+(``omega_b = A_b delta_b``, :meth:`.blend_body.BlendBody.axes`) as a :class:`.terms.Linear`, so they add
+to the priors' and go to the solver like any other term's.
 
-Parameter vector (3 + 3B): root translation, then one world-axes rotation vector per joint.
+Energy convention of :class:`.terms.Linear`: ``1/2 sum w |r|^2`` for ``H = sum w J^T J``.
 """
 from __future__ import annotations
 
 import numpy as np
+
+from .terms import Linear
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -26,12 +31,14 @@ def skew(v: np.ndarray) -> np.ndarray:
 
 
 class System:
-    """``H`` (P, P) and ``g`` (P,) of ``E = sum of weighted squared residual rows``; ``solve`` returns the
-    step minimising the quadratic model plus ``damping |step|^2`` (the dissertation's lambda_r term)."""
+    """Sums of weighted squared rows on one pose of a blend body (``posed``), in world-axes increments
+    (``H`` (P, P), ``g`` (P,), ``sum_sq`` = sum w r^2) until :meth:`linear` turns them into the body's
+    parameters."""
 
-    def __init__(self, num_bones: int):
-        P = 3 + 3 * num_bones
-        self.B, self.H, self.g, self.energy = num_bones, np.zeros((P, P)), np.zeros(P), 0.0
+    def __init__(self, body, posed):
+        P = 3 + 3 * body.num_bones
+        self.body, self.posed = body, posed
+        self.B, self.H, self.g, self.sum_sq = body.num_bones, np.zeros((P, P)), np.zeros(P), 0.0
 
     def add_points(self, a: np.ndarray, r: np.ndarray, w: np.ndarray) -> None:
         """Point rows: lever arms ``a`` (m, 3, B), residuals ``r`` (m, 3) = model - target, weights (m,).
@@ -55,41 +62,26 @@ class System:
         g = np.stack((a1 @ wr[:, 2] - a2 @ wr[:, 1], a2 @ wr[:, 0] - a0 @ wr[:, 2],
                       a0 @ wr[:, 1] - a1 @ wr[:, 0]), axis=1)                    # sum_m a_mj x (w r)_m
         self.g[3:] += g.reshape(-1)
-        self.energy += float((w * (r * r).sum(axis=1)).sum())
+        self.sum_sq += float((w * (r * r).sum(axis=1)).sum())
 
     def add_projected(self, a: np.ndarray, h: np.ndarray, e: np.ndarray, w: np.ndarray) -> None:
         """Scalar rows ``h_m . (point_m motion) = -e_m``: lever arms ``a`` (m, 3, B), directions ``h``
-        (m, 3), residuals ``e`` (m,), weights (m,) (the edge rows of Eq. 5.4)."""
+        (m, 3), residuals ``e`` (m,), weights (m,) (point-to-plane, edge and floor rows)."""
         if len(a) == 0:
             return
         rows = np.concatenate([h, cross(a.transpose(0, 2, 1), h[:, None, :]).reshape(len(a), -1)], axis=1)
-        self.add_rows(rows, e, w)
-
-    def add_rows(self, rows: np.ndarray, e: np.ndarray, w: np.ndarray) -> None:
-        """Dense rows (m, P) with residuals (m,) and weights (m,)."""
         self.H += (rows * w[:, None]).T @ rows
         self.g += rows.T @ (w * e)
-        self.energy += float((w * e * e).sum())
+        self.sum_sq += float((w * e * e).sum())
 
-    def add_blocks(self, cols: np.ndarray, D: np.ndarray, e: np.ndarray, w: np.ndarray) -> None:
-        """Rows that each touch one joint's three parameters: ``cols`` (k, 3) the joints' parameter ids,
-        ``D`` (k, 3, 3) three rows per joint on them, residuals ``e`` (k, 3), weights ``w`` (k, 3); the
-        same as :meth:`add_rows` on the dense rows, summed block by block."""
-        wD = D * w[:, :, None]
-        self.H[cols[:, :, None], cols[:, None, :]] += np.swapaxes(D, 1, 2) @ wD
-        self.g[cols] += np.einsum("kri,kr->ki", wD, e)
-        self.energy += float((w * e * e).sum())
-
-    def add_diagonal(self, index, weight: float, target=None) -> None:
-        """``weight |x[index] - target|^2`` rows on single parameters (target 0 by default)."""
-        idx = np.asarray(index)
-        self.H[idx, idx] += weight
-        if target is not None:
-            self.g[idx] -= weight * np.asarray(target)
-
-    def solve(self, damping: float) -> np.ndarray:
-        H = self.H + damping * np.eye(len(self.g))
-        try:
-            return -np.linalg.solve(H, self.g)
-        except np.linalg.LinAlgError:
-            return -np.linalg.lstsq(H, self.g, rcond=None)[0]
+    def linear(self) -> Linear:
+        """The sums in the body's parameters: ``H_p = T^T H T``, ``g_p = T^T g`` with ``T`` the block
+        diagonal of the identity (root translation) and the bones' axes."""
+        B = self.B
+        T = np.zeros((B + 1, 3, 3))
+        T[0] = np.eye(3)
+        T[1:] = self.body.axes(self.posed)
+        H = self.H.reshape(B + 1, 3, B + 1, 3)
+        Hp = np.einsum("iaj,iakb,kbl->ijkl", T, H, T, optimize=True).reshape(self.H.shape)
+        gp = np.einsum("iaj,ia->ij", T, self.g.reshape(B + 1, 3)).ravel()
+        return Linear(Hp, gp, 0.5 * self.sum_sq)

@@ -1,12 +1,18 @@
-"""The model as the depth tracker sees it: a fixed subset of its vertices under linear blend skinning,
-posed by the model's own kinematic chain, and the linearised pose update of the depth-camera tracking
-dissertation (ch. 3, Eq. 3.24; ch. 5, Eq. 5.2): a root translation plus one world-axes rotation
-increment per joint, about the joint's current position, moving the joint's whole subtree.
+"""The body evaluated fast: a fixed subset of a model's vertices under linear blend skinning, posed by the
+model's own kinematic chain, with the lever arms of the depth-camera tracking dissertation (ch. 3,
+Eq. 3.24; ch. 5, Eq. 5.2): a joint's rotation increment turns its whole subtree about the joint's current
+position, so a point's derivative is a cross product with its lever arm and the normal equations reduce
+to one Gram matrix of lever arms (:mod:`.normal_equations`).
 
-Skinning weights: the hybrid skin's swing weights on the anchor's children and the remainder on the anchor
-(the linear-blend reading of the swing/twist skin; twist ramps are not modelled), at most
-``MAX_INFLUENCES`` per vertex.  Joint positions come from the exact forward kinematics, so tracked poses
-are poses of the model itself.  Parameter vector (3 + 3B): ``[dt (3), omega_0 (3), ..., omega_{B-1} (3)]``.
+Parameters are those of :class:`.body.Body` (``P = 3 + 3B``: the root translation in metres, then one
+rotation increment per bone in the bone's local axes, applied on the right, ``q_b <- q_b exp(delta_b)``),
+so the priors of :mod:`.priors` and the solver of :mod:`.lm` serve both bodies.  Internally the
+increment of bone b is the world-axes rotation vector ``omega_b = A_b delta_b`` (:meth:`BlendBody.axes`).
+
+Skinning weights: the hybrid skin's swing weights on the anchor's children and the remainder on the
+anchor (the linear-blend reading of the swing/twist skin; twist ramps are not modelled), at most
+``MAX_INFLUENCES`` per vertex.  Joint positions come from the exact forward kinematics, so fitted poses
+are poses of the model itself.
 """
 from __future__ import annotations
 
@@ -14,9 +20,10 @@ import numpy as np
 
 from ..errors import ArticulaInputError
 from ..geometry.normals import vertex_normals
-from ..geometry.rotations import quat_mul, quat_normalize, rotvec_to_quat
+from ..rig.jacobians import apply_pose_increment
 from ..rig.kinematics import forward_kinematics
 from ..rig.model import Model, Poses
+from .normal_equations import cross
 
 MAX_INFLUENCES = 4
 SUBSET_SIZE = 1500      # model points used for correspondences (the dissertation's ch. 6 samples ~1000)
@@ -48,7 +55,7 @@ def spread_subset(vertices: np.ndarray, count: int, seed: int = 0) -> np.ndarray
         return np.arange(n)
     rng = np.random.default_rng(seed)
     order = rng.permutation(n)
-    lo, hi = vertices.min(0), vertices.max(0)
+    lo = vertices.min(0)
     ids = order
     for cell in np.geomspace(np.ptp(vertices, axis=0).max() / 4, 1e-4, 60):
         keys = np.floor((vertices[order] - lo) / cell).astype(np.int64)
@@ -60,13 +67,13 @@ def spread_subset(vertices: np.ndarray, count: int, seed: int = 0) -> np.ndarray
 
 
 class PosedBody:
-    """One pose of the body: ``points`` (M, 3) and ``normals`` (M, 3) of the subset, ``per_bone`` (M, I, 3)
-    each vertex moved by each of its influences, ``joints`` (B, 3) posed heads, ``world`` (B, 3, 3) world
-    rotations of the parts (scale removed).  The normals are computed when first asked for (most posings
-    need only the points)."""
+    """One pose of the body: ``pose`` (one frame), ``points`` (M, 3) and ``normals`` (M, 3) of the
+    subset, ``per_bone`` (M, I, 3) each vertex moved by each of its influences, ``joints`` (B, 3) posed
+    heads, ``world`` (B, 3, 3) world rotations of the parts (scale removed).  The normals are computed
+    when first asked for (most posings need only the points)."""
 
-    def __init__(self, points, per_bone, joints, world, normals_of):
-        self.points, self.per_bone, self.joints, self.world = points, per_bone, joints, world
+    def __init__(self, pose, points, per_bone, joints, world, normals_of):
+        self.pose, self.points, self.per_bone, self.joints, self.world = pose, points, per_bone, joints, world
         self._normals_of, self._normals = normals_of, None
 
     @property
@@ -76,12 +83,12 @@ class PosedBody:
         return self._normals
 
 
-class TrackingBody:
+class BlendBody:
     """A subset of ``model``'s vertices with compact linear-blend weights (see the module docstring).
 
     ``ids`` (M,) vertex ids; ``rest`` / ``rest_normals`` (M, 3); ``bones`` / ``weights`` (M, I) the
-    influences; ``main_bone`` (M,) the bone of largest weight (the relaxed bijectivity test, Eq. 5.3);
-    ``chain`` (M, B) the weight of each vertex's influences in each bone's subtree (beta of Eq. 3.26)."""
+    influences; ``main_bone`` (M,) the bone of largest weight; ``chain`` (M, B) the weight of each
+    vertex's influences in each bone's subtree (beta of Eq. 3.26)."""
 
     def __init__(self, model: Model, ids=None, count: int = SUBSET_SIZE, seed: int = 0):
         verts = np.asarray(model.rest_vertices, dtype=np.float64)
@@ -103,14 +110,9 @@ class TrackingBody:
         self.ancestors = ancestor_table(model.skeleton.parents)
         self.ancestors_f = self.ancestors.astype(np.float64)
         self.chain = np.einsum("mi,mib->mb", self.weights, self.ancestors_f[self.bones])
-
-    @property
-    def num_bones(self) -> int:
-        return self.model.skeleton.num_bones
-
-    @property
-    def num_params(self) -> int:
-        return 3 + 3 * self.num_bones
+        self.num_bones = model.skeleton.num_bones
+        self.size = 3 + 3 * self.num_bones
+        self.columns = np.r_[0:3, 4:4 + 3 * self.num_bones]     # of the rig's full layout (no scale)
 
     def pose(self, poses: Poses) -> PosedBody:
         """The subset posed by one frame of ``poses``."""
@@ -129,7 +131,18 @@ class TrackingBody:
         def normals():
             turned = (self.rest_normals @ flat).reshape(-1, B, 3)
             return np.einsum("mi,mir->mr", self.weights, turned[rows, self.bones])
-        return PosedBody(points, per_bone, joints, world, normals)
+        return PosedBody(poses, points, per_bone, joints, world, normals)
+
+    def axes(self, posed: PosedBody) -> np.ndarray:
+        """(B, 3, 3) ``A_b``: bone b's local increment ``delta_b`` turns its subtree by the world rotation
+        vector ``A_b delta_b`` (its world rotation times its rest frame)."""
+        return posed.world @ self.model.skeleton.frames
+
+    def world_step(self, posed: PosedBody, step) -> np.ndarray:
+        """(3 + 3B,) the parameter ``step`` with each bone's increment turned into world axes."""
+        step = np.asarray(step, dtype=np.float64)
+        omega = np.einsum("bij,bj->bi", self.axes(posed), step[3:].reshape(-1, 3))
+        return np.concatenate([step[:3], omega.ravel()])
 
     def lever_arms(self, posed: PosedBody, rows=None) -> np.ndarray:
         """(m, 3, B) lever arms of the chosen subset points (``rows``, default all): the point's motion
@@ -145,8 +158,14 @@ class TrackingBody:
         S = (C.reshape(3 * m, B) @ self.ancestors_f).reshape(m, 3, B)
         return S - self.chain[sel][:, None, :] * posed.joints.T[None]
 
+    def motion(self, posed: PosedBody, step, arms: np.ndarray) -> np.ndarray:
+        """(m, 3) first-order motion of points with lever arms ``arms`` (m, 3, B) under ``step``."""
+        w = self.world_step(posed, step)
+        omega = w[3:].reshape(-1, 3)
+        return w[:3] + cross(omega[None], arms.transpose(0, 2, 1)).sum(axis=1)
+
     def jacobian(self, posed: PosedBody, rows=None) -> np.ndarray:
-        """(m, 3, 3 + 3B) derivative of the chosen points with respect to the parameter vector."""
+        """(m, 3, P) derivative of the chosen points by the parameters (for tests and single rows)."""
         a = self.lever_arms(posed, rows)
         m, B = a.shape[0], self.num_bones
         J = np.zeros((m, 3, 3 + 3 * B))
@@ -156,16 +175,11 @@ class TrackingBody:
         rot[:, 0, :, 1], rot[:, 0, :, 2] = a[:, 2], -a[:, 1]
         rot[:, 1, :, 0], rot[:, 1, :, 2] = -a[:, 2], a[:, 0]
         rot[:, 2, :, 0], rot[:, 2, :, 1] = a[:, 1], -a[:, 0]
+        rot[:] = np.einsum("mrbi,bij->mrbj", rot, self.axes(posed))
         return J
 
-    def apply(self, poses: Poses, delta: np.ndarray, posed: PosedBody) -> Poses:
-        """``poses`` (one frame) moved by the parameter step ``delta`` (3 + 3B,) taken at ``posed``: the
-        root translated, each joint's local rotation left-multiplied by its world increment expressed in
-        the bone's rest axes under the parent's current rotation (``q_j <- exp(F_jᵀ W_pᵀ omega_j) q_j``)."""
-        delta = np.asarray(delta, dtype=np.float64)
-        skel = self.model.skeleton
-        omega = delta[3:].reshape(-1, 3)
-        parent_world = np.concatenate([np.eye(3)[None], posed.world[skel.parents[1:]]])
-        local = np.einsum("bji,bkj,bk->bi", skel.frames, parent_world, omega)
-        rot = quat_normalize(quat_mul(rotvec_to_quat(local), poses.rotations[0]))
-        return Poses(rot[None], poses.translations + delta[:3], poses.scales.copy())
+    def moved(self, pose: Poses, step) -> Poses:
+        """The pose after the increment ``step`` (P,) (as :meth:`.body.Body.moved`)."""
+        full = np.zeros((1, 4 + 3 * self.num_bones))
+        full[0, self.columns] = step
+        return apply_pose_increment(pose, full)
