@@ -81,7 +81,8 @@ class System:
         T = np.zeros((B + 1, 3, 3))
         T[0] = np.eye(3)
         T[1:] = self.body.axes(self.posed)
-        H = self.H.reshape(B + 1, 3, B + 1, 3)
-        Hp = np.einsum("iaj,iakb,kbl->ijkl", T, H, T, optimize=True).reshape(self.H.shape)
-        gp = np.einsum("iaj,ia->ij", T, self.g.reshape(B + 1, 3)).ravel()
+        n = 3 * (B + 1)
+        left = np.swapaxes(T, 1, 2) @ self.H.reshape(B + 1, 3, n)                     # T_i^T H_ik
+        Hp = (left.reshape(n, B + 1, 1, 3) @ T[None]).reshape(n, n)                    # ... T_k
+        gp = (np.swapaxes(T, 1, 2) @ self.g.reshape(B + 1, 3, 1)).ravel()
         return Linear(Hp, gp, 0.5 * self.sum_sq)

@@ -38,9 +38,8 @@ def pose_difference(pose, target):
     B = len(r)
     Je = np.zeros((3 + 3 * B, 3 + 3 * B))
     Je[:3, :3] = np.eye(3)
-    blocks = rotvec_increment_jacobian(r)
-    for b in range(B):
-        Je[3 + 3 * b:6 + 3 * b, 3 + 3 * b:6 + 3 * b] = blocks[b]
+    cols = 3 + 3 * np.arange(B)[:, None] + np.arange(3)                   # (B, 3) each bone's parameters
+    Je[cols[:, :, None], cols[:, None, :]] = rotvec_increment_jacobian(r)
     return np.concatenate([pose.translations[0] - target.translations[0], r.ravel()]), Je
 
 
@@ -114,7 +113,9 @@ class JointBox:
         return r, r - np.clip(r, self.lower[self.bones], self.upper[self.bones]), (r - self.centre) / self.width
 
     def energy(self, body, state) -> float:
-        _, over, pull = self._rows(state.pose)
+        return self._energy(*self._rows(state.pose)[1:])
+
+    def _energy(self, over, pull) -> float:
         return 0.5 * (self.weight * float(np.sum(over * over)) + self.centre_weight * float(np.sum(pull * pull)))
 
     def linearise(self, body, state) -> Linear:
@@ -128,7 +129,7 @@ class JointBox:
         DDc = np.swapaxes(D, 1, 2) @ (D * (self.centre_weight / self.width ** 2)[:, :, None])
         H[cols[:, :, None], cols[:, None, :]] += DD + DDc
         g[cols] += np.einsum("kri,kr->ki", D, w * over + self.centre_weight * pull / self.width)
-        return Linear(H, g, self.energy(body, state))
+        return Linear(H, g, self._energy(over, pull))
 
 
 
