@@ -23,11 +23,12 @@ import time
 
 import numpy as np
 
-from ..geometry.rotations import quat_conj, quat_mul, quat_normalize, quat_to_rotvec, rotvec_to_quat
+from ..geometry.rotations import quat_to_rotvec, rotvec_to_quat
 from ..rig.model import Poses
 from ..tracking.frame import SEARCH, SEARCH_HOLD, TRACKING, FrameSettings, capture_noise, fit_frame
 from ..tracking.checks import check_frame
 from ..tracking.lm import State
+from ..tracking.motion import extrapolate
 from .first_frame import capture_score, find_pose
 from .trail import RUNNING, Resume, Trail
 
@@ -39,14 +40,7 @@ HOLD_RELAX = 0.2        # share of the way back to rest the hold target's rotati
 def predict(history, carry: float = 1.0) -> Poses:
     """The next pose from the last one or two good poses (one frame each), moving on by ``carry`` times
     the last frame's motion (1: constant velocity; 0: the last pose)."""
-    if len(history) < 2:
-        return history[-1]
-    a, b = history[-2], history[-1]
-    turn = quat_mul(quat_conj(a.rotations), b.rotations)
-    if carry != 1.0:
-        turn = rotvec_to_quat(carry * quat_to_rotvec(turn))    # the shorter way
-    rot = quat_normalize(quat_mul(b.rotations, turn))
-    return Poses(rot, b.translations + carry * (b.translations - a.translations), b.scales.copy())
+    return history[-1] if len(history) < 2 else extrapolate(history[-2], history[-1], carry)
 
 
 def relaxed(pose: Poses, share: float = None) -> Poses:

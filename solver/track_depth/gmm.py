@@ -172,7 +172,7 @@ def sample(obs, count: int) -> np.ndarray:
 def fit_frame(body, obs, camera, pose, opts, prior=(), iterations=None, predicted=None) -> FrameFit:
     """Algorithm 3 from ``pose`` (one frame) on the observation ``obs``: step one on the model points in
     view, step two on those facing the camera, each at most ``iterations`` (default ``gmm_iterations``) EM
-    iterations.  ``predicted`` (one frame, e.g. :func:`.motion.predict` of the last two poses, usually
+    iterations.  ``predicted`` (one frame, e.g. :func:`solver.tracking.motion.extrapolate` of the last two poses, usually
     also the start ``pose``) is the target of E_p; without it the start pose is.  ``prior``: terms of
     :mod:`solver.tracking.priors` (joint limits).
     Without a ``camera`` (complete data, e.g. a scan) one step with every model point.

@@ -16,11 +16,11 @@ from .. import parallel
 from ..errors import ArticulaInputError
 from ..rig.model import Model, Poses
 from ..tracking.blend_body import BlendBody
+from ..tracking.motion import extrapolate
 from ..tracking.priors import generic_limits
 from .adapt import TemplateAdaptation
 from .initialise import cut_edges, initialise, score
 from .limb_search import place_limbs
-from .motion import predict
 from .options import DepthTrackOptions
 from .out_of_view import Parts
 from .smoothing import FOLLOWED, smooth
@@ -228,7 +228,7 @@ class _Sequence:
             return None
         if not all(f["status"] in FOLLOWED for f in self.frames[-2:]):
             return None
-        return predict(self.poses[-2], self.poses[-1], PREDICTION_GAIN)
+        return extrapolate(self.poses[-2], self.poses[-1], PREDICTION_GAIN)
 
     def _typical_share(self):
         """The median explained share of the recent frames (None while there are few)."""
