@@ -10,7 +10,6 @@ import dataclasses
 import numpy as np
 
 from . import icp
-from ..roles import role_bones
 from ..tracking.blend_body import BlendBody
 from .body_shape import ShapeTerms, same_world_pose, solve_coefficients
 from .body_size import SCALE_RANGE, FramePairs, scaled_model, solve_scales
@@ -22,8 +21,6 @@ from .visibility import visible
 
 FACING_COS = 0.5         # surface offsets only from points facing the camera (grazing pairs are biased)
 SIZE_ROUNDS = 3          # pose <-> body alternations per adaptation frame
-HINGES = ("forearm.L", "forearm.R", "shin.L", "shin.R")   # their bend shows where elbow and knee are
-NEW_BEND_RAD = np.radians(15.0)   # a hinge this far from its turn in every size frame makes a new one
 
 
 def observed_height(obs, up) -> float:
@@ -51,8 +48,6 @@ class TemplateAdaptation:
         self.state = BodyState(np.zeros(template.num_basis), np.ones(B))
         self.frames = {}
         self.done = 0
-        self.hinges = np.array([b for r, b in role_bones(template.base.skeleton.names).items() if r in HINGES], np.int64)
-        self.bends = []          # (k, 4) the hinges' rotations of the size frames
         self.surface = None
         self.since = 0
 
@@ -67,24 +62,13 @@ class TemplateAdaptation:
         self.state.scales = np.full(len(self.state.scales), s)
         return self.model()
 
-    def wants(self, pose=None) -> bool:
-        """Whether the frame of ``pose`` (one frame, of the current body) is a size frame: the first
-        ``size_frames``, then, up to ``size_frames_max``, frames whose elbow or knee is bent more than
-        ``NEW_BEND_RAD`` away from every size frame (the split of a limb's length between its two parts
-        shows only where the joint bends)."""
-        if not self.opts.adapt_size:
-            return False
-        if self.done < self.opts.size_frames:
-            return True
-        if pose is None or self.done >= self.opts.size_frames_max or not len(self.hinges):
-            return False
-        turn = _angles(pose.rotations[0, self.hinges][None], np.array(self.bends))      # (k, hinges)
-        return bool((turn.min(axis=0) > NEW_BEND_RAD).any())
+    def wants(self) -> bool:
+        return self.opts.adapt_size and self.done < self.opts.size_frames
 
     def surface_step(self, body, pose, obs, camera):
         """After the size frames: record the frame's pairs for the surface and, every ``surface_every``
         frames, return a body with the displaced rest surface (else None)."""
-        if not self.opts.adapt_surface or self.done < self.opts.size_frames:
+        if not self.opts.adapt_surface or self.wants():
             return None
         if self.surface is None:
             self.surface = SurfaceFit(body.model)
@@ -138,12 +122,4 @@ class TemplateAdaptation:
             fit = fit_frame(body, obs, camera, pose, self.opts, limits)
             pose = fit.pose
         self.done += 1
-        self.bends.append(pose.rotations[0, self.hinges])
-        if self.surface is not None:          # a later size frame: the surface is fitted anew on the new body
-            self.surface, self.since = None, 0
         return body, fit
-
-
-def _angles(a, b) -> np.ndarray:
-    """Rotation angles (radians) between quaternions ``a`` and ``b`` (broadcast over leading axes)."""
-    return 2.0 * np.arccos(np.clip(np.abs((a * b).sum(axis=-1)), 0.0, 1.0))

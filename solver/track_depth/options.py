@@ -43,7 +43,6 @@ class DepthTrackOptions:
     near_m: float = 0.05              # "near the model" for the lost test and the report
     adapt_size: bool = True           # template only: limb lengths on the first frames (Algorithm 4)
     size_frames: int = 5              # F of Algorithm 4
-    size_frames_max: int = 12         # ... then frames with an elbow or knee bent anew, up to this many
     adapt_surface: bool = True        # template only: normal displacements (ch. 5 §4.5 / ch. 6 §5.5)
     surface_every: int = 5            # L: frames between surface updates (ch. 6)
     person: str = "centre"            # with several people in view, whom to track from the start: the one
@@ -67,7 +66,6 @@ class DepthTrackOptions:
                   ("gmm_lambda_r", self.gmm_lambda_r, 0, 1e9), ("gmm_lambda_p", self.gmm_lambda_p, 0, 1e9),
                   ("lost_share", self.lost_share, 0, 1), ("limb_share", self.limb_share, 0, 1),
                   ("near_m", self.near_m, 1e-3, 1.0), ("size_frames", self.size_frames, 1, 1000),
-                  ("size_frames_max", self.size_frames_max, 1, 1000),
                   ("surface_every", self.surface_every, 1, 1000))
         for name, value, lo, hi in checks:
             if not (lo <= value <= hi):

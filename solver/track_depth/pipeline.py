@@ -260,7 +260,7 @@ class _Sequence:
 
     def _adapt(self, k, obs, fit):
         """The template's body adapted on frame k (size on the first frames, then the surface)."""
-        if self.adaptation.wants(fit.pose):
+        if self.adaptation.wants():
             _, _, limits = self._held(fit.pose)
             self.body, fit = self.adaptation.adapt(k, self.body, fit.pose, obs, self.rec.camera, limits, self.fit)
             return fit

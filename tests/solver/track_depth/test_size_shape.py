@@ -79,35 +79,3 @@ def test_same_world_pose_keeps_world_rotations(template):
     p = mild_poses(base, seed=3)
     q = same_world_pose(base.skeleton, shaped.skeleton, p)
     assert np.allclose(world_rotations(base.skeleton, p.rotations), world_rotations(shaped.skeleton, q.rotations))
-
-
-def test_size_frames_after_the_first_are_frames_with_an_elbow_or_knee_bent_anew(template):
-    """The first ``size_frames`` are size frames; after them a frame is one when an elbow or knee is
-    turned more than 15 degrees from its turn in every size frame so far, up to ``size_frames_max``."""
-    from articula.solver.geometry.rotations import rotvec_to_quat
-    from articula.solver.roles import role_bones
-    from articula.solver.rig.model import Poses
-    from articula.solver.track_depth.adapt import TemplateAdaptation
-    from articula.solver.track_depth.options import DepthTrackOptions
-
-    B = template.base.skeleton.num_bones
-    knee = role_bones(template.base.skeleton.names)["shin.L"]
-    hand = role_bones(template.base.skeleton.names)["hand.L"]
-
-    def bent(bone, degrees):
-        p = Poses.identity(1, B)
-        p.rotations[0, bone] = rotvec_to_quat(np.array([np.radians(degrees), 0.0, 0.0]))
-        return p
-
-    opts = DepthTrackOptions(size_frames=2, size_frames_max=3)
-    a = TemplateAdaptation(template, opts, None, np.zeros(3))
-    assert len(a.hinges) == 4 and a.wants(bent(knee, 0))
-    for _ in range(2):                                     # what adapt() records of its frames
-        a.done += 1
-        a.bends.append(bent(knee, 0).rotations[0, a.hinges])
-    assert not a.wants(bent(knee, 10)) and not a.wants(bent(hand, 40))      # close, or not a hinge
-    assert a.wants(bent(knee, 20))
-    a.done += 1
-    a.bends.append(bent(knee, 20).rotations[0, a.hinges])
-    assert not a.wants(bent(knee, 60))                     # size_frames_max reached
-    assert not TemplateAdaptation(template, DepthTrackOptions(adapt_size=False), None, np.zeros(3)).wants()
