@@ -32,33 +32,55 @@ MIN_WIDTH = np.radians(5.0)  # narrower boxes pull to their middle as this wide
 def pose_difference(pose, target):
     """``(e (P,), Je (P, P))``: translation difference and per-bone ``log(q*^-1 q)`` of one frame, with
     the derivative by the frame's parameters (:class:`.body.Body` layout)."""
-    rel = quat_mul(quat_conj(target.rotations[0]), pose.rotations[0])
-    rel = np.where(rel[:, :1] < 0, -rel, rel)                          # the short way round
-    r = quat_to_rotvec(rel)
-    B = len(r)
+    e, blocks = _difference(pose, target)
+    B = len(blocks)
     Je = np.zeros((3 + 3 * B, 3 + 3 * B))
     Je[:3, :3] = np.eye(3)
     cols = 3 + 3 * np.arange(B)[:, None] + np.arange(3)                   # (B, 3) each bone's parameters
-    Je[cols[:, :, None], cols[:, None, :]] = rotvec_increment_jacobian(r)
-    return np.concatenate([pose.translations[0] - target.translations[0], r.ravel()]), Je
+    Je[cols[:, :, None], cols[:, None, :]] = blocks
+    return e, Je
+
+
+def _difference(pose, target):
+    """``e (P,)`` of :func:`pose_difference` and its bones' diagonal blocks ``(B, 3, 3)``."""
+    rel = quat_mul(quat_conj(target.rotations[0]), pose.rotations[0])
+    rel = np.where(rel[:, :1] < 0, -rel, rel)                          # the short way round
+    r = quat_to_rotvec(rel)
+    return np.concatenate([pose.translations[0] - target.translations[0], r.ravel()]), rotvec_increment_jacobian(r)
 
 
 class TowardPose:
-    """``1/2 e^T W e`` with ``e`` = :func:`pose_difference` to ``target``; ``W (P, P)`` symmetric PSD."""
+    """``1/2 e^T W e`` with ``e`` = :func:`pose_difference` to ``target``; ``W (P, P)`` symmetric PSD.  A
+    diagonal ``W`` (a per-parameter pull, as the GMM tracker's E_p) is summed block by block."""
 
     def __init__(self, target, W):
         self.target, self.W = target, W
+        d = np.diagonal(W)
+        self.diagonal = d.copy() if np.array_equal(W, np.diag(d)) else None
 
     def energy(self, body, state) -> float:
-        pose = state.pose
-        e, _ = pose_difference(pose, self.target)
-        return 0.5 * float(e @ self.W @ e)
+        e, _ = _difference(state.pose, self.target)
+        return 0.5 * float(e @ self.W @ e) if self.diagonal is None else 0.5 * float(self.diagonal @ (e * e))
 
     def linearise(self, body, state) -> Linear:
         pose = state.pose
+        if self.diagonal is not None:
+            return self._diagonal(pose)
         e, Je = pose_difference(pose, self.target)
         WJ = self.W @ Je
         return Linear(Je.T @ WJ, Je.T @ (self.W @ e), 0.5 * float(e @ self.W @ e))
+
+    def _diagonal(self, pose) -> Linear:
+        e, blocks = _difference(pose, self.target)
+        w = self.diagonal
+        P, B = len(e), len(blocks)
+        H, g = np.zeros((P, P)), np.zeros(P)
+        H[:3, :3], g[:3] = np.diag(w[:3]), w[:3] * e[:3]
+        wb, eb = w[3:].reshape(B, 3), e[3:].reshape(B, 3)
+        cols = 3 + 3 * np.arange(B)[:, None] + np.arange(3)
+        H[cols[:, :, None], cols[:, None, :]] = np.swapaxes(blocks, 1, 2) @ (blocks * wb[:, :, None])
+        g[cols] = np.einsum("bri,br->bi", blocks, wb * eb)
+        return Linear(H, g, 0.5 * float(w @ (e * e)))
 
 
 def weak_directions(H, ratio: float = 1e-3, floor: float = 0.0) -> np.ndarray:
