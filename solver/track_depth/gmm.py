@@ -35,7 +35,7 @@ from scipy.spatial import cKDTree
 from ..rig.model import Poses
 from ..tracking.lm import iterate
 from ..tracking.normal_equations import System
-from ..tracking.priors import TowardPose
+from ..tracking.priors import toward_bones
 from .icp import MAX_TURN, FrameFit, coverage
 from .visibility import facing, in_view
 
@@ -80,15 +80,10 @@ def sigma2_update(x: np.ndarray, v: np.ndarray, idx: np.ndarray, p: np.ndarray) 
     return float((p * d2).sum() / max(3.0 * p.sum(), 1e-12))
 
 
-def prediction_term(body, predicted: Poses, weight: float) -> TowardPose:
-    """E_p (Eq. 6.13) as :class:`solver.tracking.priors.TowardPose`: rows ``log(q_pred_b^-1 q_b)`` on every
-    non-root joint's local rotation, each adding ``weight J^T J`` to the normal matrix."""
-    sk = body.model.skeleton
-    W = np.zeros((body.size, body.size))
-    b = np.flatnonzero(np.asarray(sk.parents) >= 0)
-    idx = (3 + 3 * b[:, None] + np.arange(3)).ravel()
-    W[idx, idx] = weight
-    return TowardPose(predicted, W)
+def prediction_term(body, predicted: Poses, weight: float):
+    """E_p (Eq. 6.13): rows ``log(q_pred_b^-1 q_b)`` on every non-root joint's local rotation, each adding
+    ``weight J^T J`` to the normal matrix (:func:`solver.tracking.priors.toward_bones`)."""
+    return toward_bones(predicted, body.size, np.flatnonzero(np.asarray(body.model.skeleton.parents) >= 0), weight)
 
 
 def _active(posed, camera, step: int) -> np.ndarray:

@@ -18,7 +18,7 @@ import dataclasses
 import numpy as np
 
 from .lm import State, Stopping, minimise
-from .priors import TowardPose, weak_directions
+from .priors import TowardPose, toward_bones, weak_directions
 from .terms import ModelToScan, Sample, ScanToModel, sample
 
 
@@ -152,10 +152,7 @@ def end_chains(model, share: float = END_SHARE) -> list:
 def _small_held(body, start, largest):
     """A pull keeping the small parts' bones at ``start``, weighing 1 % of the data's ``largest``
     curvature (a finger's own is ~1e-5 of it: firm, and the system stays well conditioned)."""
-    W = np.zeros((body.size, body.size))
-    cols = (3 + 3 * small_bones(body.model)[:, None] + np.arange(3)).ravel()
-    W[cols, cols] = 1e-2 * largest
-    return TowardPose(start, W)
+    return toward_bones(start, body.size, small_bones(body.model), 1e-2 * largest)
 
 
 def noise_share(noise: float) -> float:

@@ -127,7 +127,7 @@ def gauss_newton_step(lin, damping: float, max_turn: float = None) -> np.ndarray
 
 
 def iterate(body, pose, data, priors=(), damping: float = 0.0, max_turn: float = None,
-            max_iterations: int = 10, posed=None, cancel=None):
+            max_iterations: int = 10, posed=None):
     """Damped Gauss–Newton iterations for data terms that re-find their correspondences after every step
     (the depth trackers' ICP and EM): at each pose ``data.linearise(body, posed)`` (None: too little
     data, stop) plus the ``priors`` weighted by ``data.prior_scale`` give the step
@@ -137,8 +137,6 @@ def iterate(body, pose, data, priors=(), damping: float = 0.0, max_turn: float =
     posed = body.pose(pose) if posed is None else posed
     it = 0
     while it < max_iterations:
-        if cancel is not None:
-            cancel()
         lin = data.linearise(body, posed)
         if lin is None:
             break

@@ -36,9 +36,8 @@ class System:
     parameters."""
 
     def __init__(self, body, posed):
-        P = 3 + 3 * body.num_bones
         self.body, self.posed = body, posed
-        self.B, self.H, self.g, self.sum_sq = body.num_bones, np.zeros((P, P)), np.zeros(P), 0.0
+        self.B, self.H, self.g, self.sum_sq = body.num_bones, np.zeros((body.size, body.size)), np.zeros(body.size), 0.0
 
     def add_points(self, a: np.ndarray, r: np.ndarray, w: np.ndarray) -> None:
         """Point rows: lever arms ``a`` (m, 3, B), residuals ``r`` (m, 3) = model - target, weights (m,).

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..geometry.rotations import quat_conj, quat_mul, quat_to_rotvec
 from .pose_prior import generic_prior, rotvec_increment_jacobian
-from .terms import Linear
+from .terms import Linear, bone_columns
 
 BOX_WEIGHT = 10.0           # generic limits: m^2 per rad^2 outside the box (against unit point rows)
 CENTRE_WEIGHT = 0.02        # ... m^2 per (box width)^2 away from its middle
@@ -36,7 +36,7 @@ def pose_difference(pose, target):
     B = len(blocks)
     Je = np.zeros((3 + 3 * B, 3 + 3 * B))
     Je[:3, :3] = np.eye(3)
-    cols = 3 + 3 * np.arange(B)[:, None] + np.arange(3)                   # (B, 3) each bone's parameters
+    cols = bone_columns(np.arange(B))
     Je[cols[:, :, None], cols[:, None, :]] = blocks
     return e, Je
 
@@ -50,21 +50,19 @@ def _difference(pose, target):
 
 
 class TowardPose:
-    """``1/2 e^T W e`` with ``e`` = :func:`pose_difference` to ``target``; ``W (P, P)`` symmetric PSD.  A
-    diagonal ``W`` (a per-parameter pull, as the GMM tracker's E_p) is summed block by block."""
+    """``1/2 e^T W e`` with ``e`` = :func:`pose_difference` to ``target``; ``W (P, P)`` symmetric PSD, or
+    ``(P,)`` its diagonal (a per-parameter pull, :func:`toward_bones`), summed block by block."""
 
     def __init__(self, target, W):
-        self.target, self.W = target, W
-        d = np.diagonal(W)
-        self.diagonal = d.copy() if np.array_equal(W, np.diag(d)) else None
+        self.target, self.W = target, np.asarray(W, dtype=float)
 
     def energy(self, body, state) -> float:
         e, _ = _difference(state.pose, self.target)
-        return 0.5 * float(e @ self.W @ e) if self.diagonal is None else 0.5 * float(self.diagonal @ (e * e))
+        return 0.5 * float(self.W @ (e * e)) if self.W.ndim == 1 else 0.5 * float(e @ self.W @ e)
 
     def linearise(self, body, state) -> Linear:
         pose = state.pose
-        if self.diagonal is not None:
+        if self.W.ndim == 1:
             return self._diagonal(pose)
         e, Je = pose_difference(pose, self.target)
         WJ = self.W @ Je
@@ -72,15 +70,23 @@ class TowardPose:
 
     def _diagonal(self, pose) -> Linear:
         e, blocks = _difference(pose, self.target)
-        w = self.diagonal
+        w = self.W
         P, B = len(e), len(blocks)
         H, g = np.zeros((P, P)), np.zeros(P)
         H[:3, :3], g[:3] = np.diag(w[:3]), w[:3] * e[:3]
         wb, eb = w[3:].reshape(B, 3), e[3:].reshape(B, 3)
-        cols = 3 + 3 * np.arange(B)[:, None] + np.arange(3)
+        cols = bone_columns(np.arange(B))
         H[cols[:, :, None], cols[:, None, :]] = np.swapaxes(blocks, 1, 2) @ (blocks * wb[:, :, None])
         g[cols] = np.einsum("bri,br->bi", blocks, wb * eb)
         return Linear(H, g, 0.5 * float(w @ (e * e)))
+
+
+def toward_bones(target, size: int, bones, weight: float) -> TowardPose:
+    """A :class:`TowardPose` on ``bones``' rotations alone (``size`` parameters), each row adding ``weight
+    J^T J``: the small parts held at their start, the GMM tracker's E_p."""
+    w = np.zeros(size)
+    w[bone_columns(bones).ravel()] = weight
+    return TowardPose(target, w)
 
 
 def weak_directions(H, ratio: float = 1e-3, floor: float = 0.0) -> np.ndarray:
@@ -145,7 +151,7 @@ class JointBox:
         P = body.size
         H, g = np.zeros((P, P)), np.zeros(P)
         D = rotvec_increment_jacobian(r)                                  # (k, 3, 3) d log(q exp d) / d d
-        cols = 3 + 3 * self.bones[:, None] + np.arange(3)                 # (k, 3) parameter ids
+        cols = bone_columns(self.bones)
         w = np.where(over != 0, self.weight, 0.0)
         DD = np.swapaxes(D, 1, 2) @ (D * w[:, :, None])
         DDc = np.swapaxes(D, 1, 2) @ (D * (self.centre_weight / self.width ** 2)[:, :, None])

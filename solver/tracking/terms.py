@@ -30,6 +30,12 @@ class Linear:
         return Linear(self.H * factor, self.g * factor, self.energy * factor)
 
 
+def bone_columns(bones) -> np.ndarray:
+    """``(k, 3)`` parameter ids of the rotation increments of ``bones`` (k,) in a frame's parameters
+    (``3 + 3 b + axis``, after the root translation)."""
+    return 3 + 3 * np.asarray(bones, dtype=np.int64)[:, None] + np.arange(3)
+
+
 def charbonnier(r, eps):
     """Penalty ``eps^2 (sqrt(1 + (r/eps)^2) - 1)`` (~ r^2/2 near 0, ~ eps |r| far) and its IRLS weight."""
     s = np.sqrt(1.0 + (r / eps) ** 2)
